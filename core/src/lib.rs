@@ -1,0 +1,22 @@
+//! objslam core: the brain of the object-SLAM active-mapping testbed.
+//!
+//! The simulator (Python, SAPIEN) senses and acts; this crate updates beliefs and decides. Data
+//! flows one way per frame (see `ARCHITECTURE.md`): a [`frame::Frame`] (image, depth, intrinsics,
+//! camera pose, detections) goes in; the [`map::ObjectMap`] comes out; [`eval`] scores it against
+//! ground truth that never enters the estimator.
+//!
+//! Modules, one concept each:
+//! - [`geometry`]: SE(3), pinhole camera, 2D boxes, yaw-oriented boxes and cylinders, IoUs.
+//! - [`frame`]: sensor frames and detections, validated at the boundary.
+//! - [`map`]: the object map, labels, versioned save/load.
+//! - [`naive`]: the foundation's baseline estimator (the `naive` association ablation).
+//! - [`eval`]: matching to ground truth, 3D/2D IoU, CDE, YAE, counts.
+//! - `record` (feature `rerun`): one Rerun recording per run.
+
+pub mod eval;
+pub mod frame;
+pub mod geometry;
+pub mod map;
+pub mod naive;
+#[cfg(feature = "rerun")]
+pub mod record;
