@@ -11,6 +11,7 @@
 //! - [`map`]: the object map, labels, versioned save/load.
 //! - [`naive`]: the foundation's baseline estimator (the `naive` association ablation).
 //! - [`eval`]: matching to ground truth, 3D/2D IoU, CDE, YAE, counts.
+//! - [`plan`]: Panda kinematics, collision checking, RRT-Connect, Ruckig trajectories, grasps.
 //! - `record` (feature `rerun`): one Rerun recording per run.
 
 pub mod eval;
@@ -18,5 +19,6 @@ pub mod frame;
 pub mod geometry;
 pub mod map;
 pub mod naive;
+pub mod plan;
 #[cfg(feature = "rerun")]
 pub mod record;
