@@ -22,8 +22,8 @@
 //!   against the table, the map objects grown by a margin, and itself (parry3d-f64).
 //! - `rrt`: straight line when free, else RRT-Connect (seeded) + random shortcutting; edges are
 //!   checked every [`PlannerConfig::edge_resolution_rad`] of the largest joint motion.
-//! - [`trajectory`]: chained rest-to-rest Ruckig moves with phase synchronisation (the arm follows
-//!   the checked straight segments) under velocity / acceleration / jerk limits.
+//! - [`trajectory`]: chained rest-to-rest, time-optimal Ruckig moves along the checked straight
+//!   segments under per-joint velocity / acceleration / jerk limits.
 //! - [`grasp`]: top-down grasps (short side for cuboids, any yaw for cylinders), opening from the
 //!   estimated size, ranked by reachability, clearance and yaw change.
 //!
