@@ -236,7 +236,7 @@ fn planned_paths_never_intersect_the_objects() {
         let target = objslam_core::plan::grasp::top_down_pose(p, rng.random_range(-1.0..1.0));
         let traj = match planner.plan_to_pose(&q, &target, &objects) {
             Ok(t) => t,
-            Err(PlanError::IkNotConverged { .. }) => continue,
+            Err(PlanError::IkNotConverged { .. } | PlanError::IkRejected { .. }) => continue,
             Err(e) => panic!("planning failed: {e}"),
         };
         planned += 1;
@@ -298,6 +298,10 @@ fn planner_failures_are_typed() {
     let cfg = PlannerConfig { timeout_s: Some(0.0), ..PlannerConfig::default() };
     let hurried = Planner::new(panda_urdf(), cfg).unwrap_or_else(|e| panic!("{e}"));
     assert!(matches!(hurried.plan_path(&left, &right, &scene), Err(PlanError::Timeout { .. })));
+    // A TCP pose inside a box: IK converges but every solution collides.
+    let boxed = vec![cuboid(0.5, 0.0, 0.0, [0.2, 0.2, 0.3])];
+    let inside = objslam_core::plan::grasp::top_down_pose(Vector3::new(0.5, 0.0, 0.15), 0.0);
+    assert!(matches!(planner.plan_to_pose(&Q_READY, &inside, &boxed), Err(PlanError::IkRejected { .. })));
     let missing = Planner::new("/nonexistent/panda.urdf", PlannerConfig::default());
     assert!(matches!(missing, Err(PlanError::Urdf { .. })));
     let bad = ObjectGeometry { half_extents: Vector3::new(0.0, 0.1, 0.1), ..cuboid(0.5, 0.0, 0.0, [0.1, 0.1, 0.1]) };

@@ -137,3 +137,54 @@ pub(crate) fn grasp_height(object: &ObjectGeometry, config: &GraspConfig) -> f64
     let top = object.center.z + object.half_extents.z;
     object.center.z.max(top - config.max_grasp_depth_m).max(config.min_tcp_height_m)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn block(yaw: f64, hx: f64, hy: f64, hz: f64) -> ObjectGeometry {
+        ObjectGeometry { shape: Shape::Cuboid, center: Vector3::new(0.5, 0.0, hz), yaw_rad: yaw, half_extents: Vector3::new(hx, hy, hz) }
+    }
+
+    #[test]
+    fn top_down_pose_points_down_and_yaw_round_trips() {
+        for yaw in [-3.0, -1.0, 0.0, 0.4, 2.5] {
+            let t = top_down_pose(Vector3::new(0.1, 0.2, 0.3), yaw);
+            assert!((t.rotation * Vector3::z() - Vector3::new(0.0, 0.0, -1.0)).norm() < 1e-12);
+            assert!(wrap_angle(hand_yaw_of(&t) - yaw).abs() < 1e-12);
+            // Closing axis (hand y) = (sin yaw, −cos yaw, 0).
+            assert!((t.rotation * Vector3::y() - Vector3::new(yaw.sin(), -yaw.cos(), 0.0)).norm() < 1e-12);
+        }
+    }
+
+    #[test]
+    fn cuboid_closes_across_the_short_side() {
+        let c = GraspConfig::default();
+        for (yaw, hx, hy) in [(0.3, 0.02, 0.05), (0.3, 0.05, 0.02), (-1.2, 0.03, 0.03)] {
+            let b = block(yaw, hx, hy, 0.03);
+            let short = if hx <= hy { Vector3::new(yaw.cos(), yaw.sin(), 0.0) } else { Vector3::new(-yaw.sin(), yaw.cos(), 0.0) };
+            let yaws = grasp_yaws(&b, 0.0, &c);
+            assert_eq!(yaws.len(), 2);
+            for (hand_yaw, width) in yaws {
+                let closing = top_down_pose(Vector3::zeros(), hand_yaw).rotation * Vector3::y();
+                assert!(closing.dot(&short).abs() > 1.0 - 1e-12);
+                assert!((width - 2.0 * hx.min(hy)).abs() < 1e-12);
+            }
+        }
+    }
+
+    #[test]
+    fn candidates_are_ordered_by_yaw_change_and_height_is_clamped() {
+        let c = GraspConfig::default();
+        let b = block(0.0, 0.02, 0.05, 0.03);
+        let yaws = grasp_yaws(&b, 1.4, &c);
+        // Short side along x → hand yaw π/2 or −π/2; from 1.4 rad the first is π/2.
+        assert!((yaws[0].0 - std::f64::consts::FRAC_PI_2).abs() < 1e-12);
+        // 6 cm tall: TCP at the centroid (3 cm) since top − depth = 3.5 cm > 3 cm → 3.5 cm.
+        assert!((grasp_height(&b, &c) - 0.035).abs() < 1e-12);
+        // 2 cm tall: centroid 1 cm, raised to the minimum TCP height.
+        assert!((grasp_height(&block(0.0, 0.02, 0.02, 0.01), &c) - c.min_tcp_height_m).abs() < 1e-12);
+        // 20 cm tall: TCP 2.5 cm below the top.
+        assert!((grasp_height(&block(0.0, 0.02, 0.02, 0.1), &c) - 0.175).abs() < 1e-12);
+    }
+}

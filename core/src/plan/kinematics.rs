@@ -279,7 +279,8 @@ impl ArmChain {
     }
 
     /// Like [`ArmChain::inverse`] but a converged solution must also pass `accept` (e.g. be
-    /// collision-free); rejected solutions count as failures and the next seed is tried.
+    /// collision-free); rejected solutions count as failures and the next seed is tried. When
+    /// solutions were found but all rejected the error is [`PlanError::IkRejected`].
     pub fn inverse_filtered(
         &self,
         world_from_tip_target: &Se3,
@@ -297,6 +298,7 @@ impl ArmChain {
         }
         let mut rng = ChaCha8Rng::seed_from_u64(config.rng_seed);
         let mut best = (f64::INFINITY, f64::INFINITY);
+        let mut rejected = 0;
         for seed_index in 0..=config.random_restarts {
             let start = if seed_index == 0 { *seed } else { self.random_configuration(&mut rng) };
             let (sol, pos_err, rot_err) = self.solve_from(world_from_tip_target, start, seed_index, config);
@@ -307,7 +309,11 @@ impl ArmChain {
                 if accept(&sol.q) {
                     return Ok(sol);
                 }
+                rejected += 1;
             }
+        }
+        if rejected > 0 {
+            return Err(PlanError::IkRejected { seeds: config.random_restarts + 1, rejected });
         }
         Err(PlanError::IkNotConverged {
             seeds: config.random_restarts + 1,

@@ -127,6 +127,14 @@ pub enum PlanError {
         /// Best orientation error reached, radians.
         best_orientation_error_rad: f64,
     },
+    /// IK converged but every solution was rejected (collides with the table, an object or the arm).
+    #[error("IK found {rejected} solutions from {seeds} seeds, all in collision")]
+    IkRejected {
+        /// Seeds tried.
+        seeds: usize,
+        /// Converged solutions rejected.
+        rejected: usize,
+    },
     /// The start configuration collides.
     #[error("start configuration in collision: {contact:?}")]
     StartInCollision {
