@@ -106,14 +106,24 @@ pub fn hand_yaw_of(world_from_tcp: &Se3) -> f64 {
 
 /// A geometric grasp before reachability and clearance: (hand yaw, object width across the closing
 /// axis).
-pub(crate) fn grasp_yaws(object: &ObjectGeometry, current_yaw_rad: f64, config: &GraspConfig) -> Vec<(f64, f64)> {
+pub(crate) fn grasp_yaws(
+    object: &ObjectGeometry,
+    current_yaw_rad: f64,
+    config: &GraspConfig,
+) -> Vec<(f64, f64)> {
     let h = object.half_extents;
     let mut out: Vec<(f64, f64)> = match object.shape {
         Shape::Cuboid => {
             // Close across the shorter horizontal side.
-            let (yaw, width) =
-                if h.x <= h.y { (object.yaw_rad + std::f64::consts::FRAC_PI_2, 2.0 * h.x) } else { (object.yaw_rad, 2.0 * h.y) };
-            vec![(wrap_angle(yaw), width), (wrap_angle(yaw + std::f64::consts::PI), width)]
+            let (yaw, width) = if h.x <= h.y {
+                (object.yaw_rad + std::f64::consts::FRAC_PI_2, 2.0 * h.x)
+            } else {
+                (object.yaw_rad, 2.0 * h.y)
+            };
+            vec![
+                (wrap_angle(yaw), width),
+                (wrap_angle(yaw + std::f64::consts::PI), width),
+            ]
         }
         Shape::Cylinder => {
             let n = config.cylinder_yaw_count.max(1);
@@ -122,20 +132,31 @@ pub(crate) fn grasp_yaws(object: &ObjectGeometry, current_yaw_rad: f64, config: 
                 .flat_map(|k| {
                     let yaw = current_yaw_rad + std::f64::consts::PI * k as f64 / n as f64;
                     // Symmetric gripper: each yaw also works flipped; keep both so joint 7 can choose.
-                    [(wrap_angle(yaw), width), (wrap_angle(yaw + std::f64::consts::PI), width)]
+                    [
+                        (wrap_angle(yaw), width),
+                        (wrap_angle(yaw + std::f64::consts::PI), width),
+                    ]
                 })
                 .collect()
         }
     };
     // Closest to the current hand yaw first (stable for ties).
-    out.sort_by(|a, b| wrap_angle(a.0 - current_yaw_rad).abs().total_cmp(&wrap_angle(b.0 - current_yaw_rad).abs()));
+    out.sort_by(|a, b| {
+        wrap_angle(a.0 - current_yaw_rad)
+            .abs()
+            .total_cmp(&wrap_angle(b.0 - current_yaw_rad).abs())
+    });
     out
 }
 
 /// TCP grasp height for `object` (see the module docs).
 pub(crate) fn grasp_height(object: &ObjectGeometry, config: &GraspConfig) -> f64 {
     let top = object.center.z + object.half_extents.z;
-    object.center.z.max(top - config.max_grasp_depth_m).max(config.min_tcp_height_m)
+    object
+        .center
+        .z
+        .max(top - config.max_grasp_depth_m)
+        .max(config.min_tcp_height_m)
 }
 
 #[cfg(test)]
@@ -143,7 +164,12 @@ mod tests {
     use super::*;
 
     fn block(yaw: f64, hx: f64, hy: f64, hz: f64) -> ObjectGeometry {
-        ObjectGeometry { shape: Shape::Cuboid, center: Vector3::new(0.5, 0.0, hz), yaw_rad: yaw, half_extents: Vector3::new(hx, hy, hz) }
+        ObjectGeometry {
+            shape: Shape::Cuboid,
+            center: Vector3::new(0.5, 0.0, hz),
+            yaw_rad: yaw,
+            half_extents: Vector3::new(hx, hy, hz),
+        }
     }
 
     #[test]
@@ -153,7 +179,10 @@ mod tests {
             assert!((t.rotation * Vector3::z() - Vector3::new(0.0, 0.0, -1.0)).norm() < 1e-12);
             assert!(wrap_angle(hand_yaw_of(&t) - yaw).abs() < 1e-12);
             // Closing axis (hand y) = (sin yaw, −cos yaw, 0).
-            assert!((t.rotation * Vector3::y() - Vector3::new(yaw.sin(), -yaw.cos(), 0.0)).norm() < 1e-12);
+            assert!(
+                (t.rotation * Vector3::y() - Vector3::new(yaw.sin(), -yaw.cos(), 0.0)).norm()
+                    < 1e-12
+            );
         }
     }
 
@@ -162,7 +191,11 @@ mod tests {
         let c = GraspConfig::default();
         for (yaw, hx, hy) in [(0.3, 0.02, 0.05), (0.3, 0.05, 0.02), (-1.2, 0.03, 0.03)] {
             let b = block(yaw, hx, hy, 0.03);
-            let short = if hx <= hy { Vector3::new(yaw.cos(), yaw.sin(), 0.0) } else { Vector3::new(-yaw.sin(), yaw.cos(), 0.0) };
+            let short = if hx <= hy {
+                Vector3::new(yaw.cos(), yaw.sin(), 0.0)
+            } else {
+                Vector3::new(-yaw.sin(), yaw.cos(), 0.0)
+            };
             let yaws = grasp_yaws(&b, 0.0, &c);
             assert_eq!(yaws.len(), 2);
             for (hand_yaw, width) in yaws {
@@ -183,7 +216,9 @@ mod tests {
         // 6 cm tall: TCP at the centroid (3 cm) since top − depth = 3.5 cm > 3 cm → 3.5 cm.
         assert!((grasp_height(&b, &c) - 0.035).abs() < 1e-12);
         // 2 cm tall: centroid 1 cm, raised to the minimum TCP height.
-        assert!((grasp_height(&block(0.0, 0.02, 0.02, 0.01), &c) - c.min_tcp_height_m).abs() < 1e-12);
+        assert!(
+            (grasp_height(&block(0.0, 0.02, 0.02, 0.01), &c) - c.min_tcp_height_m).abs() < 1e-12
+        );
         // 20 cm tall: TCP 2.5 cm below the top.
         assert!((grasp_height(&block(0.0, 0.02, 0.02, 0.1), &c) - 0.175).abs() < 1e-12);
     }

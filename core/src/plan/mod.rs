@@ -283,14 +283,28 @@ impl Planner {
     /// model.
     pub fn new(urdf_path: impl AsRef<Path>, config: PlannerConfig) -> Result<Self, PlanError> {
         let chain = ArmChain::from_urdf(urdf_path.as_ref(), &config.root_link, &config.tcp_link)?;
-        let model = ArmCollisionModel::new(&chain, config.capsules.clone(), &config.self_collision_pairs)?;
+        let model = ArmCollisionModel::new(
+            &chain,
+            config.capsules.clone(),
+            &config.self_collision_pairs,
+        )?;
         let hand_index =
-            chain.link_index(&config.hand_link).ok_or_else(|| PlanError::UnknownLink { link: config.hand_link.clone() })?;
+            chain
+                .link_index(&config.hand_link)
+                .ok_or_else(|| PlanError::UnknownLink {
+                    link: config.hand_link.clone(),
+                })?;
         let q0 = [0.0; ARM_DOF];
         let links = chain.forward_all(&q0);
         let world_from_hand = links.get(hand_index).copied().unwrap_or_else(Se3::identity);
         let hand_from_tcp = world_from_hand.inverse() * chain.forward(&q0);
-        Ok(Self { chain, model, config, hand_index, hand_from_tcp })
+        Ok(Self {
+            chain,
+            model,
+            config,
+            hand_index,
+            hand_from_tcp,
+        })
     }
 
     /// The kinematic chain (to the TCP).
@@ -315,17 +329,30 @@ impl Planner {
 
     /// `world_from_link` of every chain link at `q` with their names (for recording).
     pub fn link_poses(&self, q: &JointVector) -> Vec<(String, Se3)> {
-        self.chain.link_names().into_iter().map(String::from).zip(self.chain.forward_all(q)).collect()
+        self.chain
+            .link_names()
+            .into_iter()
+            .map(String::from)
+            .zip(self.chain.forward_all(q))
+            .collect()
     }
 
     /// `world_from_hand` at `q`.
     pub fn forward_hand(&self, q: &JointVector) -> Se3 {
-        self.chain.forward_all(q).get(self.hand_index).copied().unwrap_or_else(Se3::identity)
+        self.chain
+            .forward_all(q)
+            .get(self.hand_index)
+            .copied()
+            .unwrap_or_else(Se3::identity)
     }
 
     /// A collision scene of `obstacles` with the configured margins.
     pub fn scene(&self, obstacles: &[ObjectGeometry]) -> Result<CollisionScene, PlanError> {
-        CollisionScene::new(obstacles, self.config.object_margin_m, self.config.table_margin_m)
+        CollisionScene::new(
+            obstacles,
+            self.config.object_margin_m,
+            self.config.table_margin_m,
+        )
     }
 
     /// The first contact of `q` in `scene` (None = free).
@@ -334,13 +361,25 @@ impl Planner {
     }
 
     /// IK for the TCP (no collision test), first from `seed`.
-    pub fn inverse_tcp(&self, world_from_tcp: &Se3, seed: &JointVector) -> Result<IkSolution, PlanError> {
+    pub fn inverse_tcp(
+        &self,
+        world_from_tcp: &Se3,
+        seed: &JointVector,
+    ) -> Result<IkSolution, PlanError> {
         self.chain.inverse(world_from_tcp, seed, &self.config.ik)
     }
 
     /// IK for the TCP whose solution is also collision-free in `scene`.
-    pub fn inverse_tcp_free(&self, world_from_tcp: &Se3, seed: &JointVector, scene: &CollisionScene) -> Result<IkSolution, PlanError> {
-        self.chain.inverse_filtered(world_from_tcp, seed, &self.config.ik, |q| self.model.is_free(&self.chain, q, scene))
+    pub fn inverse_tcp_free(
+        &self,
+        world_from_tcp: &Se3,
+        seed: &JointVector,
+        scene: &CollisionScene,
+    ) -> Result<IkSolution, PlanError> {
+        self.chain
+            .inverse_filtered(world_from_tcp, seed, &self.config.ik, |q| {
+                self.model.is_free(&self.chain, q, scene)
+            })
     }
 
     fn check_input(&self, q: &JointVector, what: &'static str) -> Result<(), PlanError> {
@@ -350,18 +389,32 @@ impl Planner {
         for (joint, (v, j)) in q.iter().zip(self.chain.joints()).enumerate() {
             // Small tolerance: simulators report positions a hair past the limits.
             if *v < j.lower_rad - 1e-3 || *v > j.upper_rad + 1e-3 {
-                return Err(PlanError::OutsideLimits { what, joint, value_rad: *v });
+                return Err(PlanError::OutsideLimits {
+                    what,
+                    joint,
+                    value_rad: *v,
+                });
             }
         }
         Ok(())
     }
 
     fn checker<'a>(&'a self, scene: &'a CollisionScene) -> rrt::Checker<'a> {
-        rrt::Checker { chain: &self.chain, model: &self.model, scene, resolution_rad: self.config.edge_resolution_rad }
+        rrt::Checker {
+            chain: &self.chain,
+            model: &self.model,
+            scene,
+            resolution_rad: self.config.edge_resolution_rad,
+        }
     }
 
     /// A collision-free geometric path (joint waypoints, start first) in `scene`.
-    pub fn plan_path(&self, q_start: &JointVector, q_goal: &JointVector, scene: &CollisionScene) -> Result<Vec<JointVector>, PlanError> {
+    pub fn plan_path(
+        &self,
+        q_start: &JointVector,
+        q_goal: &JointVector,
+        scene: &CollisionScene,
+    ) -> Result<Vec<JointVector>, PlanError> {
         self.check_input(q_start, "start configuration")?;
         self.check_input(q_goal, "goal configuration")?;
         let mut start = *q_start;
@@ -387,12 +440,20 @@ impl Planner {
     }
 
     /// Time-parameterises joint waypoints with the configured limits and sample period.
-    pub fn time_parameterize(&self, waypoints: &[JointVector]) -> Result<JointTrajectory, PlanError> {
+    pub fn time_parameterize(
+        &self,
+        waypoints: &[JointVector],
+    ) -> Result<JointTrajectory, PlanError> {
         trajectory::time_parameterize(waypoints, &self.config.limits, self.config.sample_dt_s)
     }
 
     /// Plans a collision-free, time-parameterised motion `q_start → q_goal` among `obstacles`.
-    pub fn plan_to_joints(&self, q_start: &JointVector, q_goal: &JointVector, obstacles: &[ObjectGeometry]) -> Result<JointTrajectory, PlanError> {
+    pub fn plan_to_joints(
+        &self,
+        q_start: &JointVector,
+        q_goal: &JointVector,
+        obstacles: &[ObjectGeometry],
+    ) -> Result<JointTrajectory, PlanError> {
         let scene = self.scene(obstacles)?;
         let path = self.plan_path(q_start, q_goal, &scene)?;
         self.time_parameterize(&path)
@@ -400,7 +461,12 @@ impl Planner {
 
     /// Plans a collision-free motion from `q_start` to a configuration whose TCP is at
     /// `world_from_tcp_target` (collision-free IK seeded from `q_start`, then [`Planner::plan_path`]).
-    pub fn plan_to_pose(&self, q_start: &JointVector, world_from_tcp_target: &Se3, obstacles: &[ObjectGeometry]) -> Result<JointTrajectory, PlanError> {
+    pub fn plan_to_pose(
+        &self,
+        q_start: &JointVector,
+        world_from_tcp_target: &Se3,
+        obstacles: &[ObjectGeometry],
+    ) -> Result<JointTrajectory, PlanError> {
         let scene = self.scene(obstacles)?;
         self.check_input(q_start, "start configuration")?;
         let goal = self.inverse_tcp_free(world_from_tcp_target, q_start, &scene)?;
@@ -413,7 +479,12 @@ impl Planner {
     ///
     /// Errors: [`PlanError::InvalidObject`] for a degenerate object, [`PlanError::TooWide`] when the
     /// object is wider than the gripper across every admissible closing axis.
-    pub fn grasp_candidates(&self, object: &ObjectGeometry, neighbours: &[ObjectGeometry], q_current: &JointVector) -> Result<Vec<GraspCandidate>, PlanError> {
+    pub fn grasp_candidates(
+        &self,
+        object: &ObjectGeometry,
+        neighbours: &[ObjectGeometry],
+        q_current: &JointVector,
+    ) -> Result<Vec<GraspCandidate>, PlanError> {
         self.check_input(q_current, "current configuration")?;
         // Validates the object too.
         CollisionScene::new(std::slice::from_ref(object), 0.0, 0.0)?;
@@ -435,10 +506,20 @@ impl Planner {
             let pregrasp = up(g.pregrasp_height_m);
             let lift = up(g.lift_height_m);
             let world_from_hand = grasp_pose * self.hand_from_tcp.inverse();
-            let clearance_m = self.model.hand_clearance(&world_from_hand, &self.config.hand_link, &scene);
-            let q_pregrasp = self.inverse_tcp_free(&pregrasp, q_current, &scene).ok().map(|s| s.q);
-            let q_grasp = q_pregrasp.and_then(|qp| self.inverse_tcp_free(&grasp_pose, &qp, &scene).ok().map(|s| s.q));
-            let q_lift = q_grasp.and_then(|qg| self.inverse_tcp_free(&lift, &qg, &scene).ok().map(|s| s.q));
+            let clearance_m =
+                self.model
+                    .hand_clearance(&world_from_hand, &self.config.hand_link, &scene);
+            let q_pregrasp = self
+                .inverse_tcp_free(&pregrasp, q_current, &scene)
+                .ok()
+                .map(|s| s.q);
+            let q_grasp = q_pregrasp.and_then(|qp| {
+                self.inverse_tcp_free(&grasp_pose, &qp, &scene)
+                    .ok()
+                    .map(|s| s.q)
+            });
+            let q_lift =
+                q_grasp.and_then(|qg| self.inverse_tcp_free(&lift, &qg, &scene).ok().map(|s| s.q));
             let closing_axis_in_world = grasp_pose.rotation * nalgebra::Vector3::y();
             out.push(GraspCandidate {
                 world_from_tcp_pregrasp: pregrasp,
@@ -455,9 +536,13 @@ impl Planner {
             });
         }
         if out.is_empty() {
-            return Err(PlanError::TooWide { width_m: too_wide.unwrap_or(f64::NAN), max_opening_m: g.max_opening_m });
+            return Err(PlanError::TooWide {
+                width_m: too_wide.unwrap_or(f64::NAN),
+                max_opening_m: g.max_opening_m,
+            });
         }
-        let yaw_change = |c: &GraspCandidate| crate::geometry::wrap_angle(c.hand_yaw_rad - current_yaw).abs();
+        let yaw_change =
+            |c: &GraspCandidate| crate::geometry::wrap_angle(c.hand_yaw_rad - current_yaw).abs();
         // Clearance beyond 5 cm does not matter: compare capped values so the yaw breaks ties.
         let capped = |c: &GraspCandidate| c.clearance_m.min(0.05);
         out.sort_by(|a, b| {
@@ -475,7 +560,12 @@ impl Planner {
     ///
     /// Errors: those of [`Planner::grasp_candidates`], or [`PlanError::NoReachableGrasp`] when no
     /// candidate is reachable and plannable.
-    pub fn plan_grasp(&self, q_start: &JointVector, object: &ObjectGeometry, neighbours: &[ObjectGeometry]) -> Result<GraspMotion, PlanError> {
+    pub fn plan_grasp(
+        &self,
+        q_start: &JointVector,
+        object: &ObjectGeometry,
+        neighbours: &[ObjectGeometry],
+    ) -> Result<GraspMotion, PlanError> {
         let candidates = self.grasp_candidates(object, neighbours, q_start)?;
         let n = candidates.len();
         let mut all: Vec<ObjectGeometry> = neighbours.to_vec();
@@ -483,14 +573,22 @@ impl Planner {
         let scene_all = self.scene(&all)?;
         let scene_neigh = self.scene(neighbours)?;
         for c in candidates {
-            let (Some(qp), Some(qg), Some(ql)) = (c.q_pregrasp, c.q_grasp, c.q_lift) else { continue };
+            let (Some(qp), Some(qg), Some(ql)) = (c.q_pregrasp, c.q_grasp, c.q_lift) else {
+                continue;
+            };
             // The pre-grasp must also clear the target itself.
             if self.first_contact(&qp, &scene_all).is_some() {
                 continue;
             }
-            let Ok(path) = self.plan_path(q_start, &qp, &scene_all) else { continue };
-            let Ok(approach) = self.plan_path(&qp, &qg, &scene_neigh) else { continue };
-            let Ok(lift) = self.plan_path(&qg, &ql, &scene_neigh) else { continue };
+            let Ok(path) = self.plan_path(q_start, &qp, &scene_all) else {
+                continue;
+            };
+            let Ok(approach) = self.plan_path(&qp, &qg, &scene_neigh) else {
+                continue;
+            };
+            let Ok(lift) = self.plan_path(&qg, &ql, &scene_neigh) else {
+                continue;
+            };
             return Ok(GraspMotion {
                 to_pregrasp: self.time_parameterize(&path)?,
                 approach: self.time_parameterize(&approach)?,

@@ -10,12 +10,19 @@ use super::{PlanError, PlannerConfig};
 
 /// Euclidean distance in joint space, radians.
 pub fn joint_distance(a: &JointVector, b: &JointVector) -> f64 {
-    a.iter().zip(b.iter()).map(|(x, y)| (x - y) * (x - y)).sum::<f64>().sqrt()
+    a.iter()
+        .zip(b.iter())
+        .map(|(x, y)| (x - y) * (x - y))
+        .sum::<f64>()
+        .sqrt()
 }
 
 /// Largest absolute joint difference, radians.
 pub fn joint_max_abs_diff(a: &JointVector, b: &JointVector) -> f64 {
-    a.iter().zip(b.iter()).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max)
+    a.iter()
+        .zip(b.iter())
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f64::max)
 }
 
 fn lerp(a: &JointVector, b: &JointVector, t: f64) -> JointVector {
@@ -42,7 +49,9 @@ impl Checker<'_> {
     /// Whether the straight segment a → b is free, checked every `resolution_rad` of the largest
     /// joint motion (endpoints included), in bisection order so collisions are found early.
     pub fn segment_free(&self, a: &JointVector, b: &JointVector) -> bool {
-        let steps = (joint_max_abs_diff(a, b) / self.resolution_rad).ceil().max(1.0) as usize;
+        let steps = (joint_max_abs_diff(a, b) / self.resolution_rad)
+            .ceil()
+            .max(1.0) as usize;
         if !self.config_free(b) {
             return false;
         }
@@ -77,7 +86,10 @@ struct Tree {
 
 impl Tree {
     fn new(root: JointVector) -> Self {
-        Self { nodes: vec![root], parents: vec![0] }
+        Self {
+            nodes: vec![root],
+            parents: vec![0],
+        }
     }
     fn nearest(&self, q: &JointVector) -> usize {
         let mut best = (0, f64::INFINITY);
@@ -115,9 +127,15 @@ enum Extend {
 
 fn extend(tree: &mut Tree, target: &JointVector, step: f64, checker: &Checker) -> Extend {
     let near_i = tree.nearest(target);
-    let Some(near) = tree.nodes.get(near_i).copied() else { return Extend::Trapped };
+    let Some(near) = tree.nodes.get(near_i).copied() else {
+        return Extend::Trapped;
+    };
     let d = joint_distance(&near, target);
-    let (new, reached) = if d <= step { (*target, true) } else { (lerp(&near, target, step / d), false) };
+    let (new, reached) = if d <= step {
+        (*target, true)
+    } else {
+        (lerp(&near, target, step / d), false)
+    };
     if !checker.segment_free(&near, &new) {
         return Extend::Trapped;
     }
@@ -158,7 +176,10 @@ pub(crate) fn plan_path(
     for iteration in 0..config.rrt_max_iterations {
         if let Some(limit) = config.timeout_s {
             if began.elapsed().as_secs_f64() > limit {
-                return Err(PlanError::Timeout { seconds: limit, iterations: iteration });
+                return Err(PlanError::Timeout {
+                    seconds: limit,
+                    iterations: iteration,
+                });
             }
         }
         let sample = if rng.random::<f64>() < config.rrt_goal_bias {
@@ -166,8 +187,12 @@ pub(crate) fn plan_path(
         } else {
             checker.chain.random_configuration(&mut rng)
         };
-        if let Extend::Advanced(i) | Extend::Reached(i) = extend(&mut tree_a, &sample, step, checker) {
-            let Some(q_new) = tree_a.nodes.get(i).copied() else { continue };
+        if let Extend::Advanced(i) | Extend::Reached(i) =
+            extend(&mut tree_a, &sample, step, checker)
+        {
+            let Some(q_new) = tree_a.nodes.get(i).copied() else {
+                continue;
+            };
             if let Extend::Reached(j) = connect(&mut tree_b, &q_new, step, checker) {
                 let mut half_a = tree_a.path_to_root(i);
                 half_a.reverse();
@@ -184,19 +209,28 @@ pub(crate) fn plan_path(
         std::mem::swap(&mut tree_a, &mut tree_b);
         a_is_start = !a_is_start;
     }
-    Err(PlanError::PlannerExhausted { iterations: config.rrt_max_iterations })
+    Err(PlanError::PlannerExhausted {
+        iterations: config.rrt_max_iterations,
+    })
 }
 
 /// Random shortcutting: repeatedly joins two random waypoints by a straight segment when it is free,
 /// then drops waypoints whose neighbours see each other.
-fn shortcut(mut path: Vec<JointVector>, checker: &Checker, config: &PlannerConfig, rng: &mut ChaCha8Rng) -> Vec<JointVector> {
+fn shortcut(
+    mut path: Vec<JointVector>,
+    checker: &Checker,
+    config: &PlannerConfig,
+    rng: &mut ChaCha8Rng,
+) -> Vec<JointVector> {
     for _ in 0..config.shortcut_iterations {
         if path.len() < 3 {
             break;
         }
         let i = rng.random_range(0..path.len() - 2);
         let j = rng.random_range(i + 2..path.len());
-        let (Some(a), Some(b)) = (path.get(i).copied(), path.get(j).copied()) else { continue };
+        let (Some(a), Some(b)) = (path.get(i).copied(), path.get(j).copied()) else {
+            continue;
+        };
         if checker.segment_free(&a, &b) {
             path.drain(i + 1..j);
         }
