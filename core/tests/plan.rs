@@ -495,3 +495,49 @@ fn grasp_bad_inputs() {
         Err(PlanError::InvalidObject { .. })
     ));
 }
+
+/// The capsule model covers the Panda's collision meshes up to `CAPSULE_COVERAGE_TOLERANCE_M`
+/// (samples from `core/tests/fixtures/make_panda_collision_samples.py`). This test needs no URDF.
+#[test]
+fn capsules_cover_the_collision_meshes() {
+    use objslam_core::plan::collision::{panda_capsules, CAPSULE_COVERAGE_TOLERANCE_M};
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/fixtures/panda_collision_samples.json");
+    let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let fx: Value = serde_json::from_str(&text).unwrap_or_else(|e| panic!("{e}"));
+    let capsules = panda_capsules();
+    let links = fx["points_in_link"]
+        .as_object()
+        .unwrap_or_else(|| panic!("points_in_link"));
+    assert_eq!(links.len(), 9);
+    for (link, points) in links {
+        let caps: Vec<_> = capsules.iter().filter(|c| &c.link == link).collect();
+        assert!(!caps.is_empty(), "no capsule on {link}");
+        let mut worst = f64::NEG_INFINITY;
+        let mut n = 0;
+        for p in points.as_array().unwrap_or_else(|| panic!("{link}")) {
+            let p = Vector3::from_vec(floats(p));
+            let excess = caps
+                .iter()
+                .map(|c| {
+                    let a = Vector3::from(c.a_in_link);
+                    let ab = Vector3::from(c.b_in_link) - a;
+                    let t = if ab.norm_squared() > 0.0 {
+                        ((p - a).dot(&ab) / ab.norm_squared()).clamp(0.0, 1.0)
+                    } else {
+                        0.0
+                    };
+                    (a + ab * t - p).norm() - c.radius_m
+                })
+                .fold(f64::INFINITY, f64::min);
+            worst = worst.max(excess);
+            n += 1;
+        }
+        assert!(n > 400, "{link}: {n} samples");
+        // 0.1 mm for the fixture's rounding.
+        assert!(
+            worst <= CAPSULE_COVERAGE_TOLERANCE_M + 1e-4,
+            "{link}: mesh sticks out of its capsules by {worst} m"
+        );
+    }
+}

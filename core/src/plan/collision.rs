@@ -1,8 +1,8 @@
 //! Collision checking of the arm against the table, the map objects and itself (parry3d-f64).
 //!
 //! The arm is approximated by capsules fixed to its links ([`ArmCapsule`]; sizes in
-//! [`panda_capsules`], fitted by hand to the Panda meshes and close to the sphere sets commonly used
-//! for the Panda, e.g. cuRobo's `franka_mesh.yml`). Obstacles are the table (everything under
+//! [`panda_capsules`], fitted to the URDF's collision meshes so that they cover them up to
+//! [`CAPSULE_COVERAGE_TOLERANCE_M`]). Obstacles are the table (everything under
 //! `z = table_margin_m` is forbidden for all links but the base) and the map objects as cuboids or
 //! upright cylinders grown by `object_margin_m` ([`CollisionScene`]). Self-collision is checked for
 //! the link pairs of [`PlannerConfig::self_collision_pairs`](super::PlannerConfig).
@@ -43,49 +43,64 @@ fn cap(link: &str, a: [f64; 3], b: [f64; 3], r: f64) -> ArmCapsule {
 /// so the collision model never underestimates them during transit.
 pub const FINGER_Z_RANGE_M: [f64; 2] = [0.065, 0.100];
 
-/// The Panda's collision capsules (link frames of `panda_v2.urdf`). Sizes, metres:
-/// - link0 (base): axis z 0.05–0.14, r 0.09 (not checked against the table it stands on);
-/// - link1: axis z −0.19…−0.03, r 0.07; shoulder housing y −0.09…0, r 0.065;
-/// - link2: axis z −0.06…0.08, r 0.065; upper arm y 0…−0.19, r 0.065;
-/// - link3: z −0.15…0, r 0.06; elbow housing at x 0.08, y −0.03…0.07, r 0.055;
-/// - link4: z −0.03…0.07, r 0.06; elbow-to-forearm (0,0,0)…(−0.08,0.12,0), r 0.06;
-/// - link5: forearm (0,0,−0.23)…(0,0.05,−0.16), r 0.06; thin wrist (0.01,0.08,−0.14)…(0.01,0.095,−0.05),
-///   r 0.03; wrist housing y 0.02…0.08, r 0.06;
-/// - link6: z −0.02…0.02, r 0.06; flange housing x 0.08, y −0.015…0.035, r 0.052;
-/// - link7: z 0.02…0.08, r 0.05; (0.02,0.04,0.08)…(0.04,0.02,0.08), r 0.025;
-/// - panda_hand: body along y ±0.075 at z 0.02 (r 0.03) and z 0.04 (r 0.025); two fingers at y ±0.052
-///   (full opening + finger half-thickness), z over [`FINGER_Z_RANGE_M`], r 0.012.
+/// How far the Panda's collision meshes may stick out of [`panda_capsules`], metres: the radii are
+/// the distances that cover every surface sample of mani-skill's collision meshes
+/// (`core/tests/fixtures/make_panda_collision_samples.py`), minus up to this much and rounded to
+/// 5 mm; the default object margin (1 cm) absorbs the rest. Checked by `core/tests/plan.rs`.
+pub const CAPSULE_COVERAGE_TOLERANCE_M: f64 = 0.005;
+
+/// The Panda's collision capsules (link frames of `panda_v2.urdf`), fitted to the collision meshes
+/// (`franka_description/meshes/collision/*.stl`, which are boxy: capsules covering their corners
+/// are fat). Segment ends and radius, metres:
+/// - link0 (base): (−0.09,0,0.06)–(0,0,0.06) r 0.11; (0,0,0.06)–(0,0,0.09) r 0.075 (the base is not
+///   checked against the table it stands on);
+/// - link1: (0,0,−0.19)–(0,0,−0.03) r 0.09; (0,−0.075,0)–(0,0,0) r 0.09;
+/// - link2: (0,0,0)–(0,0,0.075) r 0.09; (0,0,0)–(0,−0.14,0) r 0.095;
+/// - link3: (0,0,−0.07)–(0,0,0) r 0.085; (0.083,0,0)–(0.083,0.056,0) r 0.085; (0,0,0)–(0.083,0,0) r 0.075;
+/// - link4: (0,0,0)–(0,0,0.056) r 0.09; (−0.083,0,0)–(−0.083,0.07,0) r 0.085; (0,0,0)–(−0.083,0,0) r 0.07;
+/// - link5: (0,0,−0.21)–(0,0,−0.1) r 0.07; (0,0.075,−0.17)–(0,0.075,−0.06) r 0.065;
+///   (0,0,0)–(0,0.075,0) r 0.055; (0,0,−0.1)–(0,0,0) r 0.06;
+/// - link6: sphere at the origin r 0.055; (0.077,0,0)–(0.077,0.027,0) r 0.075; (0,0,0)–(0.077,0,0) r 0.065;
+/// - link7: (0,0,0.075)–(0,0,0.08) r 0.05; sphere at (0.03,0.03,0.08) r 0.05;
+/// - panda_hand: body (0,±0.07,0) r 0.035 and (0,±0.07,0.035) r 0.04; two fingers at y ±0.052
+///   (full opening 0.08 + finger half-thickness), z over [`FINGER_Z_RANGE_M`], r 0.012 (the URDF's
+///   finger boxes at full opening).
 pub fn panda_capsules() -> Vec<ArmCapsule> {
     let [fz0, fz1] = FINGER_Z_RANGE_M;
     vec![
-        cap("panda_link0", [0.0, 0.0, 0.05], [0.0, 0.0, 0.14], 0.09),
-        cap("panda_link1", [0.0, 0.0, -0.19], [0.0, 0.0, -0.03], 0.07),
-        cap("panda_link1", [0.0, -0.09, 0.0], [0.0, 0.0, 0.0], 0.065),
-        cap("panda_link2", [0.0, 0.0, -0.06], [0.0, 0.0, 0.08], 0.065),
-        cap("panda_link2", [0.0, 0.0, 0.0], [0.0, -0.19, 0.0], 0.065),
-        cap("panda_link3", [0.0, 0.0, -0.15], [0.0, 0.0, 0.0], 0.06),
-        cap("panda_link3", [0.08, -0.03, 0.0], [0.08, 0.07, 0.0], 0.055),
-        cap("panda_link4", [0.0, 0.0, -0.03], [0.0, 0.0, 0.07], 0.06),
-        cap("panda_link4", [0.0, 0.0, 0.0], [-0.08, 0.12, 0.0], 0.06),
-        cap("panda_link5", [0.0, 0.0, -0.23], [0.0, 0.05, -0.16], 0.06),
+        cap("panda_link0", [-0.09, 0.0, 0.06], [0.0, 0.0, 0.06], 0.11),
+        cap("panda_link0", [0.0, 0.0, 0.06], [0.0, 0.0, 0.09], 0.075),
+        cap("panda_link1", [0.0, 0.0, -0.19], [0.0, 0.0, -0.03], 0.09),
+        cap("panda_link1", [0.0, -0.075, 0.0], [0.0, 0.0, 0.0], 0.09),
+        cap("panda_link2", [0.0, 0.0, 0.0], [0.0, 0.0, 0.075], 0.09),
+        cap("panda_link2", [0.0, 0.0, 0.0], [0.0, -0.14, 0.0], 0.095),
+        cap("panda_link3", [0.0, 0.0, -0.07], [0.0, 0.0, 0.0], 0.085),
+        cap("panda_link3", [0.083, 0.0, 0.0], [0.083, 0.056, 0.0], 0.085),
+        cap("panda_link3", [0.0, 0.0, 0.0], [0.083, 0.0, 0.0], 0.075),
+        cap("panda_link4", [0.0, 0.0, 0.0], [0.0, 0.0, 0.056], 0.09),
+        cap(
+            "panda_link4",
+            [-0.083, 0.0, 0.0],
+            [-0.083, 0.07, 0.0],
+            0.085,
+        ),
+        cap("panda_link4", [0.0, 0.0, 0.0], [-0.083, 0.0, 0.0], 0.07),
+        cap("panda_link5", [0.0, 0.0, -0.21], [0.0, 0.0, -0.1], 0.07),
         cap(
             "panda_link5",
-            [0.01, 0.08, -0.14],
-            [0.01, 0.095, -0.05],
-            0.03,
+            [0.0, 0.075, -0.17],
+            [0.0, 0.075, -0.06],
+            0.065,
         ),
-        cap("panda_link5", [0.0, 0.02, 0.0], [0.0, 0.08, 0.0], 0.06),
-        cap("panda_link6", [0.0, 0.0, -0.02], [0.0, 0.0, 0.02], 0.06),
-        cap(
-            "panda_link6",
-            [0.08, -0.015, 0.0],
-            [0.08, 0.035, 0.0],
-            0.052,
-        ),
-        cap("panda_link7", [0.0, 0.0, 0.02], [0.0, 0.0, 0.08], 0.05),
-        cap("panda_link7", [0.02, 0.04, 0.08], [0.04, 0.02, 0.08], 0.025),
-        cap("panda_hand", [0.0, -0.075, 0.02], [0.0, 0.075, 0.02], 0.03),
-        cap("panda_hand", [0.0, -0.075, 0.04], [0.0, 0.075, 0.04], 0.025),
+        cap("panda_link5", [0.0, 0.0, 0.0], [0.0, 0.075, 0.0], 0.055),
+        cap("panda_link5", [0.0, 0.0, -0.1], [0.0, 0.0, 0.0], 0.06),
+        cap("panda_link6", [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], 0.055),
+        cap("panda_link6", [0.077, 0.0, 0.0], [0.077, 0.027, 0.0], 0.075),
+        cap("panda_link6", [0.0, 0.0, 0.0], [0.077, 0.0, 0.0], 0.065),
+        cap("panda_link7", [0.0, 0.0, 0.075], [0.0, 0.0, 0.08], 0.05),
+        cap("panda_link7", [0.03, 0.03, 0.08], [0.03, 0.03, 0.08], 0.05),
+        cap("panda_hand", [0.0, -0.07, 0.0], [0.0, 0.07, 0.0], 0.035),
+        cap("panda_hand", [0.0, -0.07, 0.035], [0.0, 0.07, 0.035], 0.04),
         cap("panda_hand", [0.0, 0.052, fz0], [0.0, 0.052, fz1], 0.012),
         cap("panda_hand", [0.0, -0.052, fz0], [0.0, -0.052, fz1], 0.012),
     ]
