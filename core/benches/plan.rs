@@ -91,7 +91,7 @@ fn benches(c: &mut Criterion) {
         })
     });
     let objects = twelve_objects();
-    // Queries: the TCP moves low (8 cm above the table) between gaps of the object grid, from one
+    // Queries: the TCP moves low (11 cm above the table) between gaps of the object grid, from one
     // gap's configuration to the next, so several straight lines are blocked and RRT-Connect runs.
     let gaps = [
         (0.385, -0.125),
@@ -105,7 +105,7 @@ fn benches(c: &mut Criterion) {
     let mut q = Q_READY;
     for &(x, y) in &gaps {
         let scene = planner.scene(&objects).unwrap_or_else(|e| panic!("{e}"));
-        let pose = top_down_pose(Vector3::new(x, y, 0.08), 0.0);
+        let pose = top_down_pose(Vector3::new(x, y, 0.11), 0.0);
         match planner.inverse_tcp_free(&pose, &q, &scene) {
             Ok(s) => {
                 starts.push((q, pose));

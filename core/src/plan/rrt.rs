@@ -58,8 +58,12 @@ impl Checker<'_> {
         // Van der Corput-like order: coarse samples first.
         let mut stride = steps.next_power_of_two();
         let mut checked = vec![false; steps + 1];
-        checked[0] = true; // `a` is assumed free (checked by the caller or a tree node)
-        checked[steps] = true;
+        // `a` is assumed free (checked by the caller or a tree node); `b` was checked above.
+        for i in [0, steps] {
+            if let Some(c) = checked.get_mut(i) {
+                *c = true;
+            }
+        }
         while stride >= 1 {
             let mut i = stride;
             while i < steps {
