@@ -475,7 +475,8 @@ impl Planner {
     }
 
     /// Grasp candidates for `object` (a map estimate) among `neighbours` (the other map objects),
-    /// ranked: reachable first, then larger clearance, then smaller hand-yaw change from `q_current`.
+    /// ranked: reachable first, then clearance (capped at `clearance_enough_m`), then short side
+    /// before long side, deep before shallow, then smaller hand-yaw change from `q_current`.
     ///
     /// Errors: [`PlanError::InvalidObject`] for a degenerate object, [`PlanError::TooWide`] when the
     /// object is wider than the gripper across every admissible closing axis.
@@ -491,64 +492,66 @@ impl Planner {
         let scene = self.scene(neighbours)?;
         let g = &self.config.grasp;
         let current_yaw = grasp::hand_yaw_of(&self.forward_tcp(q_current));
-        let yaws = grasp::grasp_yaws(object, current_yaw, g);
-        let z = grasp::grasp_height(object, g);
-        let mut out = Vec::new();
-        let mut too_wide = None;
-        for (yaw, width) in yaws {
-            if width > g.max_opening_m {
-                too_wide = Some(width);
-                continue;
-            }
-            let p = nalgebra::Vector3::new(object.center.x, object.center.y, z);
-            let grasp_pose = grasp::top_down_pose(p, yaw);
-            let up = |h: f64| grasp::top_down_pose(p + nalgebra::Vector3::new(0.0, 0.0, h), yaw);
-            let pregrasp = up(g.pregrasp_height_m);
-            let lift = up(g.lift_height_m);
-            let world_from_hand = grasp_pose * self.hand_from_tcp.inverse();
-            let clearance_m =
-                self.model
-                    .hand_clearance(&world_from_hand, &self.config.hand_link, &scene);
-            let q_pregrasp = self
-                .inverse_tcp_free(&pregrasp, q_current, &scene)
-                .ok()
-                .map(|s| s.q);
-            let q_grasp = q_pregrasp.and_then(|qp| {
-                self.inverse_tcp_free(&grasp_pose, &qp, &scene)
-                    .ok()
-                    .map(|s| s.q)
-            });
-            let q_lift =
-                q_grasp.and_then(|qg| self.inverse_tcp_free(&lift, &qg, &scene).ok().map(|s| s.q));
-            let closing_axis_in_world = grasp_pose.rotation * nalgebra::Vector3::y();
-            out.push(GraspCandidate {
-                world_from_tcp_pregrasp: pregrasp,
-                world_from_tcp_grasp: grasp_pose,
-                world_from_tcp_lift: lift,
-                hand_yaw_rad: yaw,
-                closing_axis_in_world,
-                open_width_m: (width + g.opening_clearance_m).min(g.max_opening_m),
-                expected_closed_width_m: width,
-                clearance_m,
-                q_pregrasp,
-                q_grasp,
-                q_lift,
+        let directions = grasp::grasp_directions(object, current_yaw, g);
+        if directions.is_empty() {
+            return Err(PlanError::TooWide {
+                width_m: grasp::narrowest_width(object),
+                max_opening_m: g.max_opening_m - g.min_opening_clearance_m,
             });
         }
-        if out.is_empty() {
-            return Err(PlanError::TooWide {
-                width_m: too_wide.unwrap_or(f64::NAN),
-                max_opening_m: g.max_opening_m,
-            });
+        let top = object.center.z + object.half_extents.z;
+        let mut out = Vec::new();
+        for z in grasp::grasp_heights(object, g) {
+            for d in &directions {
+                let p = nalgebra::Vector3::new(object.center.x, object.center.y, z);
+                let grasp_pose = grasp::top_down_pose(p, d.yaw_rad);
+                let up = |h: f64| {
+                    grasp::top_down_pose(p + nalgebra::Vector3::new(0.0, 0.0, h), d.yaw_rad)
+                };
+                let pregrasp = up(g.pregrasp_height_m);
+                let lift = up(g.lift_height_m);
+                let world_from_hand = grasp_pose * self.hand_from_tcp.inverse();
+                let clearance_m =
+                    self.model
+                        .hand_clearance(&world_from_hand, &self.config.hand_link, &scene);
+                let q_pregrasp = self
+                    .inverse_tcp_free(&pregrasp, q_current, &scene)
+                    .ok()
+                    .map(|s| s.q);
+                let q_grasp = q_pregrasp.and_then(|qp| {
+                    self.inverse_tcp_free(&grasp_pose, &qp, &scene)
+                        .ok()
+                        .map(|s| s.q)
+                });
+                let q_lift = q_grasp
+                    .and_then(|qg| self.inverse_tcp_free(&lift, &qg, &scene).ok().map(|s| s.q));
+                out.push(GraspCandidate {
+                    world_from_tcp_pregrasp: pregrasp,
+                    world_from_tcp_grasp: grasp_pose,
+                    world_from_tcp_lift: lift,
+                    hand_yaw_rad: d.yaw_rad,
+                    closing_axis_in_world: grasp_pose.rotation * nalgebra::Vector3::y(),
+                    open_width_m: (d.width_m + g.opening_clearance_m).min(g.max_opening_m),
+                    expected_closed_width_m: d.width_m,
+                    clearance_m,
+                    short_side: d.short_side,
+                    depth_below_top_m: top - z,
+                    q_pregrasp,
+                    q_grasp,
+                    q_lift,
+                });
+            }
         }
         let yaw_change =
             |c: &GraspCandidate| crate::geometry::wrap_angle(c.hand_yaw_rad - current_yaw).abs();
-        // Clearance beyond 5 cm does not matter: compare capped values so the yaw breaks ties.
-        let capped = |c: &GraspCandidate| c.clearance_m.min(0.05);
+        // Clearance beyond `clearance_enough_m` does not matter: compare capped values.
+        let capped = |c: &GraspCandidate| c.clearance_m.min(g.clearance_enough_m);
         out.sort_by(|a, b| {
             b.reachable()
                 .cmp(&a.reachable())
                 .then(capped(b).total_cmp(&capped(a)))
+                .then(b.short_side.cmp(&a.short_side))
+                .then(b.depth_below_top_m.total_cmp(&a.depth_below_top_m))
                 .then(yaw_change(a).total_cmp(&yaw_change(b)))
         });
         Ok(out)
