@@ -272,7 +272,11 @@ mod tests {
                 assert!((d.width_m - expected).abs() < 1e-12);
                 // Short-side grasps close along the short axis, long-side ones across it.
                 let along = closing.dot(&short).abs();
-                assert!(if d.short_side { along > 1.0 - 1e-12 } else { along < 1e-12 });
+                assert!(if d.short_side {
+                    along > 1.0 - 1e-12
+                } else {
+                    along < 1e-12
+                });
             }
             let only_short = GraspConfig {
                 allow_long_side: false,

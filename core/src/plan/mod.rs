@@ -25,16 +25,29 @@
 //! - [`trajectory`]: chained rest-to-rest, time-optimal Ruckig moves along the checked straight
 //!   segments under per-joint velocity / acceleration / jerk limits.
 //! - [`grasp`]: top-down grasps (short side for cuboids, any yaw for cylinders), opening from the
-//!   estimated size, ranked by reachability, clearance and yaw change.
+//!   estimated size, ranked by reachability, clearance, side, depth and yaw change.
+//!
+//! # Typical use (per grasp attempt)
+//! 1. `planner.plan_grasp(q_now, &target_estimate, &other_estimates)` → [`GraspMotion`] or a typed
+//!    per-attempt failure ([`PlanError::TooWide`], [`PlanError::NoReachableGrasp`], …).
+//! 2. Open the fingers to `candidate.open_width_m` (each finger joint = width / 2), execute
+//!    `to_pregrasp`, then `approach`, close, execute `lift`.
+//! 3. Views and other arm moves: `plan_to_pose(q_now, world_from_tcp, &all_estimates)`; with
+//!    a camera on the hand, `world_from_tcp = world_from_camera · tcp_from_camera⁻¹`.
 //!
 //! # Choices where the issue / paper is vague (all config fields)
-//! - Capsule sizes and self-collision pairs: hand-fitted, see [`collision`].
-//! - Object margin 1 cm, table margin 5 mm, edge resolution 0.01 rad (~1 cm at the TCP).
+//! - Capsules fitted to the URDF's collision meshes (they cover them up to 5 mm, see
+//!   [`collision::panda_capsules`]); self-collision pairs from the Panda SRDF.
+//! - Object margin 1 cm, table margin 5 mm, edge resolution 0.01 rad (≤ 9 mm at the TCP).
 //! - Trajectories stop at every waypoint (chained single moves; Ruckig's waypoint mode needs a
-//!   web service and is never used).
+//!   web service and is never used); each move is time-optimal along its straight segment.
 //! - The planner is deterministic: all randomness comes from `rng_seed`; the optional wall-clock
 //!   time-out is off by default (an iteration limit bounds the work instead).
-//! - Grasps are top-down only; tall objects are grasped near their top (`max_grasp_depth_m`).
+//! - Grasps are top-down only; tall objects are grasped near their top (`max_grasp_depth_m`);
+//!   fallbacks are the cuboid's long side when it fits and a shallower grasp
+//!   (`shallow_grasp_depth_m`) that lifts the 20 cm wide hand body above close neighbours.
+//! - The approach (pre-grasp → grasp) is a straight joint-space segment between IK solutions
+//!   seeded from each other; the TCP stays within 1 cm of the vertical line (tested).
 
 pub mod collision;
 pub mod grasp;
