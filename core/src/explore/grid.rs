@@ -67,8 +67,7 @@ pub fn binary_entropy_bits(p: f64) -> f64 {
     plogp_bits(p) + plogp_bits(1.0 - p)
 }
 
-/// `−p log₂ p` (paper Eq. `eq:plogp`), 0 for p ≤ 0 or p ≥ 1... except the value at p = 1 is 0
-/// anyway; non-finite inputs give 0.
+/// `−p log₂ p` (paper Eq. `eq:plogp`); 0 for p ≤ 0 and for non-finite p.
 pub fn plogp_bits(p: f64) -> f64 {
     if !(p.is_finite() && p > 0.0) {
         return 0.0;
@@ -255,7 +254,8 @@ fn face_size_m(shape: Shape, h: &Vector3<f64>, face: Face) -> (f64, f64) {
 }
 
 fn cells_along(len_m: f64, cell_m: f64) -> usize {
-    ((len_m / cell_m).ceil() as usize).clamp(1, MAX_CELLS_PER_SIDE)
+    // The small tolerance keeps 0.1 m / 0.01 m = 10.000000000000002 at 10 cells.
+    ((len_m / cell_m - 1e-9).ceil() as usize).clamp(1, MAX_CELLS_PER_SIDE)
 }
 
 /// Centre and normal at normalised face coordinates `(u, v) ∈ [0, 1]²`, object frame.

@@ -544,3 +544,5 @@ impl ExplorationGrids {
         Ok(FrameUpdate { objects, resampled })
     }
 }
+#[cfg(test)]
+mod tests;
