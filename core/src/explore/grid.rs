@@ -121,7 +121,9 @@ impl FaceGrid {
 
     /// Occupancy probability of cell `i`.
     pub fn probability(&self, i: usize) -> f64 {
-        self.log_odds.get(i).map_or(0.5, |l| probability_from_log_odds(f64::from(*l)))
+        self.log_odds
+            .get(i)
+            .map_or(0.5, |l| probability_from_log_odds(f64::from(*l)))
     }
 
     /// Number of cells (including masked ones).
@@ -226,7 +228,9 @@ const MAX_CELLS_PER_SIDE: usize = 1000;
 
 fn sanitize_half_extents(h: &Vector3<f64>) -> Result<Vector3<f64>, ExploreError> {
     if h.iter().any(|v| !v.is_finite()) {
-        return Err(ExploreError::NonFinite { field: "half_extents" });
+        return Err(ExploreError::NonFinite {
+            field: "half_extents",
+        });
     }
     Ok(h.map(|v| v.max(MIN_HALF_EXTENT_M)))
 }
@@ -270,9 +274,15 @@ fn surface_point(shape: Shape, h: &Vector3<f64>, face: Face, u: f64, v: f64) -> 
                 Face::NegX => (Point3::new(-h.x, -h.y + u * 2.0 * h.y, z), -Vector3::x()),
                 Face::PosY => (Point3::new(-h.x + u * 2.0 * h.x, h.y, z), Vector3::y()),
                 Face::NegY => (Point3::new(-h.x + u * 2.0 * h.x, -h.y, z), -Vector3::y()),
-                Face::Top => (Point3::new(-h.x + u * 2.0 * h.x, -h.y + v * 2.0 * h.y, h.z), Vector3::z()),
+                Face::Top => (
+                    Point3::new(-h.x + u * 2.0 * h.x, -h.y + v * 2.0 * h.y, h.z),
+                    Vector3::z(),
+                ),
             };
-            CellPose { p_in_object: p, normal_in_object: n }
+            CellPose {
+                p_in_object: p,
+                normal_in_object: n,
+            }
         }
         Shape::Cylinder => {
             let r = cylinder_radius(h);
@@ -281,7 +291,10 @@ fn surface_point(shape: Shape, h: &Vector3<f64>, face: Face, u: f64, v: f64) -> 
                     // u ∈ [0, 1] spans azimuths az0 − 45° … az0 + 45° counter-clockwise.
                     let az = az0 - std::f64::consts::FRAC_PI_4 + u * std::f64::consts::FRAC_PI_2;
                     let (s, c) = az.sin_cos();
-                    CellPose { p_in_object: Point3::new(r * c, r * s, z), normal_in_object: Vector3::new(c, s, 0.0) }
+                    CellPose {
+                        p_in_object: Point3::new(r * c, r * s, z),
+                        normal_in_object: Vector3::new(c, s, 0.0),
+                    }
                 }
                 None => CellPose {
                     p_in_object: Point3::new(-r + u * 2.0 * r, -r + v * 2.0 * r, h.z),
@@ -306,7 +319,13 @@ fn locate(shape: Shape, h: &Vector3<f64>, p: &Point3<f64>) -> Option<(Face, f64,
                 ((p.z - h.z).abs(), Some(Face::Top)),
                 ((p.z + h.z).abs(), None),
             ];
-            let (d, face) = candidates.iter().copied().fold((f64::INFINITY, None), |best, c| if c.0 < best.0 { c } else { best });
+            let (d, face) = candidates
+                .iter()
+                .copied()
+                .fold(
+                    (f64::INFINITY, None),
+                    |best, c| if c.0 < best.0 { c } else { best },
+                );
             let face = face?;
             let ux = ((p.x + h.x) / (2.0 * h.x)).clamp(0.0, 1.0);
             let uy = ((p.y + h.y) / (2.0 * h.y)).clamp(0.0, 1.0);
@@ -341,7 +360,8 @@ fn locate(shape: Shape, h: &Vector3<f64>, p: &Point3<f64>) -> Option<(Face, f64,
             };
             let az0 = face.azimuth_rad().unwrap_or(0.0);
             let rel = crate::geometry::wrap_angle(az - az0);
-            let u = ((rel + std::f64::consts::FRAC_PI_4) / std::f64::consts::FRAC_PI_2).clamp(0.0, 1.0);
+            let u =
+                ((rel + std::f64::consts::FRAC_PI_4) / std::f64::consts::FRAC_PI_2).clamp(0.0, 1.0);
             Some((face, u, v, d_lat))
         }
     }
@@ -373,7 +393,14 @@ fn build_face(shape: Shape, h: &Vector3<f64>, face: Face, cell_m: f64) -> FaceGr
             }
         }
     }
-    FaceGrid { face, cols, rows, log_odds: vec![0.0; n], updates: vec![0; n], valid }
+    FaceGrid {
+        face,
+        cols,
+        rows,
+        log_odds: vec![0.0; n],
+        updates: vec![0; n],
+        valid,
+    }
 }
 
 impl SurfaceGrid {
@@ -382,8 +409,17 @@ impl SurfaceGrid {
         config.validate()?;
         let shape = object.label.shape();
         let h = sanitize_half_extents(&object.half_extents)?;
-        let faces = Face::ALL.iter().map(|f| build_face(shape, &h, *f, config.cell_size_m)).collect();
-        Ok(Self { object_id: object.id, shape, half_extents: h, cell_size_m: config.cell_size_m, faces })
+        let faces = Face::ALL
+            .iter()
+            .map(|f| build_face(shape, &h, *f, config.cell_size_m))
+            .collect();
+        Ok(Self {
+            object_id: object.id,
+            shape,
+            half_extents: h,
+            cell_size_m: config.cell_size_m,
+            faces,
+        })
     }
 
     /// Follow the object's current estimate. The pose needs nothing (cells are in the object
@@ -397,7 +433,10 @@ impl SurfaceGrid {
         if shape == self.shape && same_size && config.cell_size_m == self.cell_size_m {
             return Ok(false);
         }
-        let mut faces: Vec<FaceGrid> = Face::ALL.iter().map(|f| build_face(shape, &h, *f, config.cell_size_m)).collect();
+        let mut faces: Vec<FaceGrid> = Face::ALL
+            .iter()
+            .map(|f| build_face(shape, &h, *f, config.cell_size_m))
+            .collect();
         for (new, old) in faces.iter_mut().zip(self.faces.iter()) {
             for i in 0..new.len() {
                 let u = ((i % new.cols) as f64 + 0.5) / new.cols as f64;
@@ -431,25 +470,36 @@ impl SurfaceGrid {
     /// `max_distance_m` and its nearest surface is not the bottom or a masked cell.
     pub fn cell_of_point(&self, p_in_object: &Point3<f64>, max_distance_m: f64) -> Option<CellRef> {
         let (face, u, v, d) = locate(self.shape, &self.half_extents, p_in_object)?;
-        if !(d <= max_distance_m) {
+        if d.is_nan() || d > max_distance_m {
             return None;
         }
         let fi = Face::ALL.iter().position(|f| *f == face)?;
         let f = self.faces.get(fi)?;
         let cell = cell_index(f.cols, f.rows, u, v);
-        f.valid.get(cell).copied().unwrap_or(false).then_some(CellRef { face: fi, cell })
+        f.valid
+            .get(cell)
+            .copied()
+            .unwrap_or(false)
+            .then_some(CellRef { face: fi, cell })
     }
 
     /// Every valid cell, in storage order (face, then row-major).
     pub fn cells(&self) -> impl Iterator<Item = CellRef> + '_ {
         self.faces.iter().enumerate().flat_map(|(fi, f)| {
-            f.valid.iter().enumerate().filter(|(_, ok)| **ok).map(move |(ci, _)| CellRef { face: fi, cell: ci })
+            f.valid
+                .iter()
+                .enumerate()
+                .filter(|(_, ok)| **ok)
+                .map(move |(ci, _)| CellRef { face: fi, cell: ci })
         })
     }
 
     /// Log-odds of a cell (0 for an invalid reference).
     pub fn log_odds(&self, r: CellRef) -> f64 {
-        self.faces.get(r.face).and_then(|f| f.log_odds.get(r.cell)).map_or(0.0, |l| f64::from(*l))
+        self.faces
+            .get(r.face)
+            .and_then(|f| f.log_odds.get(r.cell))
+            .map_or(0.0, |l| f64::from(*l))
     }
 
     /// State of a cell (`None` for an invalid or masked reference).
@@ -460,9 +510,17 @@ impl SurfaceGrid {
     /// Apply one measurement to a cell: `hit` adds the hit log-odds, a miss the miss log-odds,
     /// clamped to the configured probability bounds. Invalid references are ignored.
     pub fn update_cell(&mut self, r: CellRef, hit: bool, config: &GridConfig) {
-        let Some(f) = self.faces.get_mut(r.face) else { return };
-        let (Some(l), Some(n)) = (f.log_odds.get_mut(r.cell), f.updates.get_mut(r.cell)) else { return };
-        let delta = if hit { log_odds(config.p_hit) } else { log_odds(config.p_miss) };
+        let Some(f) = self.faces.get_mut(r.face) else {
+            return;
+        };
+        let (Some(l), Some(n)) = (f.log_odds.get_mut(r.cell), f.updates.get_mut(r.cell)) else {
+            return;
+        };
+        let delta = if hit {
+            log_odds(config.p_hit)
+        } else {
+            log_odds(config.p_miss)
+        };
         let (lo, hi) = (log_odds(config.p_min), log_odds(config.p_max));
         *l = (f64::from(*l) + delta).clamp(lo, hi) as f32;
         *n = n.saturating_add(1);

@@ -5,8 +5,10 @@ use std::collections::BTreeMap;
 
 use nalgebra::{Point3, Vector3};
 
-use super::grid::{binary_entropy_bits, log_odds, plogp_bits, probability_from_log_odds, GridStats};
-use super::visibility::{check_pose, point_visibility, CellVisibility, Occluders};
+use super::grid::{
+    binary_entropy_bits, log_odds, plogp_bits, probability_from_log_odds, GridStats,
+};
+use super::visibility::{check_pose, point_visibility, CellVisibility, Occluders, Viewpoint};
 use super::{EntropyScope, ExplorationGrids, ExploreConfig, ExploreError, IouMode, Strategy};
 use crate::geometry::{iou3d, Box2, ObjectGeometry, PinholeCamera, Se3};
 use crate::map::ObjectMap;
@@ -31,7 +33,12 @@ impl ObjectHistory {
     /// normal density never exceeds 0.399, so the paper's `p > 0.8` test would never pass).
     /// Fewer than `min_len` estimates (or none with a positive finite volume): 0 (not converged).
     pub fn volume_convergence(&self, min_len: usize, volume_sigma_floor: f64) -> f64 {
-        let v: Vec<f64> = self.estimates.iter().map(ObjectGeometry::volume).filter(|v| v.is_finite() && *v > 0.0).collect();
+        let v: Vec<f64> = self
+            .estimates
+            .iter()
+            .map(ObjectGeometry::volume)
+            .filter(|v| v.is_finite() && *v > 0.0)
+            .collect();
         if v.len() < min_len.max(1) {
             return 0.0;
         }
@@ -46,7 +53,12 @@ impl ObjectHistory {
 
     /// The latest volume normalised by the mean of all, V̄⁽ᵗ⁾ (1 without history).
     pub fn normalized_volume(&self) -> f64 {
-        let v: Vec<f64> = self.estimates.iter().map(ObjectGeometry::volume).filter(|v| v.is_finite() && *v > 0.0).collect();
+        let v: Vec<f64> = self
+            .estimates
+            .iter()
+            .map(ObjectGeometry::volume)
+            .filter(|v| v.is_finite() && *v > 0.0)
+            .collect();
         match v.last() {
             Some(last) => last / (v.iter().sum::<f64>() / v.len() as f64),
             None => 1.0,
@@ -59,7 +71,10 @@ impl ObjectHistory {
         if n < 2 {
             return None;
         }
-        Some(iou3d(self.estimates.get(n - 2)?, self.estimates.get(n - 1)?))
+        Some(iou3d(
+            self.estimates.get(n - 2)?,
+            self.estimates.get(n - 1)?,
+        ))
     }
 }
 
@@ -76,7 +91,11 @@ impl HistoryBook {
     pub fn record(&mut self, map: &ObjectMap) {
         self.objects.retain(|id, _| map.get(*id).is_some());
         for o in &map.objects {
-            self.objects.entry(o.id).or_default().estimates.push(o.geometry());
+            self.objects
+                .entry(o.id)
+                .or_default()
+                .estimates
+                .push(o.geometry());
         }
     }
 }
@@ -108,20 +127,33 @@ pub struct ObjectFeatures {
 
 /// The paper's s(x) rule: s = 0 when (H̄ < `done_normalized_entropy` ∨ R_o > `done_occupied_ratio`)
 /// ∧ p(V̄) > `done_volume_probability`; returns whether s = 1.
-pub fn needs_exploring(normalized_entropy: f64, occupied_ratio: f64, volume_probability: f64, config: &ExploreConfig) -> bool {
-    let complete = normalized_entropy < config.done_normalized_entropy || occupied_ratio > config.done_occupied_ratio;
+pub fn needs_exploring(
+    normalized_entropy: f64,
+    occupied_ratio: f64,
+    volume_probability: f64,
+    config: &ExploreConfig,
+) -> bool {
+    let complete = normalized_entropy < config.done_normalized_entropy
+        || occupied_ratio > config.done_occupied_ratio;
     !(complete && volume_probability > config.done_volume_probability)
 }
 
 /// Features of every map object (map order). Objects without a grid get an all-unknown one's
 /// statistics via `grids` (call [`ExplorationGrids::sync`] first); without history, p(V̄) = 0.
-pub fn object_features(map: &ObjectMap, grids: &ExplorationGrids, histories: &HistoryBook, config: &ExploreConfig) -> Vec<ObjectFeatures> {
+pub fn object_features(
+    map: &ObjectMap,
+    grids: &ExplorationGrids,
+    histories: &HistoryBook,
+    config: &ExploreConfig,
+) -> Vec<ObjectFeatures> {
     map.objects
         .iter()
         .map(|o| {
             let grid = grids.get(o.id).map(|g| g.stats()).unwrap_or_default();
             let hist = histories.objects.get(&o.id);
-            let pv = hist.map_or(0.0, |h| h.volume_convergence(config.min_history_len, config.volume_sigma_floor));
+            let pv = hist.map_or(0.0, |h| {
+                h.volume_convergence(config.min_history_len, config.volume_sigma_floor)
+            });
             let hn = grid.normalized_entropy();
             let ro = grid.occupied_ratio();
             ObjectFeatures {
@@ -150,7 +182,11 @@ pub enum StopReason {
 
 /// The stopping rule: `Some(reason)` when exploration should end. An empty map never counts as
 /// "all explored" (there is nothing known yet); it stops only on the view budget.
-pub fn stop_reason(features: &[ObjectFeatures], views_taken: usize, config: &ExploreConfig) -> Option<StopReason> {
+pub fn stop_reason(
+    features: &[ObjectFeatures],
+    views_taken: usize,
+    config: &ExploreConfig,
+) -> Option<StopReason> {
     if views_taken >= config.max_views {
         return Some(StopReason::MaxViews);
     }
@@ -228,7 +264,8 @@ pub fn expected_entropy_reduction(l: f64, config: &ExploreConfig) -> f64 {
     let p = probability_from_log_odds(l);
     let lh = (l + log_odds(g.p_hit)).clamp(lo, hi);
     let lm = (l + log_odds(g.p_miss)).clamp(lo, hi);
-    let after = p * binary_entropy_bits(probability_from_log_odds(lh)) + (1.0 - p) * binary_entropy_bits(probability_from_log_odds(lm));
+    let after = p * binary_entropy_bits(probability_from_log_odds(lh))
+        + (1.0 - p) * binary_entropy_bits(probability_from_log_odds(lm));
     (binary_entropy_bits(p) - after).max(0.0)
 }
 
@@ -260,9 +297,19 @@ impl UtilityContext {
                     });
                 }
             }
-            objects.push(PreparedObject { id: o.id, geometry: o.geometry(), features: f, cells });
+            objects.push(PreparedObject {
+                id: o.id,
+                geometry: o.geometry(),
+                features: f,
+                cells,
+            });
         }
-        Ok(Self { camera: *camera, config: config.clone(), objects, occluders: Occluders::from_map(map, &config.grid) })
+        Ok(Self {
+            camera: *camera,
+            config: config.clone(),
+            objects,
+            occluders: Occluders::from_map(map, &config.grid),
+        })
     }
 
     /// The features of every object (map order).
@@ -274,9 +321,15 @@ impl UtilityContext {
     /// ([`Strategy::ObjectDriven`] or [`Strategy::ExpectedGain`]; the view-generator baselines
     /// are scored like object-driven). `current` is the camera pose now (motion cost of
     /// expected-gain; ignored otherwise).
-    pub fn score(&self, world_from_camera: &Se3, strategy: Strategy, current: Option<&Se3>) -> Result<ViewScore, ExploreError> {
+    pub fn score(
+        &self,
+        world_from_camera: &Se3,
+        strategy: Strategy,
+        current: Option<&Se3>,
+    ) -> Result<ViewScore, ExploreError> {
         check_pose(world_from_camera, "world_from_camera")?;
-        let camera_from_world = world_from_camera.inverse();
+        let viewpoint = Viewpoint::new(&self.camera, world_from_camera);
+        let camera_from_world = viewpoint.camera_from_world;
         let cfg = &self.config;
         let eye = Point3::from(world_from_camera.translation.vector);
         // Visible objects and their projected boxes.
@@ -286,15 +339,27 @@ impl UtilityContext {
             let dist = (Point3::from(o.geometry.center) - eye).norm();
             let in_view = c.z >= cfg.grid.min_range_m
                 && dist <= cfg.grid.max_range_m
-                && self.camera.project(&c).is_some_and(|uv| self.camera.contains(uv));
+                && self
+                    .camera
+                    .project(&c)
+                    .is_some_and(|uv| self.camera.contains(uv));
             if in_view {
-                visible.push((i, project_geometry(&o.geometry, &self.camera, world_from_camera)));
+                visible.push((
+                    i,
+                    project_geometry(&o.geometry, &self.camera, world_from_camera),
+                ));
             }
         }
         let cos_max = cfg.grid.max_incidence_deg.to_radians().cos();
-        let mut out = ViewScore { utility: 0.0, motion_cost: 0.0, objects: Vec::with_capacity(visible.len()) };
+        let mut out = ViewScore {
+            utility: 0.0,
+            motion_cost: 0.0,
+            objects: Vec::with_capacity(visible.len()),
+        };
         for (k, (i, bbox)) in visible.iter().enumerate() {
-            let Some(o) = self.objects.get(*i) else { continue };
+            let Some(o) = self.objects.get(*i) else {
+                continue;
+            };
             let f = &o.features;
             let r_iou = match cfg.iou_mode {
                 IouMode::ViewOcclusion => {
@@ -335,9 +400,7 @@ impl UtilityContext {
                             &c.p_in_world,
                             &c.n_in_world,
                             o.id,
-                            &self.camera,
-                            world_from_camera,
-                            &camera_from_world,
+                            &viewpoint,
                             &self.occluders,
                             &cfg.grid,
                         );
@@ -355,14 +418,20 @@ impl UtilityContext {
                         for c in &o.cells {
                             let to_eye = eye - c.p_in_world;
                             let dist = to_eye.norm();
-                            if c.n_in_world.dot(&to_eye) < dist * cos_max || dist > cfg.grid.max_range_m {
+                            if c.n_in_world.dot(&to_eye) < dist * cos_max
+                                || dist > cfg.grid.max_range_m
+                            {
                                 continue;
                             }
                             let pc = camera_from_world * c.p_in_world;
                             if pc.z < cfg.grid.min_range_m {
                                 continue;
                             }
-                            if self.camera.project(&pc).is_some_and(|uv| self.camera.contains(uv)) {
+                            if self
+                                .camera
+                                .project(&pc)
+                                .is_some_and(|uv| self.camera.contains(uv))
+                            {
                                 h += c.entropy_bits;
                                 visible_cells += 1;
                             }
@@ -373,14 +442,24 @@ impl UtilityContext {
             };
             let total = (entropy_term + cfg.lambda * (h_iou + h_v)) * s;
             out.utility += total;
-            out.objects.push(ObjectViewTerms { object_id: o.id, entropy_term, r_iou, h_iou, h_v, visible_cells, s, total });
+            out.objects.push(ObjectViewTerms {
+                object_id: o.id,
+                entropy_term,
+                r_iou,
+                h_iou,
+                h_v,
+                visible_cells,
+                s,
+                total,
+            });
         }
         if strategy == Strategy::ExpectedGain {
             if let Some(cur) = current {
                 check_pose(cur, "current world_from_camera")?;
                 let d = (cur.translation.vector - world_from_camera.translation.vector).norm();
                 let angle = cur.rotation.angle_to(&world_from_camera.rotation);
-                out.motion_cost = cfg.motion_cost_bits_per_m * (d + cfg.motion_cost_m_per_rad * angle);
+                out.motion_cost =
+                    cfg.motion_cost_bits_per_m * (d + cfg.motion_cost_m_per_rad * angle);
                 out.utility -= out.motion_cost;
             }
         }
@@ -388,8 +467,16 @@ impl UtilityContext {
     }
 
     /// Score every candidate; the result is aligned with `views`.
-    pub fn score_all(&self, views: &[Se3], strategy: Strategy, current: Option<&Se3>) -> Result<Vec<ViewScore>, ExploreError> {
-        views.iter().map(|v| self.score(v, strategy, current)).collect()
+    pub fn score_all(
+        &self,
+        views: &[Se3],
+        strategy: Strategy,
+        current: Option<&Se3>,
+    ) -> Result<Vec<ViewScore>, ExploreError> {
+        views
+            .iter()
+            .map(|v| self.score(v, strategy, current))
+            .collect()
     }
 }
 

@@ -38,25 +38,41 @@ impl Reachability for AlwaysReachable {
 /// ~8° of vertical it is instead the horizontal direction away from the robot base (world origin)
 /// through the eye (world +x when the eye is above the origin).
 pub fn look_at(eye: &Point3<f64>, target: &Point3<f64>) -> Result<Se3, ExploreError> {
-    if eye.coords.iter().chain(target.coords.iter()).any(|v| !v.is_finite()) {
-        return Err(ExploreError::NonFinite { field: "look_at eye/target" });
+    if eye
+        .coords
+        .iter()
+        .chain(target.coords.iter())
+        .any(|v| !v.is_finite())
+    {
+        return Err(ExploreError::NonFinite {
+            field: "look_at eye/target",
+        });
     }
     let d = target - eye;
     let n = d.norm();
     if n < 1e-9 {
-        return Err(ExploreError::Degenerate { what: "look_at: eye and target coincide".into() });
+        return Err(ExploreError::Degenerate {
+            what: "look_at: eye and target coincide".into(),
+        });
     }
     let z = d / n;
     let mut up = Vector3::z();
     if z.dot(&up).abs() > 0.99 {
         let radial = Vector3::new(eye.x, eye.y, 0.0);
-        up = if radial.norm() > 1e-6 { radial / radial.norm() } else { Vector3::x() };
+        up = if radial.norm() > 1e-6 {
+            radial / radial.norm()
+        } else {
+            Vector3::x()
+        };
     }
     let up_perp = up - z * up.dot(&z);
     let y = -up_perp / up_perp.norm();
     let x = y.cross(&z);
     let r = Rotation3::from_matrix_unchecked(Matrix3::from_columns(&[x, y, z]));
-    Ok(Se3::from_parts(Translation3::from(eye.coords), UnitQuaternion::from_rotation_matrix(&r)))
+    Ok(Se3::from_parts(
+        Translation3::from(eye.coords),
+        UnitQuaternion::from_rotation_matrix(&r),
+    ))
 }
 
 /// A candidate view with where it came from.
@@ -70,8 +86,13 @@ pub struct CandidateView {
 
 /// Whether a camera position is admissible: above the table by `min_camera_height_m` and outside
 /// every object primitive inflated by `collision_margin_m`.
-pub fn camera_position_free(eye: &Point3<f64>, occluders: &Occluders, config: &CandidateConfig) -> bool {
-    eye.z >= config.min_camera_height_m && !occluders.point_inside_any(eye, config.collision_margin_m)
+pub fn camera_position_free(
+    eye: &Point3<f64>,
+    occluders: &Occluders,
+    config: &CandidateConfig,
+) -> bool {
+    eye.z >= config.min_camera_height_m
+        && !occluders.point_inside_any(eye, config.collision_margin_m)
 }
 
 /// Candidate views around the objects (paper: "sampled around the objects"): for each object in
@@ -98,7 +119,9 @@ pub fn sample_candidates(
         }
         for k in 0..n {
             let az = std::f64::consts::TAU * (k as f64 + rng.random::<f64>()) / n as f64;
-            let el = rng.random_range(config.elevation_deg[0]..=config.elevation_deg[1]).to_radians();
+            let el = rng
+                .random_range(config.elevation_deg[0]..=config.elevation_deg[1])
+                .to_radians();
             let d = rng.random_range(config.distance_m[0]..=config.distance_m[1]);
             let eye = c + Vector3::new(el.cos() * az.cos(), el.cos() * az.sin(), el.sin()) * d;
             if !camera_position_free(&eye, &occluders, config) {
@@ -106,7 +129,10 @@ pub fn sample_candidates(
             }
             let pose = look_at(&eye, &c)?;
             if reachable.reachable(&pose) {
-                out.push(CandidateView { world_from_camera: pose, target_object: Some(o.id) });
+                out.push(CandidateView {
+                    world_from_camera: pose,
+                    target_object: Some(o.id),
+                });
             }
         }
     }
@@ -120,17 +146,29 @@ pub fn sample_candidates(
 pub fn init_views(table: &TableRect, config: &CandidateConfig) -> Result<Vec<Se3>, ExploreError> {
     config.validate()?;
     table.validate()?;
-    let (hx, hy) = ((table.size_m[0] / 2.0 - config.init_inset_m).max(0.0), (table.size_m[1] / 2.0 - config.init_inset_m).max(0.0));
+    let (hx, hy) = (
+        (table.size_m[0] / 2.0 - config.init_inset_m).max(0.0),
+        (table.size_m[1] / 2.0 - config.init_inset_m).max(0.0),
+    );
     let [cx, cy] = table.center_m;
     let h = config.init_height_m;
-    let corners = [[cx - hx, cy + hy], [cx + hx, cy + hy], [cx + hx, cy - hy], [cx - hx, cy - hy]];
+    let corners = [
+        [cx - hx, cy + hy],
+        [cx + hx, cy + hy],
+        [cx + hx, cy - hy],
+        [cx - hx, cy - hy],
+    ];
     corners
         .iter()
         .map(|p| {
             let eye = Point3::new(p[0], p[1], table.height_m + h);
             let inward = Vector3::new(cx - p[0], cy - p[1], 0.0);
             let shift = h * config.init_tilt_deg.to_radians().tan();
-            let offset = if inward.norm() > 1e-9 { inward / inward.norm() * shift.min(inward.norm()) } else { Vector3::zeros() };
+            let offset = if inward.norm() > 1e-9 {
+                inward / inward.norm() * shift.min(inward.norm())
+            } else {
+                Vector3::zeros()
+            };
             let target = Point3::new(p[0], p[1], table.height_m) + offset;
             look_at(&eye, &target)
         })
@@ -142,7 +180,11 @@ pub fn init_views(table: &TableRect, config: &CandidateConfig) -> Result<Vec<Se3
 /// by the image footprint's height × (1 − `coverage_overlap`), waypoints along each lane spaced by
 /// the footprint's width × (1 − overlap), alternating direction lane by lane. The image's u axis
 /// runs along world ∓y for these views (see [`look_at`]).
-pub fn coverage_views(table: &TableRect, camera: &PinholeCamera, config: &CandidateConfig) -> Result<Vec<Se3>, ExploreError> {
+pub fn coverage_views(
+    table: &TableRect,
+    camera: &PinholeCamera,
+    config: &CandidateConfig,
+) -> Result<Vec<Se3>, ExploreError> {
     config.validate()?;
     table.validate()?;
     camera.validate().map_err(ExploreError::Geometry)?;
@@ -151,18 +193,31 @@ pub fn coverage_views(table: &TableRect, camera: &PinholeCamera, config: &Candid
     // Top-down with up = away from the robot: image v runs along world x, u along world y.
     let step_x = (h * f64::from(camera.height) / camera.fy * keep).max(1e-3);
     let step_y = (h * f64::from(camera.width) / camera.fx * keep).max(1e-3);
-    let (hx, hy) = ((table.size_m[0] / 2.0 - config.coverage_inset_m).max(0.0), (table.size_m[1] / 2.0 - config.coverage_inset_m).max(0.0));
+    let (hx, hy) = (
+        (table.size_m[0] / 2.0 - config.coverage_inset_m).max(0.0),
+        (table.size_m[1] / 2.0 - config.coverage_inset_m).max(0.0),
+    );
     let lanes = |half: f64, step: f64| -> Vec<f64> {
         let n = ((2.0 * half / step).ceil() as usize).max(1);
-        (0..=n).map(|i| -half + 2.0 * half * i as f64 / n as f64).collect()
+        (0..=n)
+            .map(|i| -half + 2.0 * half * i as f64 / n as f64)
+            .collect()
     };
     let xs = lanes(hx, step_x);
     let ys = lanes(hy, step_y);
     let mut out = Vec::with_capacity(xs.len() * ys.len());
     for (i, x) in xs.iter().enumerate() {
-        let row: Vec<f64> = if i % 2 == 0 { ys.clone() } else { ys.iter().rev().copied().collect() };
+        let row: Vec<f64> = if i % 2 == 0 {
+            ys.clone()
+        } else {
+            ys.iter().rev().copied().collect()
+        };
         for y in row {
-            let eye = Point3::new(table.center_m[0] + x, table.center_m[1] + y, table.height_m + h);
+            let eye = Point3::new(
+                table.center_m[0] + x,
+                table.center_m[1] + y,
+                table.height_m + h,
+            );
             out.push(look_at(&eye, &Point3::new(eye.x, eye.y, table.height_m))?);
         }
     }
@@ -186,7 +241,10 @@ pub fn random_views(
     table.validate()?;
     let occluders = Occluders::from_map(map, grid);
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let (hx, hy) = ((table.size_m[0] / 2.0 - config.coverage_inset_m).max(0.0), (table.size_m[1] / 2.0 - config.coverage_inset_m).max(0.0));
+    let (hx, hy) = (
+        (table.size_m[0] / 2.0 - config.coverage_inset_m).max(0.0),
+        (table.size_m[1] / 2.0 - config.coverage_inset_m).max(0.0),
+    );
     let mut out = Vec::with_capacity(count);
     for _ in 0..count.saturating_mul(config.max_attempts_per_view) {
         if out.len() >= count {
@@ -194,7 +252,8 @@ pub fn random_views(
         }
         let ex = table.center_m[0] + rng.random_range(-hx..=hx);
         let ey = table.center_m[1] + rng.random_range(-hy..=hy);
-        let ez = table.height_m + rng.random_range(config.random_height_m[0]..=config.random_height_m[1]);
+        let ez = table.height_m
+            + rng.random_range(config.random_height_m[0]..=config.random_height_m[1]);
         let tx = table.center_m[0] + rng.random_range(-hx..=hx);
         let ty = table.center_m[1] + rng.random_range(-hy..=hy);
         let eye = Point3::new(ex, ey, ez);

@@ -59,7 +59,10 @@ impl Occluders {
     /// Objects with non-finite poses or sizes are skipped.
     pub fn from_map(map: &ObjectMap, config: &GridConfig) -> Self {
         let items = map.objects.iter().filter_map(occluder_of).collect();
-        Self { items, table_height_m: config.table_height_m }
+        Self {
+            items,
+            table_height_m: config.table_height_m,
+        }
     }
 
     /// Number of object occluders.
@@ -74,7 +77,12 @@ impl Occluders {
 
     /// Whether the open segment `from → to` is blocked by the table plane or by any object other
     /// than `ignore_id`.
-    pub fn segment_blocked(&self, from: &Point3<f64>, to: &Point3<f64>, ignore_id: Option<u32>) -> bool {
+    pub fn segment_blocked(
+        &self,
+        from: &Point3<f64>,
+        to: &Point3<f64>,
+        ignore_id: Option<u32>,
+    ) -> bool {
         let eps = 1e-6;
         if from.z < self.table_height_m - eps || to.z < self.table_height_m - eps {
             // Both ends above the plane never cross it; an end below it is behind the table.
@@ -99,12 +107,14 @@ impl Occluders {
             let origin = o.object_from_world * from;
             let dir_o = o.object_from_world.rotation * dir;
             let hit = match &o.shape {
-                OccluderShape::Cuboid(c) => {
-                    c.intersects_local_ray(&Ray::new(pvec(&origin.coords, false), pvec(&dir_o, false)), len)
-                }
-                OccluderShape::Cylinder(c) => {
-                    c.intersects_local_ray(&Ray::new(pvec(&origin.coords, true), pvec(&dir_o, true)), len)
-                }
+                OccluderShape::Cuboid(c) => c.intersects_local_ray(
+                    &Ray::new(pvec(&origin.coords, false), pvec(&dir_o, false)),
+                    len,
+                ),
+                OccluderShape::Cylinder(c) => c.intersects_local_ray(
+                    &Ray::new(pvec(&origin.coords, true), pvec(&dir_o, true)),
+                    len,
+                ),
             };
             if hit {
                 return true;
@@ -121,10 +131,13 @@ impl Occluders {
             match &o.shape {
                 OccluderShape::Cuboid(c) => {
                     let h = c.half_extents;
-                    q.x.abs() <= h.x + margin_m && q.y.abs() <= h.y + margin_m && q.z.abs() <= h.z + margin_m
+                    q.x.abs() <= h.x + margin_m
+                        && q.y.abs() <= h.y + margin_m
+                        && q.z.abs() <= h.z + margin_m
                 }
                 OccluderShape::Cylinder(c) => {
-                    (q.x * q.x + q.y * q.y).sqrt() <= c.radius + margin_m && q.z.abs() <= c.half_height + margin_m
+                    (q.x * q.x + q.y * q.y).sqrt() <= c.radius + margin_m
+                        && q.z.abs() <= c.half_height + margin_m
                 }
             }
         }) || p.z < self.table_height_m + margin_m
@@ -168,30 +181,59 @@ pub enum CellVisibility {
     Occluded,
 }
 
+/// A camera with its pose (both directions precomputed).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Viewpoint {
+    /// Intrinsics.
+    pub camera: PinholeCamera,
+    /// Pose, OpenCV camera axes.
+    pub world_from_camera: Se3,
+    /// Inverse of `world_from_camera`.
+    pub camera_from_world: Se3,
+    /// Camera centre, world frame.
+    pub eye_in_world: Point3<f64>,
+}
+
+impl Viewpoint {
+    /// A viewpoint from intrinsics and pose.
+    pub fn new(camera: &PinholeCamera, world_from_camera: &Se3) -> Self {
+        Self {
+            camera: *camera,
+            world_from_camera: *world_from_camera,
+            camera_from_world: world_from_camera.inverse(),
+            eye_in_world: Point3::from(world_from_camera.translation.vector),
+        }
+    }
+}
+
 /// Geometric visibility of a surface point (world frame) with outward normal `n_in_world` from a
-/// camera; `object_id` is excluded from the occluders (its own convexity is handled by the normal
-/// test). No depth test here.
+/// viewpoint; `object_id` is excluded from the occluders (its own convexity is handled by the
+/// normal test). No depth test here.
 pub fn point_visibility(
     p_in_world: &Point3<f64>,
     n_in_world: &Vector3<f64>,
     object_id: u32,
-    camera: &PinholeCamera,
-    world_from_camera: &Se3,
-    camera_from_world: &Se3,
+    view: &Viewpoint,
     occluders: &Occluders,
     config: &GridConfig,
 ) -> CellVisibility {
-    let eye = Point3::from(world_from_camera.translation.vector);
+    let (camera, camera_from_world, eye) =
+        (&view.camera, &view.camera_from_world, view.eye_in_world);
     let to_eye = eye - p_in_world;
     let dist = to_eye.norm();
-    if !(dist > 0.0) || n_in_world.dot(&to_eye) < dist * config.max_incidence_deg.to_radians().cos() {
+    if dist.is_nan()
+        || dist <= 0.0
+        || n_in_world.dot(&to_eye) < dist * config.max_incidence_deg.to_radians().cos()
+    {
         return CellVisibility::BackFacing;
     }
     let p_c = camera_from_world * p_in_world;
     if p_c.z < config.min_range_m || dist > config.max_range_m {
         return CellVisibility::OutOfView;
     }
-    let Some(uv) = camera.project(&p_c) else { return CellVisibility::OutOfView };
+    let Some(uv) = camera.project(&p_c) else {
+        return CellVisibility::OutOfView;
+    };
     if !camera.contains(uv) {
         return CellVisibility::OutOfView;
     }
@@ -199,7 +241,10 @@ pub fn point_visibility(
     if occluders.segment_blocked(&eye, &start, Some(object_id)) {
         return CellVisibility::Occluded;
     }
-    CellVisibility::Visible { u: uv[0] as u32, v: uv[1] as u32 }
+    CellVisibility::Visible {
+        u: uv[0] as u32,
+        v: uv[1] as u32,
+    }
 }
 
 /// One object's points seen in one frame (world frame), as segmented by the pipeline.
@@ -243,9 +288,13 @@ pub fn integrate_object(
     occluders: &Occluders,
     config: &GridConfig,
 ) -> ObjectFrameUpdate {
-    let mut out = ObjectFrameUpdate { object_id: object.id, ..Default::default() };
+    let mut out = ObjectFrameUpdate {
+        object_id: object.id,
+        ..Default::default()
+    };
     let object_from_world = object.world_from_object.inverse();
-    let camera_from_world = world_from_camera.inverse();
+    let view = Viewpoint::new(camera, world_from_camera);
+    let camera_from_world = view.camera_from_world;
     let mut hit_cells: Vec<CellRef> = Vec::new();
     for p in points_in_world {
         if !p.coords.iter().all(|v| v.is_finite()) {
@@ -268,11 +317,15 @@ pub fn integrate_object(
         if hit_cells.binary_search(&c).is_ok() {
             continue;
         }
-        let Some(pose) = grid.cell_pose(c) else { continue };
+        let Some(pose) = grid.cell_pose(c) else {
+            continue;
+        };
         let p_w = object.world_from_object * pose.p_in_object;
         let n_w = object.world_from_object.rotation * pose.normal_in_object;
-        let vis = point_visibility(&p_w, &n_w, object.id, camera, world_from_camera, &camera_from_world, occluders, config);
-        let CellVisibility::Visible { u, v } = vis else { continue };
+        let vis = point_visibility(&p_w, &n_w, object.id, &view, occluders, config);
+        let CellVisibility::Visible { u, v } = vis else {
+            continue;
+        };
         let hit = match depth {
             None => false,
             Some(d) => {
@@ -301,7 +354,12 @@ pub fn integrate_object(
 
 /// Check a camera pose is finite.
 pub(crate) fn check_pose(t: &Se3, field: &'static str) -> Result<(), ExploreError> {
-    if t.translation.vector.iter().chain(t.rotation.coords.iter()).all(|v| v.is_finite()) {
+    if t.translation
+        .vector
+        .iter()
+        .chain(t.rotation.coords.iter())
+        .all(|v| v.is_finite())
+    {
         Ok(())
     } else {
         Err(ExploreError::NonFinite { field })
