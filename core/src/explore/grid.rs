@@ -206,6 +206,21 @@ pub struct CellPose {
     pub normal_in_object: Vector3<f64>,
 }
 
+/// One cell in the world frame (see [`SurfaceGrid::cells_in_world`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct WorldCell {
+    /// Which cell.
+    pub cell: CellRef,
+    /// Cell centre, world frame, metres.
+    pub p_in_world: Point3<f64>,
+    /// Outward unit normal, world frame.
+    pub normal_in_world: Vector3<f64>,
+    /// Unknown / occupied / free.
+    pub state: CellState,
+    /// Occupancy probability.
+    pub probability: f64,
+}
+
 /// The surface occupancy grid of one map object.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SurfaceGrid {
@@ -541,6 +556,23 @@ impl SurfaceGrid {
             }
         }
         s
+    }
+
+    /// Every valid cell in the world frame for recording / plotting: centre, outward normal,
+    /// state and occupancy probability, given the object's current `world_from_object`.
+    pub fn cells_in_world(&self, world_from_object: &crate::geometry::Se3) -> Vec<WorldCell> {
+        self.cells()
+            .filter_map(|c| {
+                let pose = self.cell_pose(c)?;
+                Some(WorldCell {
+                    cell: c,
+                    p_in_world: world_from_object * pose.p_in_object,
+                    normal_in_world: world_from_object.rotation * pose.normal_in_object,
+                    state: self.state(c)?,
+                    probability: probability_from_log_odds(self.log_odds(c)),
+                })
+            })
+            .collect()
     }
 
     /// Stats of one face (index into [`Face::ALL`]).

@@ -88,7 +88,7 @@ use nalgebra::Point3;
 
 pub use grid::{
     binary_entropy_bits, log_odds, plogp_bits, probability_from_log_odds, CellPose, CellRef,
-    CellState, Face, FaceGrid, GridStats, SurfaceGrid,
+    CellState, Face, FaceGrid, GridStats, SurfaceGrid, WorldCell,
 };
 pub use utility::{
     expected_entropy_reduction, needs_exploring, next_best_view, object_features, stop_reason,

@@ -75,6 +75,48 @@ impl Occluders {
         self.items.is_empty()
     }
 
+    /// First hit of the ray `origin + t·dir` (`dir` need not be unit; `t` is returned in units of
+    /// `dir`) with the table plane or any object, up to `max_t`: `(Some(object_id), t)` for an
+    /// object, `(None, t)` for the table. Useful to render synthetic depth and segmentation from
+    /// a map (tests, ground-truth oracles).
+    pub fn cast_ray(
+        &self,
+        origin: &Point3<f64>,
+        dir: &Vector3<f64>,
+        max_t: f64,
+    ) -> Option<(Option<u32>, f64)> {
+        let mut best: Option<(Option<u32>, f64)> = None;
+        if dir.z < 0.0 && origin.z >= self.table_height_m {
+            let t = (self.table_height_m - origin.z) / dir.z;
+            if t <= max_t {
+                best = Some((None, t));
+            }
+        }
+        for o in &self.items {
+            let limit = best.map_or(max_t, |b| b.1);
+            let p = o.object_from_world * origin;
+            let d = o.object_from_world.rotation * dir;
+            let toi = match &o.shape {
+                OccluderShape::Cuboid(c) => c.cast_local_ray(
+                    &Ray::new(pvec(&p.coords, false), pvec(&d, false)),
+                    limit,
+                    true,
+                ),
+                OccluderShape::Cylinder(c) => c.cast_local_ray(
+                    &Ray::new(pvec(&p.coords, true), pvec(&d, true)),
+                    limit,
+                    true,
+                ),
+            };
+            if let Some(t) = toi {
+                if best.is_none_or(|b| t < b.1) {
+                    best = Some((Some(o.object_id), t));
+                }
+            }
+        }
+        best
+    }
+
     /// Whether the open segment `from → to` is blocked by the table plane or by any object other
     /// than `ignore_id`.
     pub fn segment_blocked(
