@@ -145,13 +145,13 @@ fn run(strategy: Strategy, seed: u64, cfg: &ExploreConfig) -> Episode {
     }
     let mut current = init.last().copied().unwrap_or_else(Se3::identity);
     let mut ep = Episode {
-        mean_entropy: vec![mean_normalized_entropy(&map, &grids, &hist, &cfg)],
+        mean_entropy: vec![mean_normalized_entropy(&map, &grids, &hist, cfg)],
         views: Vec::new(),
         stopped_early: false,
     };
     for step in 0..max_views {
-        let features = object_features(&map, &grids, &hist, &cfg);
-        if let Some(reason) = stop_reason(&features, step, &cfg) {
+        let features = object_features(&map, &grids, &hist, cfg);
+        if let Some(reason) = stop_reason(&features, step, cfg) {
             ep.stopped_early = reason == objslam_core::explore::StopReason::AllExplored;
             break;
         }
@@ -166,7 +166,7 @@ fn run(strategy: Strategy, seed: u64, cfg: &ExploreConfig) -> Episode {
                 )
                 .unwrap_or_else(|e| panic!("{e}"));
                 let views: Vec<Se3> = cands.iter().map(|c| c.world_from_camera).collect();
-                let ctx = UtilityContext::new(&map, &grids, &hist, &cam, &cfg)
+                let ctx = UtilityContext::new(&map, &grids, &hist, &cam, cfg)
                     .unwrap_or_else(|e| panic!("{e}"));
                 let scores = ctx
                     .score_all(&views, strategy, Some(&current))
@@ -192,7 +192,7 @@ fn run(strategy: Strategy, seed: u64, cfg: &ExploreConfig) -> Episode {
         current = next;
         ep.views.push(next);
         ep.mean_entropy
-            .push(mean_normalized_entropy(&map, &grids, &hist, &cfg));
+            .push(mean_normalized_entropy(&map, &grids, &hist, cfg));
     }
     ep
 }

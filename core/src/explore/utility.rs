@@ -255,15 +255,18 @@ pub struct UtilityContext {
     occluders: Occluders,
 }
 
-/// Expected entropy reduction (bits) of a cell at log-odds `l` after one more measurement, with
-/// P(hit) ≈ p(occupied): H(p) − [p·H(σ(l + L_hit)) + (1 − p)·H(σ(l + L_miss))], clamped as the
-/// updates are, floored at 0.
+/// Expected entropy reduction (bits) of a cell at log-odds `l` after k = `expected_measurements`
+/// more measurements of it (a view is reached by a move that streams several frames), with the
+/// cell's true state drawn from its current belief (P(occupied) = p) and the k measurements all
+/// agreeing with it: ΔH = H(p) − [p·H(σ(l + k·L_hit)) + (1 − p)·H(σ(l + k·L_miss))], clamped as
+/// the updates are, floored at 0.
 pub fn expected_entropy_reduction(l: f64, config: &ExploreConfig) -> f64 {
     let g = &config.grid;
+    let k = f64::from(config.expected_measurements.max(1));
     let (lo, hi) = (log_odds(g.p_min), log_odds(g.p_max));
     let p = probability_from_log_odds(l);
-    let lh = (l + log_odds(g.p_hit)).clamp(lo, hi);
-    let lm = (l + log_odds(g.p_miss)).clamp(lo, hi);
+    let lh = (l + k * log_odds(g.p_hit)).clamp(lo, hi);
+    let lm = (l + k * log_odds(g.p_miss)).clamp(lo, hi);
     let after = p * binary_entropy_bits(probability_from_log_odds(lh))
         + (1.0 - p) * binary_entropy_bits(probability_from_log_odds(lm));
     (binary_entropy_bits(p) - after).max(0.0)
