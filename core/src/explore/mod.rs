@@ -110,8 +110,8 @@ pub use utility::{
     ViewScore,
 };
 pub use views::{
-    camera_position_free, coverage_views, init_views, look_at, random_views, sample_candidates,
-    AlwaysReachable, CandidateView, Reachability,
+    camera_position_free, coverage_views, init_views, look_at, look_at_with_up, random_views,
+    sample_candidates, AlwaysReachable, CandidateView, Reachability,
 };
 pub use visibility::{
     integrate_object, point_visibility, CellVisibility, ObjectFrameUpdate, ObservedPoints,

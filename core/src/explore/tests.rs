@@ -635,6 +635,14 @@ fn baseline_generators() {
     let cov = coverage_views(&table, &cam, &cc).unwrap_or_else(|e| panic!("{e}"));
     assert!(cov.len() >= 4);
     // Boustrophedon: consecutive waypoints move along y within a lane, then one step in x.
+    let first = cov[0].rotation;
+    for v in &cov {
+        assert!(
+            v.rotation.angle_to(&first) < 1e-9,
+            "coverage views share one orientation"
+        );
+        assert!((v.rotation * -Vector3::y() - Vector3::x()).norm() < 1e-9);
+    }
     for w in cov.windows(2) {
         let (a, b) = (w[0].translation.vector, w[1].translation.vector);
         assert!((a.x - b.x).abs() < 1e-12 || (a.y - b.y).abs() < 1e-12);
@@ -774,4 +782,63 @@ fn expected_entropy_reduction_is_largest_for_unknown_cells() {
     let gsat = expected_entropy_reduction(lmax, &cfg);
     assert!(gsat < g0 * 0.5, "{gsat} vs {g0}");
     assert!(gsat >= 0.0);
+}
+
+#[test]
+fn utility_matches_closed_form_for_one_unknown_cube() {
+    // A 10 cm cube, all 500 cells unknown (1 bit each), no history (H_V = 0), alone (R_IoU = 0).
+    let cfg = ExploreConfig::default();
+    let center = [0.5, 0.0, 0.05];
+    let map = map_of(vec![object(Label::Block, center, 0.0, [0.05, 0.05, 0.05])]);
+    let mut grids = ExplorationGrids::new();
+    grids
+        .sync(&map, &cfg.grid)
+        .unwrap_or_else(|e| panic!("{e}"));
+    let ctx = UtilityContext::new(&map, &grids, &HistoryBook::default(), &camera(), &cfg)
+        .unwrap_or_else(|e| panic!("{e}"));
+    // Level with the centre, facing +x: only the +x face (100 cells) faces the camera within 80°.
+    let level = ctx
+        .score(
+            &view(eye_around(center, 0.0, 0.0, 0.5), center),
+            Strategy::ObjectDriven,
+            None,
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert!((level.utility - 100.0).abs() < 1e-9, "{level:?}");
+    assert_eq!(level.objects[0].visible_cells, 100);
+    // 45° above +x: the +x face and the top (incidence 45°) are seen: 200 bits.
+    let high = ctx
+        .score(
+            &view(eye_around(center, 0.0, 45.0, 0.5), center),
+            Strategy::ObjectDriven,
+            None,
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert!((high.utility - 200.0).abs() < 1e-9, "{high:?}");
+    // Whole-object scope: H_obj = 500 bits from any view that sees the object.
+    let whole = ExploreConfig {
+        entropy_scope: EntropyScope::Object,
+        ..ExploreConfig::default()
+    };
+    let ctx2 = UtilityContext::new(&map, &grids, &HistoryBook::default(), &camera(), &whole)
+        .unwrap_or_else(|e| panic!("{e}"));
+    let s2 = ctx2
+        .score(
+            &view(eye_around(center, 0.0, 0.0, 0.5), center),
+            Strategy::ObjectDriven,
+            None,
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert!((s2.utility - 500.0).abs() < 1e-9);
+    // Looking away: the object is not in the view, f = 0.
+    let away = look_at(
+        &eye_around(center, 0.0, 0.0, 0.5),
+        &Point3::new(2.0, 0.0, 0.05),
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    let s3 = ctx
+        .score(&away, Strategy::ObjectDriven, None)
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(s3.utility, 0.0);
+    assert!(s3.objects.is_empty());
 }

@@ -38,14 +38,41 @@ impl Reachability for AlwaysReachable {
 /// ~8° of vertical it is instead the horizontal direction away from the robot base (world origin)
 /// through the eye (world +x when the eye is above the origin).
 pub fn look_at(eye: &Point3<f64>, target: &Point3<f64>) -> Result<Se3, ExploreError> {
+    let d = target - eye;
+    let radial = Vector3::new(eye.x, eye.y, 0.0);
+    let up = if d.norm() > 0.0 && (d.z.abs() / d.norm()) > NEAR_VERTICAL_COS {
+        if radial.norm() > 1e-6 {
+            radial / radial.norm()
+        } else {
+            Vector3::x()
+        }
+    } else {
+        Vector3::z()
+    };
+    look_at_with_up(eye, target, &up)
+}
+
+/// Viewing directions closer to vertical than this (|cos| of the angle to world z) use the
+/// horizontal "away from the robot" direction as image up in [`look_at`].
+const NEAR_VERTICAL_COS: f64 = 0.99;
+
+/// `world_from_camera` looking from `eye` at `target` with image up (−y) along `up_hint`
+/// projected onto the image plane. Errors when the eye and target coincide or `up_hint` is
+/// (nearly) parallel to the viewing direction.
+pub fn look_at_with_up(
+    eye: &Point3<f64>,
+    target: &Point3<f64>,
+    up_hint: &Vector3<f64>,
+) -> Result<Se3, ExploreError> {
     if eye
         .coords
         .iter()
         .chain(target.coords.iter())
+        .chain(up_hint.iter())
         .any(|v| !v.is_finite())
     {
         return Err(ExploreError::NonFinite {
-            field: "look_at eye/target",
+            field: "look_at eye/target/up",
         });
     }
     let d = target - eye;
@@ -56,16 +83,12 @@ pub fn look_at(eye: &Point3<f64>, target: &Point3<f64>) -> Result<Se3, ExploreEr
         });
     }
     let z = d / n;
-    let mut up = Vector3::z();
-    if z.dot(&up).abs() > 0.99 {
-        let radial = Vector3::new(eye.x, eye.y, 0.0);
-        up = if radial.norm() > 1e-6 {
-            radial / radial.norm()
-        } else {
-            Vector3::x()
-        };
+    let up_perp = up_hint - z * up_hint.dot(&z);
+    if up_perp.norm() < 1e-6 {
+        return Err(ExploreError::Degenerate {
+            what: "look_at: up direction parallel to the view".into(),
+        });
     }
-    let up_perp = up - z * up.dot(&z);
     let y = -up_perp / up_perp.norm();
     let x = y.cross(&z);
     let r = Rotation3::from_matrix_unchecked(Matrix3::from_columns(&[x, y, z]));
@@ -178,8 +201,8 @@ pub fn init_views(table: &TableRect, config: &CandidateConfig) -> Result<Vec<Se3
 /// Coverage (paper: a Boustrophedon coverage trajectory over the scene): top-down views at
 /// `coverage_height_m` over the table inset by `coverage_inset_m`, on lanes of constant x spaced
 /// by the image footprint's height × (1 − `coverage_overlap`), waypoints along each lane spaced by
-/// the footprint's width × (1 − overlap), alternating direction lane by lane. The image's u axis
-/// runs along world ∓y for these views (see [`look_at`]).
+/// the footprint's width × (1 − overlap), alternating direction lane by lane. Every view has the
+/// same orientation: image up along world +x (away from the robot), so image u runs along −y.
 pub fn coverage_views(
     table: &TableRect,
     camera: &PinholeCamera,
@@ -218,7 +241,11 @@ pub fn coverage_views(
                 table.center_m[1] + y,
                 table.height_m + h,
             );
-            out.push(look_at(&eye, &Point3::new(eye.x, eye.y, table.height_m))?);
+            out.push(look_at_with_up(
+                &eye,
+                &Point3::new(eye.x, eye.y, table.height_m),
+                &Vector3::x(),
+            )?);
         }
     }
     Ok(out)
