@@ -238,8 +238,9 @@ pub struct SurfaceGrid {
 
 /// Half-extents below this (metres) are raised to it so a degenerate estimate still has cells.
 const MIN_HALF_EXTENT_M: f64 = 1e-3;
-/// Upper bound on cells per face side, protecting against absurd estimates (10 m at 1 cm).
-const MAX_CELLS_PER_SIDE: usize = 1000;
+/// Upper bound on cells per face side, protecting against absurd estimates (3 m at 1 cm; larger
+/// faces get coarser cells).
+const MAX_CELLS_PER_SIDE: usize = 300;
 
 fn sanitize_half_extents(h: &Vector3<f64>) -> Result<Vector3<f64>, ExploreError> {
     if h.iter().any(|v| !v.is_finite()) {

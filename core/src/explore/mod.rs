@@ -540,6 +540,19 @@ impl ExplorationGrids {
         self.grids.get(&object_id)
     }
 
+    /// Mean of H̄_obj over all grids (the "mean normalised entropy" curve); `None` without grids.
+    pub fn mean_normalized_entropy(&self) -> Option<f64> {
+        if self.grids.is_empty() {
+            return None;
+        }
+        let sum: f64 = self
+            .grids
+            .values()
+            .map(|g| g.stats().normalized_entropy())
+            .sum();
+        Some(sum / self.grids.len() as f64)
+    }
+
     /// Follow the map: create all-unknown grids for new objects, drop grids of objects no longer
     /// in the map (merged duplicates), re-anchor the others ([`SurfaceGrid::sync`]). Returns the
     /// ids whose grids were resampled.

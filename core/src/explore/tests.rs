@@ -196,6 +196,9 @@ fn observing_a_face_lowers_normalized_entropy() {
     assert_eq!(g2.face_stats(face_index(Face::Top)).free, 100);
     assert_eq!(g2.face_stats(face_index(Face::NegX)).unknown, 100);
     assert!(g2.stats().normalized_entropy() < 1.0);
+    let m = grids2.mean_normalized_entropy().unwrap_or(f64::NAN);
+    assert!((m - g2.stats().normalized_entropy()).abs() < 1e-12);
+    assert_eq!(ExplorationGrids::new().mean_normalized_entropy(), None);
 }
 
 #[test]
