@@ -111,7 +111,7 @@ pub use utility::{
 };
 pub use views::{
     camera_position_free, coverage_views, init_views, look_at, look_at_with_up, random_views,
-    sample_candidates, AlwaysReachable, CandidateView, Reachability,
+    sample_candidates, sample_candidates_around, AlwaysReachable, CandidateView, Reachability,
 };
 pub use visibility::{
     integrate_object, point_visibility, CellVisibility, ObjectFrameUpdate, ObservedPoints,

@@ -582,6 +582,10 @@ fn same_seed_gives_same_candidates_and_utilities() {
         assert_eq!(s1, s2);
         assert!(next_best_view(&s1).is_some());
     }
+    // Restricting to one object samples only around it.
+    let one = sample_candidates_around(&map, Some(&[1]), &cc, &cfg.grid, &AlwaysReachable, 7)
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert!(!one.is_empty() && one.iter().all(|v| v.target_object == Some(1)));
     // A reachability callback filters.
     let only_positive_y = |p: &Se3| p.translation.vector.y > 0.0;
     let f = sample_candidates(&map, &cc, &cfg.grid, &only_positive_y, 7)

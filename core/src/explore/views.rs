@@ -130,12 +130,30 @@ pub fn sample_candidates(
     reachable: &dyn Reachability,
     seed: u64,
 ) -> Result<Vec<CandidateView>, ExploreError> {
+    sample_candidates_around(map, None, config, grid, reachable, seed)
+}
+
+/// [`sample_candidates`] restricted to the objects in `around` (e.g. those with s(x) = 1, from
+/// [`super::ObjectFeatures::explore`]); `None` = every object. Collision checks still use the whole
+/// map. The random stream is drawn per sampled object in map order, so the same `around` and
+/// seed give the same views.
+pub fn sample_candidates_around(
+    map: &ObjectMap,
+    around: Option<&[u32]>,
+    config: &CandidateConfig,
+    grid: &GridConfig,
+    reachable: &dyn Reachability,
+    seed: u64,
+) -> Result<Vec<CandidateView>, ExploreError> {
     config.validate()?;
     let occluders = Occluders::from_map(map, grid);
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let mut out = Vec::new();
     let n = config.views_per_object;
     for o in &map.objects {
+        if around.is_some_and(|ids| !ids.contains(&o.id)) {
+            continue;
+        }
         let c = Point3::from(o.world_from_object.translation.vector);
         if !c.coords.iter().all(|v| v.is_finite()) {
             continue;
