@@ -84,7 +84,7 @@ if [ -f "$STAMP_DIR/native" ] && [ "$(cat "$STAMP_DIR/native")" = "$src_hash" ] 
 else
   step "    building (a clean build of the dependency tree takes 10-15 min on 2 cores)"
   VIRTUAL_ENV="$VENV" "$VENV/bin/maturin" develop --release -q || fail "maturin develop --release"
-  native_hash > "$STAMP_DIR/native"
+  echo "$src_hash" > "$STAMP_DIR/native"   # the sources as they were when the build started
   "$PY" -c "import objslam._native" || fail "import objslam._native after build"
   step "    built"
 fi

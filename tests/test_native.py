@@ -98,3 +98,22 @@ def test_recorder_validates_and_writes(tmp_path: Path) -> None:
     with pytest.raises(objslam.RecordingError, match="closed"):
         r.log_event("late")
     assert (tmp_path / "r.rrd").stat().st_size > 0
+
+
+def test_stub_lists_every_public_native_name() -> None:
+    """The hand-written _native.pyi covers the compiled module (a light stubtest)."""
+    import ast
+
+    import objslam._native as native
+
+    stub = ast.parse((Path(objslam.__file__).parent / "_native.pyi").read_text())
+    stubbed = {n.name for n in stub.body if isinstance(n, (ast.ClassDef, ast.FunctionDef))}
+    stubbed |= {t.id for n in stub.body if isinstance(n, ast.AnnAssign) for t in [n.target] if isinstance(t, ast.Name)}
+    compiled = {n for n in dir(native) if not n.startswith("_") or n == "__version__"}
+    assert compiled - stubbed == set(), f"missing from _native.pyi: {sorted(compiled - stubbed)}"
+    for cls in (c for c in stub.body if isinstance(c, ast.ClassDef) and c.body and isinstance(c.body[0], ast.FunctionDef)):
+        methods = {f.name for f in cls.body if isinstance(f, ast.FunctionDef)} - {"__init__", "__len__"}
+        real = getattr(native, cls.name)
+        assert all(hasattr(real, m) for m in methods), (cls.name, [m for m in methods if not hasattr(real, m)])
+        public = {m for m in dir(real) if not m.startswith("_")}
+        assert public - methods == set(), (cls.name, sorted(public - methods))

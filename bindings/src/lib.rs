@@ -13,6 +13,8 @@ use objslam_core::geometry::{se3_from_matrix, Box2, GeometryError, ObjectGeometr
 use objslam_core::map::{Label, MapError, ObjectMap};
 use objslam_core::naive::{NaiveConfig, NaiveMapper};
 use objslam_core::record::{DrawnObject, RecordError, Recorder};
+mod active;
+
 use pyo3::create_exception;
 use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
@@ -22,7 +24,7 @@ create_exception!(_native, InputError, ObjslamError, "An argument has the wrong 
 create_exception!(_native, MapFileError, ObjslamError, "A map file cannot be read or written.");
 create_exception!(_native, RecordingError, ObjslamError, "The Rerun recording failed.");
 
-fn input_err(msg: impl std::fmt::Display) -> PyErr {
+pub(crate) fn input_err(msg: impl std::fmt::Display) -> PyErr {
     InputError::new_err(msg.to_string())
 }
 
@@ -82,18 +84,18 @@ fn matrix<const R: usize, const C: usize>(obj: &Bound<'_, PyAny>, field: &str) -
     Ok(out)
 }
 
-fn pose(obj: &Bound<'_, PyAny>, field: &'static str) -> PyResult<Se3> {
+pub(crate) fn pose(obj: &Bound<'_, PyAny>, field: &'static str) -> PyResult<Se3> {
     let m = matrix::<4, 4>(obj, field)?;
     let mat = Matrix4::from_fn(|r, c| m[r][c]);
     se3_from_matrix(&mat, field).map_err(geometry_err)
 }
 
-fn camera(k: &Bound<'_, PyAny>, width: u32, height: u32) -> PyResult<PinholeCamera> {
+pub(crate) fn camera(k: &Bound<'_, PyAny>, width: u32, height: u32) -> PyResult<PinholeCamera> {
     let m = matrix::<3, 3>(k, "intrinsics")?;
     PinholeCamera::from_matrix(width, height, &Matrix3::from_fn(|r, c| m[r][c])).map_err(geometry_err)
 }
 
-fn depth_image(obj: &Bound<'_, PyAny>) -> PyResult<DepthImage> {
+pub(crate) fn depth_image(obj: &Bound<'_, PyAny>) -> PyResult<DepthImage> {
     let arr: PyReadonlyArray2<'_, f32> = obj.extract().map_err(|_| {
         PyTypeError::new_err(format!(
             "depth: expected a float32 array of shape (H, W) in metres, got dtype {} shape {}",
@@ -108,7 +110,7 @@ fn depth_image(obj: &Bound<'_, PyAny>) -> PyResult<DepthImage> {
 }
 
 /// Detections from a list of `(u0, v0, u1, v1, label, score)` tuples.
-fn detections(list: &Bound<'_, PyAny>) -> PyResult<Vec<Detection>> {
+pub(crate) fn detections(list: &Bound<'_, PyAny>) -> PyResult<Vec<Detection>> {
     let items: Vec<(f64, f64, f64, f64, String, f64)> = list.extract().map_err(|_| {
         PyTypeError::new_err("detections: expected a list of (u0, v0, u1, v1, label: str, score) tuples")
     })?;
@@ -122,7 +124,7 @@ fn detections(list: &Bound<'_, PyAny>) -> PyResult<Vec<Detection>> {
         .collect()
 }
 
-fn json_err(field: &str, e: serde_json::Error) -> PyErr {
+pub(crate) fn json_err(field: &str, e: serde_json::Error) -> PyErr {
     input_err(format!("{field}: {e}"))
 }
 
@@ -182,7 +184,7 @@ impl NaiveMapperPy {
     }
 }
 
-fn objects_json(map: &ObjectMap) -> PyResult<String> {
+pub(crate) fn objects_json(map: &ObjectMap) -> PyResult<String> {
     let records: Vec<serde_json::Value> = map
         .objects
         .iter()
@@ -251,6 +253,21 @@ fn points3(obj: &Bound<'_, PyAny>, field: &str) -> PyResult<Vec<Point3<f64>>> {
         out.push(Point3::new(row[0], row[1], row[2]));
     }
     Ok(out)
+}
+
+fn colors_u8(obj: &Bound<'_, PyAny>, n: usize) -> PyResult<Vec<[u8; 3]>> {
+    let arr: PyReadonlyArray2<'_, u8> = obj.extract().map_err(|_| {
+        PyTypeError::new_err(format!(
+            "colors: expected a uint8 array of shape (N, 3), got dtype {} shape {}",
+            dtype_name(obj),
+            shape_of(obj)
+        ))
+    })?;
+    let a = arr.as_array();
+    if a.shape() != [n, 3] {
+        return Err(input_err(format!("colors: expected shape ({n}, 3), got {:?}", a.shape())));
+    }
+    Ok(a.rows().into_iter().map(|r| [r[0], r[1], r[2]]).collect())
 }
 
 /// One Rerun recording (`.rrd` file); see `objslam_core::record` for entity paths.
@@ -346,6 +363,37 @@ impl RecorderPy {
         self.rec()?.log_points(entity, &pts, &group_keys.unwrap_or_default()).map_err(record_err)
     }
 
+    /// Points (N, 3) float64 with colours (N, 3) uint8.
+    #[pyo3(signature = (entity, points, colors, radius_m = 0.004))]
+    fn log_colored_points(
+        &self,
+        entity: &str,
+        points: &Bound<'_, PyAny>,
+        colors: &Bound<'_, PyAny>,
+        radius_m: f32,
+    ) -> PyResult<()> {
+        let pts = points3(points, "points")?;
+        let cols = colors_u8(colors, pts.len())?;
+        self.rec()?.log_colored_points(entity, &pts, &cols, radius_m).map_err(record_err)
+    }
+
+    /// Arrows: origins (N, 3), vectors (N, 3) float64, colours (N, 3) uint8.
+    fn log_arrows(
+        &self,
+        entity: &str,
+        origins: &Bound<'_, PyAny>,
+        vectors: &Bound<'_, PyAny>,
+        colors: &Bound<'_, PyAny>,
+    ) -> PyResult<()> {
+        let o = points3(origins, "origins")?;
+        let v: Vec<nalgebra::Vector3<f64>> = points3(vectors, "vectors")?.iter().map(|p| p.coords).collect();
+        if v.len() != o.len() {
+            return Err(input_err(format!("vectors: {} rows, origins has {}", v.len(), o.len())));
+        }
+        let cols = colors_u8(colors, o.len())?;
+        self.rec()?.log_arrows(entity, &o, &v, &cols).map_err(record_err)
+    }
+
     fn log_scalar(&self, entity: &str, value: f64) -> PyResult<()> {
         self.rec()?.log_scalar(entity, value).map_err(record_err)
     }
@@ -372,6 +420,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("RecordingError", py.get_type::<RecordingError>())?;
     m.add_class::<NaiveMapperPy>()?;
     m.add_class::<RecorderPy>()?;
+    m.add_class::<active::ActiveMapperPy>()?;
     m.add_function(wrap_pyfunction!(evaluate_map, m)?)?;
     m.add_function(wrap_pyfunction!(load_map, m)?)?;
     m.add_function(wrap_pyfunction!(save_map, m)?)?;

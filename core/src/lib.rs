@@ -6,6 +6,7 @@
 //! ground truth that never enters the estimator.
 //!
 //! Modules, one concept each:
+//! - [`active`]: the exploration session: Init views, grid updates, next view per strategy.
 //! - [`geometry`]: SE(3), pinhole camera, 2D boxes, yaw-oriented boxes and cylinders, IoUs.
 //! - [`frame`]: sensor frames and detections, validated at the boundary.
 //! - [`map`]: the object map, labels, versioned save/load.
@@ -16,6 +17,7 @@
 //! - [`plan`]: Panda kinematics, collision checking, RRT-Connect, Ruckig trajectories, grasps.
 //! - `record` (feature `rerun`): one Rerun recording per run.
 
+pub mod active;
 pub mod eval;
 pub mod explore;
 pub mod frame;

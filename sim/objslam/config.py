@@ -27,18 +27,32 @@ class ConfigError(ValueError):
 
 
 @dataclass(frozen=True)
-class InitConfig:
-    """The paper's initialisation: the camera over the four corners of the table's object area,
-    looking down and slightly inward."""
+class ExploreRunConfig:
+    """Exploration (mirrors ``objslam_core::active::ActiveConfig``; meanings in the core's
+    ``explore`` module docs). Every strategy starts with the same Init step: four views over the
+    table corners (inset by ``init_inset_m``), ``init_height_m`` high, tilted ``init_tilt_deg``
+    towards the centre."""
 
-    center: tuple[float, float] = (0.51, 0.0)
-    """Centre of the object area (x, y), metres."""
-    half_span: tuple[float, float] = (0.16, 0.26)
-    """Corner offsets from the centre (x, y), metres."""
-    height_m: float = 0.5
-    """Camera height above the table, metres."""
-    inward: float = 0.6
-    """0 = look straight down, 1 = look at the centre of the area."""
+    max_views: int = 10
+    """Views after Init (paper: 10)."""
+    utility_lambda: float = 0.2
+    """λ of the utility (paper: 0.2)."""
+    cell_m: float = 0.01
+    """Surface grid cell, metres (paper: 1 cm)."""
+    views_per_object: int = 12
+    """Candidate views sampled around each object still to explore."""
+    distance_m: tuple[float, float] = (0.35, 0.6)
+    """Candidate camera distance from the object centre, metres."""
+    elevation_deg: tuple[float, float] = (25.0, 75.0)
+    """Candidate elevation, degrees."""
+    init_height_m: float = 0.5
+    init_inset_m: float = 0.3
+    init_tilt_deg: float = 20.0
+    coverage_height_m: float = 0.45
+    coverage_inset_m: float = 0.15
+    done_occupied_ratio: float = 0.5
+    done_normalized_entropy: float = 0.5
+    motion_cost_bits_per_m: float = 20.0
 
 
 @dataclass(frozen=True)
@@ -70,6 +84,8 @@ class RecordConfig:
     depth: bool = True
     every_n_frames: int = 1
     """Log images every n-th frame (poses, detections and the map are logged every frame)."""
+    grids: bool = True
+    """Log the surface grid cells coloured by state after every view."""
 
 
 @dataclass(frozen=True)
@@ -94,7 +110,7 @@ class RunConfig:
     detector: DetectorConfig = field(default_factory=DetectorConfig)
     naive: NaiveMapperConfig = field(default_factory=NaiveMapperConfig)
     eval: EvalConfig = field(default_factory=EvalConfig)
-    init: InitConfig = field(default_factory=InitConfig)
+    explore: ExploreRunConfig = field(default_factory=ExploreRunConfig)
     record: RecordConfig = field(default_factory=RecordConfig)
 
     def validate(self) -> None:
@@ -109,6 +125,8 @@ class RunConfig:
             raise ConfigError("frame_rate_hz: must be in (0, 60]")
         if not (0 < self.max_joint_speed <= 2.5):
             raise ConfigError("max_joint_speed: must be in (0, 2.5] rad/s")
+        if self.explore.max_views < 0:
+            raise ConfigError("explore.max_views: must be ≥ 0")
         if self.record.every_n_frames < 1:
             raise ConfigError("record.every_n_frames: must be ≥ 1")
         try:
@@ -118,7 +136,7 @@ class RunConfig:
             raise ConfigError(str(e)) from e
 
 
-STRATEGIES = ("init",)
+STRATEGIES = ("init", "object-driven", "random", "coverage", "expected-gain")
 
 
 def _build(cls: type, data: dict[str, Any], prefix: str) -> Any:
@@ -252,7 +270,7 @@ __all__ = [
     "DepthNoiseConfig",
     "DetectorConfig",
     "EvalConfig",
-    "InitConfig",
+    "ExploreRunConfig",
     "NaiveMapperConfig",
     "RecordConfig",
     "RunConfig",

@@ -30,7 +30,7 @@ from . import _native
 from .config import REPO_ROOT, RunConfig, to_dict
 from .detector import Detection, SimulatedDetector
 from .scene import SceneSpec, gt_objects, load_scene
-from .world import MotionError, SensorFrame, SimWorld, UnreachablePoseError, look_at
+from .world import MotionError, SensorFrame, SimWorld, UnreachablePoseError
 
 #: Timing stages reported per frame (milliseconds).
 STAGES = ("render", "detect", "core", "record")
@@ -46,25 +46,34 @@ class EpisodeResult:
     frame_times_ms: dict[str, list[float]] = field(default_factory=dict)
 
 
-def init_views(cfg: RunConfig) -> list[np.ndarray]:
-    """The paper's initialisation: four views over the corners of the object area, looking down and
-    slightly inward (``init.inward``), as ``world_from_camera`` (OpenCV axes)."""
-    c = np.array([*cfg.init.center, 0.0])
-    out = []
-    # Near-left, far-left, far-right, near-right: a loop around the table without crossing it.
-    for sx, sy in ((-1, 1), (1, 1), (1, -1), (-1, -1)):
-        off = np.array([sx * cfg.init.half_span[0], sy * cfg.init.half_span[1], 0.0])
-        eye = c + off + np.array([0.0, 0.0, cfg.init.height_m])
-        target = c + (1.0 - cfg.init.inward) * off
-        out.append(look_at(eye, target))
-    return out
+#: Grid cell colours by state: unknown grey, free green, occupied red.
+GRID_COLORS = np.array([[150, 150, 150], [60, 200, 60], [220, 50, 50]], dtype=np.uint8)
 
 
-def views_for(cfg: RunConfig) -> list[np.ndarray]:
-    """The view sequence of the configured strategy."""
-    if cfg.strategy == "init":
-        return init_views(cfg)
-    raise ValueError(f"strategy: unknown {cfg.strategy!r}")
+def active_config(cfg: RunConfig) -> dict[str, Any]:
+    """The core's ``ActiveConfig`` JSON from a run config."""
+    e = to_dict(cfg.explore)
+    e["lambda"] = e.pop("utility_lambda")
+    return {"strategy": cfg.strategy, "seed": cfg.seed, **e}
+
+
+def _log_decision(rec: Any, decision: dict[str, Any]) -> None:
+    """Candidate views as arrows coloured by utility (blue low → red high), the chosen one white."""
+    cands = decision.get("candidates") or []
+    if cands:
+        poses = np.array([c[0] for c in cands])
+        util = np.array([c[1] for c in cands], dtype=float)
+        finite = np.isfinite(util)
+        lo, hi = (util[finite].min(), util[finite].max()) if finite.any() else (0.0, 1.0)
+        t = np.where(finite, (util - lo) / max(hi - lo, 1e-12), 0.0)
+        colors = np.stack([255 * t, 40 + 0 * t, 255 * (1 - t)], axis=1).astype(np.uint8)
+        rec.log_arrows("world/explore/candidates", poses[:, :3, 3], 0.08 * poses[:, :3, 2], colors)
+    chosen = decision["world_from_camera"]
+    rec.log_arrows(
+        "world/explore/chosen", chosen[None, :3, 3], 0.12 * chosen[None, :3, 2], np.array([[255, 255, 255]], dtype=np.uint8)
+    )
+    if np.isfinite(decision.get("utility", float("nan"))):
+        rec.log_scalar("explore/utility", float(decision["utility"]))
 
 
 def _scene_path(cfg: RunConfig) -> Path:
@@ -124,7 +133,11 @@ def run_episode(cfg: RunConfig, *, progress: bool = True, on_frame: Callable[[Se
 
     (run_dir / "config.toml").write_text(tomli_w.dumps(to_dict(cfg)))
     rec = _Recorder(run_dir / "run.rrd" if cfg.record.enabled else None)
-    mapper = _native.NaiveMapper(json.dumps(to_dict(cfg.naive)))
+    mapper = _native.ActiveMapper(
+        mapper_config_json=json.dumps(to_dict(cfg.naive)),
+        active_config_json=json.dumps(active_config(cfg)),
+        table=(*scene.table.center, *scene.table.size),
+    )
     t_start = time.perf_counter()
     times: dict[str, list[float]] = {s: [] for s in STAGES}
     events: list[str] = []
@@ -138,12 +151,13 @@ def run_episode(cfg: RunConfig, *, progress: bool = True, on_frame: Callable[[Se
         world = SimWorld(scene, cfg.camera, rng_sensor)
         detector = SimulatedDetector(cfg.detector, rng_detector)
         rec.log_objects("world/ground_truth", json.dumps(gt_objects(scene, world.ground_truth())))
-        views = views_for(cfg)
+        init_views = mapper.initial_views()
+        budget = len(init_views) + (0 if cfg.strategy == "init" else cfg.explore.max_views)
         bar = None
         if progress:
             from tqdm import tqdm
 
-            bar = tqdm(total=len(views), desc=f"{cfg.strategy} {scene.name} seed {cfg.seed}", unit="view")
+            bar = tqdm(total=budget, desc=f"{cfg.strategy} {scene.name} seed {cfg.seed}", unit="view")
 
         def process(frame: SensorFrame) -> None:
             nonlocal frames
@@ -188,9 +202,10 @@ def run_episode(cfg: RunConfig, *, progress: bool = True, on_frame: Callable[[Se
             if bar is not None:
                 bar.set_postfix(frames=frames, objects=len(mapper))
 
-        for vi, view in enumerate(views):
+        def execute(view: np.ndarray, what: str) -> bool:
+            """Move to a view while fusing the streamed frames; False if it was skipped."""
             try:
-                it = world.move_camera_to(view, frame_rate_hz=cfg.frame_rate_hz, max_joint_speed=cfg.max_joint_speed, what=f"view {vi}")
+                it = world.move_camera_to(view, frame_rate_hz=cfg.frame_rate_hz, max_joint_speed=cfg.max_joint_speed, what=what)
                 while True:
                     t0 = time.perf_counter()
                     try:
@@ -201,13 +216,40 @@ def run_episode(cfg: RunConfig, *, progress: bool = True, on_frame: Callable[[Se
                     rec.set_frame(frame.index, frame.sim_time_s)
                     rec.log_scalar("timings/render_ms", times["render"][-1])
                     process(frame)
-                views_done += 1
+                ok = True
             except (UnreachablePoseError, MotionError) as e:
-                events.append(f"view {vi} skipped: {e}")
-                rec.log_event(f"view {vi} skipped: {e}")
+                events.append(f"{what} skipped: {e}")
+                rec.log_event(f"{what} skipped: {e}")
+                ok = False
             if bar is not None:
                 bar.update(1)
             (run_dir / "map.json.partial").write_text(mapper.map_json())
+            return ok
+
+        for vi, view in enumerate(init_views):
+            views_done += execute(view, f"init view {vi}")
+            mapper.view_done(False)
+        rec.log_scalar("explore/mean_normalized_entropy", mapper.entropy_curve()[-1])
+        stop_reason = "strategy_done"
+        while True:
+            decision = mapper.next_view(
+                intrinsics=world.intrinsics,
+                width=cfg.camera.width,
+                height=cfg.camera.height,
+                world_from_camera=world.world_from_camera_fk(world.qpos()),
+                reachable=world.is_reachable,
+            )
+            if decision["action"] == "stop":
+                stop_reason = decision["reason"]
+                rec.log_event(f"stop: {stop_reason}")
+                break
+            _log_decision(rec, decision)
+            views_done += execute(decision["world_from_camera"], f"view {mapper.views_taken() + 1}")
+            mapper.view_done(True)
+            rec.log_scalar("explore/mean_normalized_entropy", mapper.entropy_curve()[-1])
+            if cfg.record.grids:
+                pts, states = mapper.grid_cells()
+                rec.log_colored_points("world/map/grids", pts, GRID_COLORS[np.asarray(states, dtype=np.int64)], 0.004)
         if bar is not None:
             bar.close()
 
@@ -233,6 +275,9 @@ def run_episode(cfg: RunConfig, *, progress: bool = True, on_frame: Callable[[Se
             "mean": evaluation["mean"],
             "objects": evaluation["objects"],
             "n_matched": evaluation["n_matched"],
+            "nbv_views": mapper.views_taken(),
+            "stop_reason": stop_reason,
+            "entropy_curve": mapper.entropy_curve(),
             "timings_ms_median": {s: (statistics.median(v) if v else None) for s, v in times.items()},
             "events": events,
         }

@@ -136,6 +136,7 @@ class SimWorld:
         self.camera_path_length_m = 0.0
         """Length of the camera's path so far, metres (forward kinematics sampled at 30 Hz)."""
         self._steps = 0
+        self._ik_cache: dict[bytes, np.ndarray] = {}
         self._last_camera_xyz: np.ndarray | None = None
 
         scene = sapien.Scene()
@@ -294,6 +295,20 @@ class SimWorld:
             best_err = min(best_err, e)
         raise UnreachablePoseError(what, world_from_camera[:3, 3], best_err)
 
+    def is_reachable(self, world_from_camera: np.ndarray) -> bool:
+        """Whether IK reaches a camera pose (the solution is kept for the move that follows)."""
+        key = np.round(np.asarray(world_from_camera, dtype=np.float64), 9).tobytes()
+        if key in self._ik_cache:
+            return True
+        try:
+            q = self.solve_ik(world_from_camera, "candidate")
+        except UnreachablePoseError:
+            return False
+        if len(self._ik_cache) > 256:
+            self._ik_cache.clear()
+        self._ik_cache[key] = q
+        return True
+
     # ----- sensing --------------------------------------------------------------------------------
     def render(self) -> SensorFrame:
         """Render the hand camera now."""
@@ -348,7 +363,10 @@ class SimWorld:
         settling. Raises :class:`UnreachablePoseError` before moving if IK fails."""
         if frame_rate_hz <= 0:
             raise ValueError("frame_rate_hz: must be > 0")
-        q_goal = self.solve_ik(world_from_camera, what)
+        key = np.round(np.asarray(world_from_camera, dtype=np.float64), 9).tobytes()
+        q_goal = self._ik_cache.pop(key, None)
+        if q_goal is None:
+            q_goal = self.solve_ik(world_from_camera, what)
         yield from self.move_joints_to(q_goal, frame_rate_hz=frame_rate_hz, max_joint_speed=max_joint_speed, settle_s=settle_s)
 
     def move_joints_to(

@@ -428,7 +428,9 @@ pub fn iou3d(a: &ObjectGeometry, b: &ObjectGeometry) -> f64 {
 
 /// Yaw error in degrees between an estimate and the truth, modulo the shape's symmetry:
 /// a cuboid is symmetric under 180°; one whose horizontal sides differ by less than
-/// `square_tolerance` (relative) also under 90°. Cylinders have no yaw: `None`.
+/// `square_tolerance` (relative) also under 90°. The yaws compared are those of each box's longer
+/// horizontal side, so a box described as (a, b) at θ equals (b, a) at θ + 90°. Cylinders have no
+/// yaw: `None`.
 pub fn yaw_error_deg(estimate: &ObjectGeometry, truth: &ObjectGeometry, square_tolerance: f64) -> Option<f64> {
     if truth.shape == Shape::Cylinder {
         return None;
@@ -436,7 +438,15 @@ pub fn yaw_error_deg(estimate: &ObjectGeometry, truth: &ObjectGeometry, square_t
     let (hx, hy) = (truth.half_extents.x, truth.half_extents.y);
     let square = (hx - hy).abs() <= square_tolerance * hx.max(hy);
     let period = if square { std::f64::consts::FRAC_PI_2 } else { std::f64::consts::PI };
-    let d = (estimate.yaw_rad - truth.yaw_rad).rem_euclid(period);
+    // A box with sides (a, b) at θ is the box (b, a) at θ + 90°: compare the yaws of the long sides.
+    let long_side_yaw = |g: &ObjectGeometry| {
+        if g.half_extents.x >= g.half_extents.y {
+            g.yaw_rad
+        } else {
+            g.yaw_rad + std::f64::consts::FRAC_PI_2
+        }
+    };
+    let d = (long_side_yaw(estimate) - long_side_yaw(truth)).rem_euclid(period);
     Some(d.min(period - d).to_degrees())
 }
 
@@ -522,6 +532,10 @@ mod tests {
         let e10 = cuboid([0.0; 3], 0.1 - 10f64.to_radians(), [0.1, 0.05, 0.05]);
         assert!((yaw_error_deg(&e10, &t, 0.05).unwrap_or(f64::NAN) - 10.0).abs() < 1e-9);
         assert!(yaw_error_deg(&e10, &cylinder([0.0; 3], 0.1, 0.1), 0.05).is_none());
+        // The same box described with swapped sides and yaw + 90° has no yaw error.
+        let swapped = cuboid([0.0; 3], 0.1 + FRAC_PI_2, [0.05, 0.1, 0.05]);
+        assert!(yaw_error_deg(&swapped, &t, 0.05).unwrap_or(f64::NAN) < 1e-9);
+        assert!(yaw_error_deg(&t, &swapped, 0.05).unwrap_or(f64::NAN) < 1e-9);
     }
 
     #[test]

@@ -53,12 +53,14 @@ struct Track {
 }
 
 /// What one update did (for logging and tests).
-#[derive(Debug, Clone, Default, PartialEq, Eq)]
+#[derive(Debug, Clone, Default, PartialEq)]
 pub struct UpdateSummary {
     /// For each detection: the object id it updated or created (`None` if skipped).
     pub assigned: Vec<Option<u32>>,
     /// Number of objects created by this update.
     pub created: usize,
+    /// This frame's points (world frame) per updated or created object id.
+    pub observed: BTreeMap<u32, Vec<Point3<f64>>>,
 }
 
 /// The naive mapper: owns an [`ObjectMap`] and updates it frame by frame.
@@ -113,7 +115,8 @@ impl NaiveMapper {
             }
         }
 
-        let mut summary = UpdateSummary { assigned: vec![None; frame.detections.len()], created: 0 };
+        let mut summary =
+            UpdateSummary { assigned: vec![None; frame.detections.len()], created: 0, observed: BTreeMap::new() };
         for (di, det) in frame.detections.iter().enumerate() {
             let cloud = &clouds[di];
             if cloud.len() < self.config.min_points {
@@ -147,6 +150,7 @@ impl NaiveMapper {
             }
             self.refresh(id);
             summary.assigned[di] = Some(id);
+            summary.observed.entry(id).or_default().extend_from_slice(cloud);
         }
         Ok(summary)
     }

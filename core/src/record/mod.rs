@@ -99,7 +99,9 @@ fn class_color(key: &str) -> rerun::Color {
 impl Recorder {
     /// Create a recording that streams to `path` (created or truncated).
     pub fn create(path: &Path, application_id: &str) -> Result<Self, RecordError> {
-        let stream = RecordingStreamBuilder::new(application_id)
+        let app = rerun::ApplicationId::try_from(application_id.to_string())
+            .map_err(|e| RecordError::Create { path: path.display().to_string(), reason: format!("application id: {e}") })?;
+        let stream = RecordingStreamBuilder::new(app)
             .save(path)
             .map_err(|e| RecordError::Create { path: path.display().to_string(), reason: e.to_string() })?;
         let rec = Self { stream };
@@ -236,6 +238,43 @@ impl Recorder {
             arch = arch.with_colors(group_keys.iter().map(|k| class_color(k)).collect::<Vec<_>>());
         }
         self.log(entity, &arch)
+    }
+
+    /// Points with explicit RGB colours (e.g. grid cells coloured by state).
+    pub fn log_colored_points(
+        &self,
+        entity: &str,
+        points: &[Point3<f64>],
+        colors: &[[u8; 3]],
+        radius_m: f32,
+    ) -> Result<(), RecordError> {
+        if colors.len() != points.len() {
+            return Err(RecordError::BufferLength { field: "colors", expected: points.len(), actual: colors.len() });
+        }
+        let positions: Vec<[f32; 3]> = points.iter().map(v3).collect();
+        let colors: Vec<rerun::Color> = colors.iter().map(|c| rerun::Color::from_rgb(c[0], c[1], c[2])).collect();
+        self.log(entity, &rerun::Points3D::new(positions).with_colors(colors).with_radii([radius_m]))
+    }
+
+    /// Arrows (e.g. candidate views: origin = camera centre, vector = viewing direction).
+    pub fn log_arrows(
+        &self,
+        entity: &str,
+        origins: &[Point3<f64>],
+        vectors: &[nalgebra::Vector3<f64>],
+        colors: &[[u8; 3]],
+    ) -> Result<(), RecordError> {
+        if vectors.len() != origins.len() || colors.len() != origins.len() {
+            return Err(RecordError::BufferLength {
+                field: "vectors/colors",
+                expected: origins.len(),
+                actual: vectors.len().min(colors.len()),
+            });
+        }
+        let o: Vec<[f32; 3]> = origins.iter().map(v3).collect();
+        let v: Vec<[f32; 3]> = vectors.iter().map(|d| [d.x as f32, d.y as f32, d.z as f32]).collect();
+        let c: Vec<rerun::Color> = colors.iter().map(|c| rerun::Color::from_rgb(c[0], c[1], c[2])).collect();
+        self.log(entity, &rerun::Arrows3D::from_vectors(v).with_origins(o).with_colors(c))
     }
 
     /// A scalar time series value (e.g. `timings/render_ms`).

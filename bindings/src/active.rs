@@ -1,0 +1,183 @@
+//! `ActiveMapper`: the mapper and the exploration session behind one Python object, so one call
+//! per frame updates the map and the surface grids, and one call per decision gives the next view.
+
+use nalgebra::Matrix4;
+use numpy::{PyArray2, ToPyArray};
+use objslam_core::active::{ActiveConfig, ActiveSession, NextView};
+use objslam_core::explore::{ExploreError, ObservedPoints, TableRect};
+use objslam_core::frame::Frame;
+use objslam_core::geometry::Se3;
+use objslam_core::naive::{NaiveConfig, NaiveMapper};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+
+use crate::{camera, depth_image, detections, input_err, json_err, objects_json, pose};
+
+fn explore_err(e: ExploreError) -> PyErr {
+    input_err(e)
+}
+
+fn matrix_py<'py>(py: Python<'py>, t: &Se3) -> Bound<'py, PyArray2<f64>> {
+    let m: Matrix4<f64> = t.to_homogeneous();
+    let rows: Vec<Vec<f64>> = (0..4).map(|r| (0..4).map(|c| m[(r, c)]).collect()).collect();
+    let arr = numpy::ndarray::Array2::from_shape_fn((4, 4), |(r, c)| rows[r][c]);
+    arr.to_pyarray(py)
+}
+
+/// Mapper + exploration session (see `objslam_core::active`).
+#[pyclass(module = "objslam._native", name = "ActiveMapper")]
+pub struct ActiveMapperPy {
+    mapper: NaiveMapper,
+    session: ActiveSession,
+}
+
+#[pymethods]
+impl ActiveMapperPy {
+    /// `table` = (centre x, centre y, size x, size y) of the table top at z = 0.
+    #[new]
+    #[pyo3(signature = (*, mapper_config_json, active_config_json, table))]
+    fn new(mapper_config_json: &str, active_config_json: &str, table: (f64, f64, f64, f64)) -> PyResult<Self> {
+        let mc: NaiveConfig = serde_json::from_str(mapper_config_json).map_err(|e| json_err("mapper_config", e))?;
+        let ac: ActiveConfig = serde_json::from_str(active_config_json).map_err(|e| json_err("active_config", e))?;
+        let rect = TableRect { center_m: [table.0, table.1], size_m: [table.2, table.3], height_m: 0.0 };
+        let session = ActiveSession::new(ac, rect).map_err(explore_err)?;
+        Ok(Self { mapper: NaiveMapper::new(mc), session })
+    }
+
+    /// The Init views as a list of 4x4 `world_from_camera` matrices.
+    fn initial_views<'py>(&self, py: Python<'py>) -> PyResult<Vec<Bound<'py, PyArray2<f64>>>> {
+        let views = self.session.initial_views().map_err(explore_err)?;
+        Ok(views.iter().map(|v| matrix_py(py, v)).collect())
+    }
+
+    /// Fuse one frame into the map and the surface grids; returns per-detection object ids.
+    #[pyo3(signature = (*, index, intrinsics, depth, world_from_camera, detections))]
+    fn update(
+        &mut self,
+        index: u32,
+        intrinsics: &Bound<'_, PyAny>,
+        depth: &Bound<'_, PyAny>,
+        world_from_camera: &Bound<'_, PyAny>,
+        detections: &Bound<'_, PyAny>,
+    ) -> PyResult<Vec<Option<u32>>> {
+        let depth = depth_image(depth)?;
+        let frame = Frame {
+            index,
+            camera: camera(intrinsics, depth.width, depth.height)?,
+            world_from_camera: pose(world_from_camera, "world_from_camera")?,
+            depth,
+            detections: self::detections(detections)?,
+        };
+        let summary = self.mapper.update(&frame).map_err(|e| input_err(e))?;
+        let observed: Vec<ObservedPoints> = summary
+            .observed
+            .into_iter()
+            .map(|(object_id, points_in_world)| ObservedPoints { object_id, points_in_world })
+            .collect();
+        self.session.integrate_frame(self.mapper.map(), &frame, &observed).map_err(explore_err)?;
+        Ok(summary.assigned)
+    }
+
+    /// A view was reached and its frames fused (`counts_as_view` false for Init views).
+    fn view_done(&mut self, counts_as_view: bool) {
+        self.session.view_done(self.mapper.map(), counts_as_view);
+        self.session.mark_entropy();
+    }
+
+    /// The next view: a dict {"action": "move", "world_from_camera", "utility", "candidates":
+    /// [(pose, utility, reachable)]} or {"action": "stop", "reason"}. `reachable` is called with a
+    /// 4x4 `world_from_camera` and returns a bool.
+    #[pyo3(signature = (*, intrinsics, width, height, world_from_camera, reachable))]
+    fn next_view<'py>(
+        &mut self,
+        py: Python<'py>,
+        intrinsics: &Bound<'py, PyAny>,
+        width: u32,
+        height: u32,
+        world_from_camera: &Bound<'py, PyAny>,
+        reachable: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let cam = camera(intrinsics, width, height)?;
+        let current = pose(world_from_camera, "world_from_camera")?;
+        let callback_error: std::cell::RefCell<Option<PyErr>> = std::cell::RefCell::new(None);
+        let check = |p: &Se3| -> bool {
+            if callback_error.borrow().is_some() {
+                return false;
+            }
+            match reachable.call1((matrix_py(py, p),)).and_then(|r| r.extract::<bool>()) {
+                Ok(ok) => ok,
+                Err(e) => {
+                    *callback_error.borrow_mut() = Some(e);
+                    false
+                }
+            }
+        };
+        let decision = self.session.next_view(self.mapper.map(), &cam, &current, &check).map_err(explore_err)?;
+        if let Some(e) = callback_error.into_inner() {
+            return Err(e);
+        }
+        let out = PyDict::new(py);
+        match decision {
+            NextView::Move { world_from_camera, utility, candidates } => {
+                out.set_item("action", "move")?;
+                out.set_item("world_from_camera", matrix_py(py, &world_from_camera))?;
+                out.set_item("utility", utility)?;
+                let cands: Vec<(Bound<'py, PyArray2<f64>>, f64, Option<bool>)> = candidates
+                    .iter()
+                    .map(|c| (matrix_py(py, &c.world_from_camera), c.utility, c.reachable))
+                    .collect();
+                out.set_item("candidates", cands)?;
+            }
+            NextView::Stop { reason } => {
+                out.set_item("action", "stop")?;
+                out.set_item("reason", serde_json::to_value(reason).map_err(|e| json_err("reason", e))?.as_str().unwrap_or("?"))?;
+            }
+        }
+        Ok(out)
+    }
+
+    /// Views taken after Init.
+    fn views_taken(&self) -> usize {
+        self.session.views_taken()
+    }
+
+    /// Mean normalised entropy after Init and after each view.
+    fn entropy_curve(&self) -> Vec<f64> {
+        self.session.entropy_curve().to_vec()
+    }
+
+    /// The map as versioned JSON.
+    fn map_json(&self) -> String {
+        self.mapper.map().to_json()
+    }
+
+    /// The map's objects as JSON records.
+    fn objects_json(&self) -> PyResult<String> {
+        objects_json(self.mapper.map())
+    }
+
+    /// Surface grid cells of every object: (N, 3) centres in the world and (N,) states
+    /// (0 unknown, 1 free, 2 occupied), for recording.
+    fn grid_cells<'py>(&self, py: Python<'py>) -> (Bound<'py, PyArray2<f64>>, Vec<u8>) {
+        let mut pts: Vec<[f64; 3]> = Vec::new();
+        let mut states = Vec::new();
+        for (id, grid) in &self.session.grids().grids {
+            if let Some(obj) = self.mapper.map().get(*id) {
+                for c in grid.cells_in_world(&obj.world_from_object) {
+                    pts.push([c.p_in_world.x, c.p_in_world.y, c.p_in_world.z]);
+                    states.push(match c.state {
+                        objslam_core::explore::CellState::Unknown => 0u8,
+                        objslam_core::explore::CellState::Free => 1,
+                        objslam_core::explore::CellState::Occupied => 2,
+                    });
+                }
+            }
+        }
+        let arr = numpy::ndarray::Array2::from_shape_fn((pts.len(), 3), |(r, c)| pts[r][c]);
+        (arr.to_pyarray(py), states)
+    }
+
+    fn __len__(&self) -> usize {
+        self.mapper.map().len()
+    }
+}

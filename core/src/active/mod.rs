@@ -1,0 +1,330 @@
+//! The active-mapping session: the brain's side of an exploration episode.
+//!
+//! It owns the exploration state ([`ExplorationGrids`], [`HistoryBook`], views taken) and decides
+//! where the camera goes next; the simulator executes the moves and streams frames. One call per
+//! frame, one per decision:
+//!
+//! - [`ActiveSession::initial_views`]: the Init step every strategy starts with (paper: the four
+//!   table corners from a top view; [`explore::init_views`]).
+//! - [`ActiveSession::integrate_frame`]: after the object map was updated from a frame, update the
+//!   surface grids with that frame's observed points per object and its depth image.
+//! - [`ActiveSession::view_done`]: after a view was reached and its frames integrated (records the
+//!   estimate history used by H_V and s(x)).
+//! - [`ActiveSession::next_view`]: the next camera pose or a stop reason, for the configured
+//!   [`Strategy`]:
+//!   - `init`: stop after the Init step;
+//!   - `coverage`: the Boustrophedon scan views in order (unreachable ones skipped), then stop;
+//!   - `random`: one random reachable view per step (seeded by `seed` and the step);
+//!   - `object-driven` / `expected-gain`: the paper's stopping rule, candidate views sampled around
+//!     the objects still to explore, the utility's argmax among the reachable ones.
+//!
+//! Every strategy stops at `explore.max_views` views after Init (paper: 10), so the comparison is
+//! at an equal or smaller view budget. Reachability is a callback (the simulator side or the
+//! `plan` module's IK decides); candidates that are unreachable are skipped in utility order.
+
+use serde::{Deserialize, Serialize};
+
+use crate::explore::{
+    self, coverage_views, random_views, sample_candidates_around, stop_reason, CandidateConfig,
+    ExplorationGrids, ExploreConfig, ExploreError, HistoryBook, ObservedPoints, Reachability, StopReason, Strategy,
+    TableRect, UtilityContext,
+};
+use crate::frame::Frame;
+use crate::geometry::{PinholeCamera, Se3};
+use crate::map::ObjectMap;
+
+/// Settings of a session. The fields mirror the explore module's configs that a run usually
+/// changes; everything else keeps the explore defaults (documented there).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ActiveConfig {
+    /// Strategy name: object-driven | random | coverage | init | expected-gain.
+    pub strategy: String,
+    /// Seeds candidate sampling and random views.
+    pub seed: u64,
+    /// Views after Init, at most (paper: 10).
+    pub max_views: usize,
+    /// λ of the utility (paper: 0.2).
+    pub lambda: f64,
+    /// Grid cell size, metres (paper: 1 cm).
+    pub cell_m: f64,
+    /// Candidate views sampled around each object still to explore.
+    pub views_per_object: usize,
+    /// Camera distance from the object centre, [min, max] metres.
+    pub distance_m: [f64; 2],
+    /// Elevation of candidate views, [min, max] degrees.
+    pub elevation_deg: [f64; 2],
+    /// Init: camera height above the table, metres.
+    pub init_height_m: f64,
+    /// Init: corner inset from the table edges, metres.
+    pub init_inset_m: f64,
+    /// Init: tilt towards the table centre, degrees (0 = straight down, the paper's top view).
+    pub init_tilt_deg: f64,
+    /// Coverage: scan height, metres.
+    pub coverage_height_m: f64,
+    /// Coverage and random: inset of the scanned rectangle from the table edges, metres.
+    pub coverage_inset_m: f64,
+    /// s(x): R_o threshold (paper 0.5).
+    pub done_occupied_ratio: f64,
+    /// s(x): H̄ threshold (paper 0.5).
+    pub done_normalized_entropy: f64,
+    /// expected-gain: motion cost, bits per metre.
+    pub motion_cost_bits_per_m: f64,
+}
+
+impl Default for ActiveConfig {
+    fn default() -> Self {
+        let e = ExploreConfig::default();
+        let c = CandidateConfig::default();
+        Self {
+            strategy: Strategy::ObjectDriven.as_str().into(),
+            seed: 0,
+            max_views: e.max_views,
+            lambda: e.lambda,
+            cell_m: e.grid.cell_size_m,
+            views_per_object: c.views_per_object,
+            distance_m: c.distance_m,
+            elevation_deg: c.elevation_deg,
+            init_height_m: c.init_height_m,
+            init_inset_m: c.init_inset_m,
+            init_tilt_deg: c.init_tilt_deg,
+            coverage_height_m: c.coverage_height_m,
+            coverage_inset_m: c.coverage_inset_m,
+            done_occupied_ratio: e.done_occupied_ratio,
+            done_normalized_entropy: e.done_normalized_entropy,
+            motion_cost_bits_per_m: e.motion_cost_bits_per_m,
+        }
+    }
+}
+
+/// What the session decided.
+#[derive(Debug, Clone, PartialEq)]
+pub enum NextView {
+    /// Move the camera here.
+    Move {
+        /// Target `world_from_camera` (OpenCV axes).
+        world_from_camera: Se3,
+        /// Its utility (NaN for strategies without one).
+        utility: f64,
+        /// Every scored candidate (pose, utility, reachable), for recording; empty for baselines.
+        candidates: Vec<ScoredCandidate>,
+    },
+    /// Stop exploring.
+    Stop {
+        /// Why.
+        reason: SessionStop,
+    },
+}
+
+/// A scored candidate view.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ScoredCandidate {
+    /// Candidate pose.
+    pub world_from_camera: Se3,
+    /// Utility.
+    pub utility: f64,
+    /// Whether the reachability callback accepted it (only asked in utility order until one is).
+    pub reachable: Option<bool>,
+}
+
+/// Why a session stopped.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SessionStop {
+    /// Every object's s(x) = 0 (paper's rule).
+    AllExplored,
+    /// The view budget is spent.
+    MaxViews,
+    /// The strategy has no more views (init, end of the coverage scan).
+    StrategyDone,
+    /// No candidate view was reachable.
+    NoReachableView,
+}
+
+impl From<StopReason> for SessionStop {
+    fn from(r: StopReason) -> Self {
+        match r {
+            StopReason::AllExplored => SessionStop::AllExplored,
+            StopReason::MaxViews => SessionStop::MaxViews,
+        }
+    }
+}
+
+/// The exploration state of one episode.
+#[derive(Debug, Clone)]
+pub struct ActiveSession {
+    config: ActiveConfig,
+    strategy: Strategy,
+    explore: ExploreConfig,
+    candidates: CandidateConfig,
+    table: TableRect,
+    grids: ExplorationGrids,
+    history: HistoryBook,
+    views_taken: usize,
+    coverage_queue: Option<Vec<Se3>>,
+    entropy_curve: Vec<f64>,
+}
+
+impl ActiveSession {
+    /// A session for a table; validates the config.
+    pub fn new(config: ActiveConfig, table: TableRect) -> Result<Self, ExploreError> {
+        let strategy = Strategy::parse(&config.strategy)?;
+        let mut explore = ExploreConfig { lambda: config.lambda, max_views: config.max_views, ..ExploreConfig::default() };
+        explore.grid.cell_size_m = config.cell_m;
+        explore.done_occupied_ratio = config.done_occupied_ratio;
+        explore.done_normalized_entropy = config.done_normalized_entropy;
+        explore.motion_cost_bits_per_m = config.motion_cost_bits_per_m;
+        explore.validate()?;
+        let candidates = CandidateConfig {
+            views_per_object: config.views_per_object,
+            distance_m: config.distance_m,
+            elevation_deg: config.elevation_deg,
+            init_height_m: config.init_height_m,
+            init_inset_m: config.init_inset_m,
+            init_tilt_deg: config.init_tilt_deg,
+            coverage_height_m: config.coverage_height_m,
+            coverage_inset_m: config.coverage_inset_m,
+            ..CandidateConfig::default()
+        };
+        candidates.validate()?;
+        table.validate()?;
+        Ok(Self {
+            config,
+            strategy,
+            explore,
+            candidates,
+            table,
+            grids: ExplorationGrids::new(),
+            history: HistoryBook::default(),
+            views_taken: 0,
+            coverage_queue: None,
+            entropy_curve: Vec::new(),
+        })
+    }
+
+    /// The strategy.
+    pub fn strategy(&self) -> Strategy {
+        self.strategy
+    }
+
+    /// Views taken after Init.
+    pub fn views_taken(&self) -> usize {
+        self.views_taken
+    }
+
+    /// The surface grids (for recording).
+    pub fn grids(&self) -> &ExplorationGrids {
+        &self.grids
+    }
+
+    /// Mean normalised entropy H̄ after Init and after each view (the report's entropy curve).
+    pub fn entropy_curve(&self) -> &[f64] {
+        &self.entropy_curve
+    }
+
+    /// The Init views (four table corners), shared by every strategy.
+    pub fn initial_views(&self) -> Result<Vec<Se3>, ExploreError> {
+        explore::init_views(&self.table, &self.candidates)
+    }
+
+    /// Update the grids from a frame (after the map was updated from it).
+    pub fn integrate_frame(
+        &mut self,
+        map: &ObjectMap,
+        frame: &Frame,
+        observed: &[ObservedPoints],
+    ) -> Result<(), ExploreError> {
+        self.grids
+            .integrate_frame(map, &frame.camera, &frame.world_from_camera, observed, Some(&frame.depth), &self.explore.grid)
+            .map(|_| ())
+    }
+
+    /// Call when a view has been reached and its frames integrated; `counts_as_view` is false for
+    /// the Init views (they do not use the budget).
+    pub fn view_done(&mut self, map: &ObjectMap, counts_as_view: bool) {
+        self.history.record(map);
+        if counts_as_view {
+            self.views_taken += 1;
+        }
+    }
+
+    /// Record the current mean normalised entropy on the curve (call after Init and each view).
+    pub fn mark_entropy(&mut self) {
+        self.entropy_curve.push(self.grids.mean_normalized_entropy().unwrap_or(1.0));
+    }
+
+    /// Decide the next view (see the module docs). `step_seed` mixes into the seed per step.
+    pub fn next_view(
+        &mut self,
+        map: &ObjectMap,
+        camera: &PinholeCamera,
+        current: &Se3,
+        reachable: &dyn Reachability,
+    ) -> Result<NextView, ExploreError> {
+        if self.views_taken >= self.explore.max_views {
+            return Ok(NextView::Stop { reason: SessionStop::MaxViews });
+        }
+        let step_seed = self.config.seed.wrapping_mul(0x9E37_79B9_7F4A_7C15).wrapping_add(self.views_taken as u64 + 1);
+        match self.strategy {
+            Strategy::Init => Ok(NextView::Stop { reason: SessionStop::StrategyDone }),
+            Strategy::Coverage => {
+                if self.coverage_queue.is_none() {
+                    let mut q = coverage_views(&self.table, camera, &self.candidates)?;
+                    q.reverse(); // pop() from the end gives scan order
+                    self.coverage_queue = Some(q);
+                }
+                let queue = self.coverage_queue.get_or_insert_with(Vec::new);
+                while let Some(pose) = queue.pop() {
+                    if reachable.reachable(&pose) {
+                        return Ok(NextView::Move { world_from_camera: pose, utility: f64::NAN, candidates: Vec::new() });
+                    }
+                }
+                Ok(NextView::Stop { reason: SessionStop::StrategyDone })
+            }
+            Strategy::Random => {
+                let views = random_views(&self.table, map, &self.candidates, &self.explore.grid, reachable, 1, step_seed)?;
+                Ok(match views.first() {
+                    Some(p) => NextView::Move { world_from_camera: *p, utility: f64::NAN, candidates: Vec::new() },
+                    None => NextView::Stop { reason: SessionStop::NoReachableView },
+                })
+            }
+            Strategy::ObjectDriven | Strategy::ExpectedGain => {
+                let ctx = UtilityContext::new(map, &self.grids, &self.history, camera, &self.explore)?;
+                let features = ctx.features();
+                if let Some(r) = stop_reason(&features, self.views_taken, &self.explore) {
+                    return Ok(NextView::Stop { reason: r.into() });
+                }
+                let around: Vec<u32> = features.iter().filter(|f| f.explore).map(|f| f.object_id).collect();
+                // The argmax rule over reachable views: sample without the reachability filter,
+                // score all, then ask reachability in utility order, so IK runs only for the best.
+                let always = |_: &Se3| true;
+                let views = sample_candidates_around(
+                    map,
+                    Some(&around),
+                    &self.candidates,
+                    &self.explore.grid,
+                    &always,
+                    step_seed,
+                )?;
+                let poses: Vec<Se3> = views.iter().map(|v| v.world_from_camera).collect();
+                let scores = ctx.score_all(&poses, self.strategy, Some(current))?;
+                let mut scored: Vec<ScoredCandidate> = poses
+                    .iter()
+                    .zip(&scores)
+                    .map(|(p, s)| ScoredCandidate { world_from_camera: *p, utility: s.utility, reachable: None })
+                    .collect();
+                let mut order: Vec<usize> = (0..scored.len()).filter(|i| scored[*i].utility.is_finite()).collect();
+                order.sort_by(|a, b| scored[*b].utility.total_cmp(&scored[*a].utility).then(a.cmp(b)));
+                for i in order {
+                    let ok = reachable.reachable(&scored[i].world_from_camera);
+                    scored[i].reachable = Some(ok);
+                    if ok {
+                        let (pose, utility) = (scored[i].world_from_camera, scored[i].utility);
+                        return Ok(NextView::Move { world_from_camera: pose, utility, candidates: scored });
+                    }
+                }
+                Ok(NextView::Stop { reason: SessionStop::NoReachableView })
+            }
+        }
+    }
+}
