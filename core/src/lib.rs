@@ -6,6 +6,8 @@
 //! ground truth that never enters the estimator.
 //!
 //! Modules, one concept each:
+//! - [`association`]: ensemble object data association (M-IoU, Mann-Whitney, t-tests, P-IoU,
+//!   duplicate merge) and association metrics.
 //! - [`geometry`]: SE(3), pinhole camera, 2D boxes, yaw-oriented boxes and cylinders, IoUs.
 //! - [`frame`]: sensor frames and detections, validated at the boundary.
 //! - [`map`]: the object map, labels, versioned save/load.
@@ -13,6 +15,7 @@
 //! - [`eval`]: matching to ground truth, 3D/2D IoU, CDE, YAE, counts.
 //! - `record` (feature `rerun`): one Rerun recording per run.
 
+pub mod association;
 pub mod eval;
 pub mod frame;
 pub mod geometry;
