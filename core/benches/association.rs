@@ -1,18 +1,22 @@
 //! Benchmarks of the association module (criterion ids = report entry names):
-//! - `associate_frame_20x10`: one [`Associator::associate_frame`] call with 20 map objects (each
-//!   seen in 3 earlier frames, 200 points per sighting) and 10 detections of 200 points each,
-//!   `evaluate_all_tests = true` (every test on every same-label pair: the worst case).
-//! - `associate_frame_20x10_default`: the same frame with the default config (tests stop at the
-//!   first pass).
+//! - `associate_frame_20x10`: one `Associator::associate_frame` call, default config, with 20 map
+//!   objects (4 labels, each seen in frames 0–2 with 200 points per sighting) and 10 detections of
+//!   200 points each in frame 10 from another viewpoint: a revisit, so M-IoU is not applicable
+//!   and the statistical tests decide. Includes the frame's updates and the duplicate check.
+//! - `associate_frame_20x10_tracking`: the same in frame 3 (consecutive; M-IoU decides).
+//! - `associate_frame_20x10_all_tests`: frame 10 with `evaluate_all_tests = true` (every test on
+//!   every same-label pair: the worst case).
 //! - `mannwhitney_500`: `mann_whitney_u` on 2 × 500 values (copy, sort, rank-sum, p-value). The
 //!   values come from SplitMix64 (seed 42): `x_i = 0.45 + 0.1 u`, `y_i = 0.46 + 0.1 u` with
 //!   `u = (next >> 11) · 2⁻⁵³`, x drawn first; `experiments/bench/association_refs.py` generates
 //!   the identical data for `scipy_mannwhitney_500`.
 
+#![allow(missing_docs)] // criterion_group! generates an undocumented pub fn
+
 use criterion::{criterion_group, criterion_main, BatchSize, Criterion};
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use objslam_core::association::stats::mann_whitney_u;
-use objslam_core::association::{AssociationConfig, Associator, LocalObject};
+use objslam_core::association::{AssociationConfig, Associator, Decision, LocalObject};
 use objslam_core::frame::Detection;
 use objslam_core::geometry::{ObjectGeometry, PinholeCamera, Se3, Shape};
 use objslam_core::map::Label;
@@ -82,21 +86,21 @@ fn local(rng: &mut ChaCha8Rng, k: usize, c: &Vector3<f64>, pose: &Se3) -> LocalO
     LocalObject { detection: Detection { bbox, label: LABELS[k % 4], score: 0.9 }, points_in_world: points }
 }
 
-/// An associator after three frames seeing all 20 objects, and the 10 local objects of frame 3.
-fn setup(config: AssociationConfig) -> (Associator, Se3, Vec<LocalObject>) {
+/// An associator after three frames seeing all 20 objects, and the 10 local objects of the
+/// benchmarked frame (every other object), seen from `pose`.
+fn setup(config: AssociationConfig, pose: &Se3) -> (Associator, Vec<LocalObject>) {
     let mut rng = ChaCha8Rng::seed_from_u64(7);
     let cs = centers();
     let mut a = Associator::new(config).unwrap_or_else(|e| panic!("{e}"));
     for f in 0..3u32 {
-        let pose = top_down(0.5 + 0.005 * f64::from(f), 0.0, 0.9);
-        let locals: Vec<LocalObject> = cs.iter().enumerate().map(|(k, c)| local(&mut rng, k, c, &pose)).collect();
-        a.associate_frame(f, &camera(), &pose, &locals).unwrap_or_else(|e| panic!("{e}"));
+        let p = top_down(0.5 + 0.005 * f64::from(f), 0.0, 0.9);
+        let locals: Vec<LocalObject> = cs.iter().enumerate().map(|(k, c)| local(&mut rng, k, c, &p)).collect();
+        a.associate_frame(f, &camera(), &p, &locals).unwrap_or_else(|e| panic!("{e}"));
     }
     assert_eq!(a.len(), 20, "setup must track 20 objects");
-    let pose = top_down(0.515, 0.0, 0.9);
     let locals: Vec<LocalObject> =
-        cs.iter().enumerate().filter(|(k, _)| k % 2 == 0).map(|(k, c)| local(&mut rng, k, c, &pose)).collect();
-    (a, pose, locals)
+        cs.iter().enumerate().filter(|(k, _)| k % 2 == 0).map(|(k, c)| local(&mut rng, k, c, pose)).collect();
+    (a, locals)
 }
 
 fn bench_association(c: &mut Criterion) {
@@ -107,18 +111,30 @@ fn bench_association(c: &mut Criterion) {
     assert!((r.p_value - 0.005_968_492_198_626_155).abs() < 1e-12, "{}", r.p_value);
     c.bench_function("mannwhitney_500", |b| b.iter(|| mann_whitney_u(std::hint::black_box(&x), &y, false)));
 
-    for (id, cfg) in [
-        ("associate_frame_20x10", AssociationConfig { evaluate_all_tests: true, ..AssociationConfig::default() }),
-        ("associate_frame_20x10_default", AssociationConfig::default()),
-    ] {
-        let (a, pose, locals) = setup(cfg);
+    let all_tests = AssociationConfig { evaluate_all_tests: true, ..AssociationConfig::default() };
+    // (id, config, frame index, camera pose): frame 10 after frame 2 is a revisit (M-IoU not
+    // applicable, the statistical tests decide); frame 3 is plain tracking (M-IoU decides).
+    let cases = [
+        ("associate_frame_20x10", AssociationConfig::default(), 10u32, top_down(0.45, 0.03, 0.85)),
+        ("associate_frame_20x10_tracking", AssociationConfig::default(), 3, top_down(0.515, 0.0, 0.9)),
+        ("associate_frame_20x10_all_tests", all_tests, 10, top_down(0.45, 0.03, 0.85)),
+    ];
+    for (id, cfg, frame, pose) in cases {
+        let (a, locals) = setup(cfg, &pose);
         // Sanity: every detection joins its object.
-        let r = a.clone().associate_frame(3, &camera(), &pose, &locals).unwrap_or_else(|e| panic!("{e}"));
-        assert!(r.detections.iter().all(|d| matches!(d.decision, objslam_core::association::Decision::Existing { .. })));
+        let r = a.clone().associate_frame(frame, &camera(), &pose, &locals).unwrap_or_else(|e| panic!("{e}"));
+        assert!(
+            r.detections.iter().all(|d| matches!(d.decision, Decision::Existing { .. })),
+            "{id}: {:?}",
+            r.detections
+        );
         c.bench_function(id, |b| {
             b.iter_batched(
                 || a.clone(),
-                |mut a| a.associate_frame(3, &camera(), &pose, &locals),
+                |mut a| {
+                    let r = a.associate_frame(frame, &camera(), &pose, &locals);
+                    (a, r) // dropped outside the timed section
+                },
                 BatchSize::SmallInput,
             )
         });

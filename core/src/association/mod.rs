@@ -99,7 +99,9 @@
 pub mod metrics;
 pub mod stats;
 
-use std::collections::{BTreeMap, BTreeSet};
+use std::cell::OnceCell;
+use std::collections::{BTreeMap, BTreeSet, HashSet};
+use std::hash::{BuildHasherDefault, Hasher};
 
 use nalgebra::{Point3, Vector3};
 use pathfinding::prelude::{kuhn_munkres, Matrix};
@@ -427,15 +429,16 @@ pub struct ObservationRecord {
     pub label: Label,
 }
 
-/// Per-axis sorted, subsampled coordinates (the NP test's view of a cloud).
+/// Per-axis sorted, subsampled coordinates (the NP test's view of a cloud), stored as
+/// [`stats::order_key`]s (same order and ties as the values, faster to sort).
 #[derive(Debug, Clone, PartialEq, Default)]
-struct SortedAxes([Vec<f64>; 3]);
+struct SortedAxes([Vec<u64>; 3]);
 
 impl SortedAxes {
     fn new(points: &[Point3<f64>], max_points: usize) -> Self {
         let axis = |a: usize| {
-            let mut v: Vec<f64> = points.iter().map(|p| p[a]).collect();
-            v.sort_unstable_by(f64::total_cmp);
+            let mut v: Vec<u64> = points.iter().map(|p| stats::order_key(p[a])).collect();
+            v.sort_unstable();
             quantile_subsample(v, max_points)
         };
         Self([axis(0), axis(1), axis(2)])
@@ -443,7 +446,7 @@ impl SortedAxes {
 }
 
 /// Keep `max` evenly spaced order statistics of a sorted vector (`floor((i + 0.5) n / max)`).
-fn quantile_subsample(sorted: Vec<f64>, max: usize) -> Vec<f64> {
+fn quantile_subsample<T: Copy>(sorted: Vec<T>, max: usize) -> Vec<T> {
     let n = sorted.len();
     if max == 0 || n <= max {
         return sorted;
@@ -457,12 +460,12 @@ pub struct GlobalObject {
     id: u32,
     label_votes: [u32; Label::ALL.len()],
     points: Vec<Point3<f64>>,
-    voxel_keys: BTreeSet<(i64, i64, i64)>,
+    voxel_keys: VoxelSet,
     voxel_m: f64,
     history: Vec<CentroidSample>,
     observations: Vec<ObservationRecord>,
     frames_seen: BTreeSet<u32>,
-    np_cache: Option<SortedAxes>,
+    np_cache: OnceCell<SortedAxes>,
 }
 
 impl GlobalObject {
@@ -543,12 +546,12 @@ impl GlobalObject {
             id,
             label_votes: [0; Label::ALL.len()],
             points: Vec::new(),
-            voxel_keys: BTreeSet::new(),
+            voxel_keys: VoxelSet::default(),
             voxel_m,
             history: Vec::new(),
             observations: Vec::new(),
             frames_seen: BTreeSet::new(),
-            np_cache: None,
+            np_cache: OnceCell::new(),
         }
     }
 
@@ -571,7 +574,7 @@ impl GlobalObject {
             }
             guard += 1;
         }
-        self.np_cache = None;
+        self.np_cache = OnceCell::new();
     }
 
     fn push_history(&mut self, sample: CentroidSample, max_history: usize) {
@@ -583,7 +586,7 @@ impl GlobalObject {
     }
 
     /// The last two sightings' (frame, box), most recent last.
-    fn last_two_boxes(&self) -> (Option<(u32, Box2)>, Option<(u32, Box2)>) {
+    fn last_two_boxes(&self) -> (Option<FrameBox>, Option<FrameBox>) {
         let n = self.observations.len();
         let get = |i: usize| self.observations.get(i).map(|o| (o.observation.frame, o.observation.bbox));
         let last = n.checked_sub(1).and_then(get);
@@ -591,6 +594,37 @@ impl GlobalObject {
         (prev, last)
     }
 }
+
+/// Membership set of occupied voxels. Only queried, never iterated, so hash order cannot leak
+/// into results; a multiplicative hash (FxHash-style) keeps inserts cheap.
+type VoxelSet = HashSet<(i64, i64, i64), BuildHasherDefault<VoxelHasher>>;
+
+/// FxHash-style hasher for voxel keys (not DoS-resistant; keys are our own coordinates).
+#[derive(Debug, Clone, Copy, Default)]
+struct VoxelHasher(u64);
+
+impl Hasher for VoxelHasher {
+    fn finish(&self) -> u64 {
+        self.0
+    }
+
+    fn write(&mut self, bytes: &[u8]) {
+        for b in bytes {
+            self.write_u64(u64::from(*b));
+        }
+    }
+
+    fn write_i64(&mut self, i: i64) {
+        self.write_u64(i as u64);
+    }
+
+    fn write_u64(&mut self, i: u64) {
+        self.0 = (self.0.rotate_left(5) ^ i).wrapping_mul(0x51_7c_c1_b7_27_22_0a_95);
+    }
+}
+
+/// A sighting's frame index and box.
+type FrameBox = (u32, Box2);
 
 fn voxel_key(p: &Point3<f64>, voxel_m: f64) -> (i64, i64, i64) {
     ((p.x / voxel_m).floor() as i64, (p.y / voxel_m).floor() as i64, (p.z / voxel_m).floor() as i64)
@@ -683,7 +717,8 @@ impl Associator {
             let points: Vec<Point3<f64>> =
                 local.points_in_world.iter().filter(|p| p.iter().all(|v| v.is_finite())).copied().collect();
             let dropped = local.points_in_world.len() - points.len();
-            let clipped = if local.detection.bbox.is_finite() { local.detection.bbox.intersection(&image) } else { None };
+            let clipped =
+                if local.detection.bbox.is_finite() { local.detection.bbox.intersection(&image) } else { None };
             let skip = match clipped {
                 None => Some(SkipReason::OutsideImage),
                 Some(_) if points.len() < cfg.min_local_points.max(1) => Some(SkipReason::TooFewPoints),
@@ -720,17 +755,6 @@ impl Associator {
             // Only objects whose label some detection carries can be compared at all.
             let b = self.objects.get(id).filter(|o| labels_present.contains(&o.label()));
             projected.push(b.and_then(|o| projected_box(o.points_in_world(), camera, &camera_from_world, &cfg)));
-        }
-        if cfg.mode.uses_np() {
-            for (k, id) in ids.iter().enumerate() {
-                if projected.get(k).copied().flatten().is_some() {
-                    if let Some(o) = self.objects.get_mut(id) {
-                        if o.np_cache.is_none() {
-                            o.np_cache = Some(SortedAxes::new(&o.points, cfg.np_max_points));
-                        }
-                    }
-                }
-            }
         }
         let n_det = prepared.len();
         let n_obj = ids.len();
@@ -996,7 +1020,7 @@ fn t_test(cfg: &AssociationConfig, centroid: &Vector3<f64>, obj: &GlobalObject) 
         let mean = obj.history.iter().map(|s| s.centroid_in_world[axis]).sum::<f64>() / nf;
         let ss = obj.history.iter().map(|s| (s.centroid_in_world[axis] - mean).powi(2)).sum::<f64>();
         let sd = (ss / (nf - 1.0)).sqrt().max(cfg.t_min_std_m);
-        if !(sd > 0.0) {
+        if sd.is_nan() || sd <= 0.0 {
             return None;
         }
         let t = (mean - centroid[axis]) / (sd / nf.sqrt());
@@ -1041,14 +1065,7 @@ fn evaluate_pair(
         if local.np.is_none() {
             local.np = Some(SortedAxes::new(&local.points, cfg.np_max_points));
         }
-        let global_np;
-        let g = match &obj.np_cache {
-            Some(c) => c,
-            None => {
-                global_np = SortedAxes::new(&obj.points, cfg.np_max_points);
-                &global_np
-            }
-        };
+        let g = obj.np_cache.get_or_init(|| SortedAxes::new(&obj.points, cfg.np_max_points));
         tests.nonparametric = local.np.as_ref().and_then(|l| np_test(cfg, l, g));
         any |= tests.nonparametric == Some(true);
     }

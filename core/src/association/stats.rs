@@ -86,11 +86,23 @@ pub fn student_t_two_sided_p(t: f64, df: f64) -> f64 {
     beta_reg(df / 2.0, 0.5, h).clamp(0.0, 1.0)
 }
 
-/// Mann-Whitney U statistic pieces from two samples *already sorted ascending* (no NaN):
+/// A `u64` whose integer order is the numeric order of finite `f64`s (−0.0 and +0.0 map to the
+/// same key, so they tie as in scipy). Sorting integers is faster than `f64::total_cmp`.
+pub fn order_key(v: f64) -> u64 {
+    let bits = (v + 0.0).to_bits(); // −0.0 + 0.0 = +0.0
+    if bits >> 63 == 1 {
+        !bits
+    } else {
+        bits | (1 << 63)
+    }
+}
+
+/// Mann-Whitney U statistic pieces from two samples *already sorted ascending* (no NaN; any
+/// ordered type: `f64`, or the keys of [`order_key`]):
 /// `(U1, tie_term)` with `tie_term = Σ (t³ − t)` over tie groups of the pooled sample.
 ///
 /// Merges the two sorted lists in one pass (O(|x| + |y|)); ranks of tied values are averaged.
-pub fn rank_sum_sorted(x_sorted: &[f64], y_sorted: &[f64]) -> (f64, f64) {
+pub fn rank_sum_sorted<T: PartialOrd + Copy>(x_sorted: &[T], y_sorted: &[T]) -> (f64, f64) {
     let (n1, n2) = (x_sorted.len(), y_sorted.len());
     let (mut i, mut j) = (0usize, 0usize);
     let mut rank_sum_x = 0.0f64;
@@ -99,7 +111,13 @@ pub fn rank_sum_sorted(x_sorted: &[f64], y_sorted: &[f64]) -> (f64, f64) {
     while i < n1 || j < n2 {
         // Smallest remaining value.
         let v = match (x_sorted.get(i), y_sorted.get(j)) {
-            (Some(a), Some(b)) => a.min(*b),
+            (Some(a), Some(b)) => {
+                if b < a {
+                    *b
+                } else {
+                    *a
+                }
+            }
             (Some(a), None) => *a,
             (None, Some(b)) => *b,
             (None, None) => break,
@@ -140,7 +158,7 @@ pub fn mann_whitney_p(u1: f64, n1: usize, n2: usize, tie_term: f64, use_continui
     let mu = n1f * n2f / 2.0;
     let u = u1.max(n1f * n2f - u1);
     let var = n1f * n2f / 12.0 * ((n + 1.0) - tie_term / (n * (n - 1.0)));
-    if !(var > 0.0) {
+    if var.is_nan() || var <= 0.0 {
         return 1.0;
     }
     let mut num = u - mu;
@@ -165,10 +183,10 @@ pub fn mann_whitney_u(x: &[f64], y: &[f64], use_continuity: bool) -> Result<Test
     check_len("y", y, 1)?;
     check_finite("x", x)?;
     check_finite("y", y)?;
-    let mut xs = x.to_vec();
-    let mut ys = y.to_vec();
-    xs.sort_unstable_by(f64::total_cmp);
-    ys.sort_unstable_by(f64::total_cmp);
+    let mut xs: Vec<u64> = x.iter().map(|v| order_key(*v)).collect();
+    let mut ys: Vec<u64> = y.iter().map(|v| order_key(*v)).collect();
+    xs.sort_unstable();
+    ys.sort_unstable();
     let (u1, tie_term) = rank_sum_sorted(&xs, &ys);
     Ok(TestResult { statistic: u1, p_value: mann_whitney_p(u1, xs.len(), ys.len(), tie_term, use_continuity) })
 }
@@ -194,7 +212,7 @@ pub fn ttest_1samp(a: &[f64], popmean: f64) -> Result<TestResult, StatsError> {
         return Err(StatsError::NonFinite { sample: "popmean", index: 0 });
     }
     let (mean, var) = mean_var(a);
-    if !(var > 0.0) {
+    if var.is_nan() || var <= 0.0 {
         return Err(StatsError::ZeroVariance);
     }
     let n = a.len() as f64;
@@ -235,7 +253,7 @@ pub fn pooled_t(ma: f64, va: f64, na: usize, mb: f64, vb: f64, nb: usize) -> Res
     let df = naf + nbf - 2.0;
     let sp2 = ((naf - 1.0) * va + (nbf - 1.0) * vb) / df;
     let denom = (sp2 * (1.0 / naf + 1.0 / nbf)).sqrt();
-    if !(denom > 0.0) {
+    if denom.is_nan() || denom <= 0.0 {
         return Err(StatsError::ZeroVariance);
     }
     let t = (ma - mb) / denom;
@@ -339,13 +357,19 @@ mod tests {
             mann_whitney_u(&[], &[1.0], false),
             Err(StatsError::TooFewSamples { sample: "x", required: 1, actual: 0 })
         );
-        assert_eq!(mann_whitney_u(&[1.0, f64::NAN], &[1.0], false), Err(StatsError::NonFinite { sample: "x", index: 1 }));
+        assert_eq!(
+            mann_whitney_u(&[1.0, f64::NAN], &[1.0], false),
+            Err(StatsError::NonFinite { sample: "x", index: 1 })
+        );
         assert_eq!(ttest_1samp(&[1.0], 0.0), Err(StatsError::TooFewSamples { sample: "a", required: 2, actual: 1 }));
         assert_eq!(ttest_1samp(&[1.0, 2.0], f64::NAN), Err(StatsError::NonFinite { sample: "popmean", index: 0 }));
         assert_eq!(ttest_ind(&[1.0, 1.0], &[1.0, 1.0]), Err(StatsError::ZeroVariance));
         assert_eq!(ttest_ind(&[1.0], &[2.0]), Err(StatsError::TooFewSamples { sample: "a+b", required: 3, actual: 2 }));
         assert_eq!(ttest_ind(&[], &[2.0, 3.0]), Err(StatsError::TooFewSamples { sample: "a", required: 1, actual: 0 }));
-        assert!(matches!(ttest_ind(&[1.0, 2.0], &[f64::INFINITY, 1.0]), Err(StatsError::NonFinite { sample: "b", .. })));
+        assert!(matches!(
+            ttest_ind(&[1.0, 2.0], &[f64::INFINITY, 1.0]),
+            Err(StatsError::NonFinite { sample: "b", .. })
+        ));
     }
 
     #[test]

@@ -47,12 +47,7 @@ impl Block {
     }
 }
 
-fn run(
-    assoc: &mut Associator,
-    blocks: &[Block],
-    frames: &[(u32, Se3)],
-    rng: &mut ChaCha8Rng,
-) -> Vec<FrameAssociation> {
+fn run(assoc: &mut Associator, blocks: &[Block], frames: &[(u32, Se3)], rng: &mut ChaCha8Rng) -> Vec<FrameAssociation> {
     frames
         .iter()
         .map(|(f, pose)| {
@@ -175,7 +170,12 @@ fn insert(a: &mut Associator, id: u32, label: Label, centroids: &[Vector3<f64>],
         o.push_history(CentroidSample { frame: f, centroid_in_world: *c }, 100);
         o.frames_seen.insert(f);
         o.observations.push(ObservationRecord {
-            observation: Observation { frame: f, bbox: Box2::new(0.0, 0.0, 1.0, 1.0), score: 1.0, centroid_in_world: *c },
+            observation: Observation {
+                frame: f,
+                bbox: Box2::new(0.0, 0.0, 1.0, 1.0),
+                score: 1.0,
+                centroid_in_world: *c,
+            },
             detection_index: 0,
             label,
         });
@@ -272,7 +272,8 @@ fn projected_box_trims_ignores_points_behind_and_clips() {
     let far: Vec<Point3<f64>> = pts.iter().map(|p| p + Vector3::new(5.0, 0.0, 0.0)).collect();
     assert_eq!(projected_box(&far, &cam, &cfw, &cfg), None);
     // Trim drops a stray point.
-    let mut stray: Vec<Point3<f64>> = (0..100).map(|i| Point3::new(0.5 + 0.0004 * f64::from(i - 50), 0.001 * f64::from(i % 10), 0.0)).collect();
+    let mut stray: Vec<Point3<f64>> =
+        (0..100).map(|i| Point3::new(0.5 + 0.0004 * f64::from(i - 50), 0.001 * f64::from(i % 10), 0.0)).collect();
     stray.push(Point3::new(0.6, 0.0, 0.0));
     let trimmed = AssociationConfig { projected_box_trim: 0.02, ..cfg };
     let bt = projected_box(&stray, &cam, &cfw, &trimmed).unwrap_or_else(|| panic!("box"));
@@ -294,6 +295,8 @@ fn np_and_t_tests_accept_same_and_reject_shifted() {
     assert_eq!(np_test(&cfg, &a, &c), Some(false));
     assert_eq!(np_test(&cfg, &a, &SortedAxes::default()), None);
     assert_eq!(quantile_subsample(vec![0.0, 1.0, 2.0, 3.0], 2), vec![1.0, 3.0]);
+    assert_eq!(quantile_subsample(vec![5, 6, 7, 8, 9, 10], 3), vec![6, 8, 10]);
+    assert_eq!(quantile_subsample(vec![5, 6], 3), vec![5, 6]);
 
     let mut o = GlobalObject::new(0, 0.005);
     let base = Vector3::new(0.5, 0.0, 0.03);
@@ -363,7 +366,10 @@ fn bad_input_is_defined() {
     // Invalid camera or pose: typed error, state unchanged.
     let before = a.clone();
     let bad_cam = PinholeCamera { fx: -1.0, ..camera() };
-    assert!(matches!(a.associate_frame(1, &bad_cam, &pose, &[good.clone()]), Err(AssociationError::Camera(_))));
+    assert!(matches!(
+        a.associate_frame(1, &bad_cam, &pose, std::slice::from_ref(&good)),
+        Err(AssociationError::Camera(_))
+    ));
     let mut bad_pose = pose;
     bad_pose.translation.vector.x = f64::NAN;
     assert_eq!(a.associate_frame(1, &camera(), &bad_pose, &[good]), Err(AssociationError::NonFinitePose));
@@ -383,7 +389,8 @@ fn bad_input_is_defined() {
 fn clouds_are_bounded_and_runs_are_deterministic() {
     let mut o = GlobalObject::new(0, 0.001);
     let mut rng = ChaCha8Rng::seed_from_u64(8);
-    let pts: Vec<Point3<f64>> = cloud(&mut rng, Vector3::new(0.5, 0.0, 0.05), 0.05, 5000).into_iter().map(Point3::from).collect();
+    let pts: Vec<Point3<f64>> =
+        cloud(&mut rng, Vector3::new(0.5, 0.0, 0.05), 0.05, 5000).into_iter().map(Point3::from).collect();
     o.add_points(&pts, 500);
     assert!(o.points_in_world().len() <= 500 && o.points_in_world().len() > 50, "{}", o.points_in_world().len());
     assert!(o.voxel_m() > 0.001);
