@@ -17,6 +17,8 @@
 //! - [`AssociationConfig`] (all thresholds, with the values we use as defaults) and
 //!   [`AssociationMode`] (the paper's Table I ablations).
 //! - [`stats`]: Mann-Whitney U, one- and two-sample t-tests (checked against scipy).
+//! - [`mapper::EnsembleMapper`]: frames in, [`crate::map::ObjectMap`] out (depth points inside
+//!   each box as local clouds), shaped like [`crate::naive::NaiveMapper`] for the episode runner.
 //! - [`metrics`]: association quality from ground-truth ids (for evaluation only: ground truth
 //!   never enters the [`Associator`]).
 //!
@@ -59,13 +61,14 @@
 //!   the velocity linearly. Not applicable (does not pass) otherwise.
 //! - NP on big clouds is over-powered (any tiny shift rejects with thousands of points) and costs
 //!   O(n log n); both clouds are reduced to at most [`AssociationConfig::np_max_points`] evenly
-//!   spaced order statistics per axis (deterministic quantile subsample) before the rank-sum.
-//!   The paper's ORB clouds are similarly small. The continuity correction is off by default (the
-//!   paper's rule has none), [`AssociationConfig::np_use_continuity`].
-//! - S-t needs `|C| ≥ t_min_history` (default 3) centroids; the history's standard deviation is
-//!   floored at [`AssociationConfig::t_min_std_m`] (default 2 mm, the order of depth noise) so a
-//!   short, nearly constant history does not reject everything; with the floor at 0 a zero-variance
-//!   history makes the test not applicable (does not pass).
+//!   spaced order statistics per axis (deterministic quantile subsample; default 30, the size of
+//!   the paper's ORB clouds) before the rank-sum. The continuity correction is off by default
+//!   (the paper's rule has none), [`AssociationConfig::np_use_continuity`].
+//! - S-t follows the paper's statistic literally (standard error `σ(C)/√|C|`, so it tightens as
+//!   the history grows); it needs `|C| ≥ t_min_history` (default 3) centroids, and the history's
+//!   standard deviation is floored at [`AssociationConfig::t_min_std_m`] (default 5 mm: a partial
+//!   cloud's centroid moves with the viewpoint) so a history from similar views does not reject
+//!   the next view; with the floor at 0 a zero-variance history makes the test not applicable.
 //! - D-t additionally requires the two objects never to have been seen in the same frame (two
 //!   detections of one frame are two objects) and centroids within
 //!   [`AssociationConfig::merge_max_distance_m`]; both guards can be disabled.
@@ -85,6 +88,10 @@
 //! - A local object with fewer than [`AssociationConfig::min_local_points`] finite points (empty,
 //!   or single-point with the default 3) is skipped: [`Decision::Skipped`] with
 //!   [`SkipReason::TooFewPoints`]; it neither updates nor creates an object.
+//! - A detection box touching the image border (within
+//!   [`AssociationConfig::border_margin_px`]) may update an object but never creates one
+//!   ([`SkipReason::TruncatedAtBorder`]): a truncated view would seed an object whose cloud the
+//!   next full view fails to match (our choice; the paper does not discuss truncation).
 //! - A detection box is clipped to the image; if nothing is left (box entirely outside the image
 //!   or non-finite) the detection is skipped with [`SkipReason::OutsideImage`].
 //! - Tests that cannot be computed (too short or zero-variance history, object not projectable)
@@ -96,6 +103,7 @@
 //! Ids in [`FrameAssociation::detections`] are those assigned before the frame's merges; apply
 //! [`FrameAssociation::merges`] in order (`removed_id` → `kept_id`) to get the surviving id.
 
+pub mod mapper;
 pub mod metrics;
 pub mod stats;
 
@@ -117,6 +125,9 @@ pub enum AssociationError {
     /// The camera intrinsics are invalid.
     #[error(transparent)]
     Camera(#[from] GeometryError),
+    /// The frame is invalid (sizes, depth, detections).
+    #[error(transparent)]
+    Frame(#[from] crate::frame::FrameError),
     /// The camera pose has a non-finite entry.
     #[error("world_from_camera has a non-finite entry")]
     NonFinitePose,
@@ -204,13 +215,17 @@ pub struct AssociationConfig {
     /// Use the continuity correction in the Mann-Whitney normal approximation (default false).
     pub np_use_continuity: bool,
     /// Each cloud is reduced to at most this many evenly spaced order statistics per axis before
-    /// the rank-sum test (default 100; 0 = no reduction). Larger = more powerful, stricter test.
+    /// the rank-sum test (default 30, the order of the ORB points per object the paper's clouds
+    /// hold; 0 = no reduction). Larger = more powerful, stricter test: with hundreds of depth
+    /// points, views of one object from two sides already differ significantly.
     pub np_max_points: usize,
     /// Significance level α of the single-sample t-test (default 0.05).
     pub t_alpha: f64,
     /// Minimum centroid-history length for the single-sample t-test (default 3; at least 2).
     pub t_min_history: usize,
-    /// Floor on the history's per-axis standard deviation in the t-tests, metres (default 0.002).
+    /// Floor on the history's per-axis standard deviation in the t-tests, metres (default 0.005:
+    /// the centroid of a partial surface cloud moves by millimetres with the viewpoint, so a
+    /// history from similar views understates the spread of the next view's centroid).
     pub t_min_std_m: f64,
     /// Significance level α of the double-sample t-test for duplicate merging (default 0.05).
     pub merge_alpha: f64,
@@ -223,6 +238,10 @@ pub struct AssociationConfig {
     pub merge_forbid_co_observed: bool,
     /// Local objects with fewer finite points are skipped (default 3).
     pub min_local_points: usize,
+    /// A detection box closer than this to an image edge, pixels, is *truncated*: it may update an
+    /// existing object but never starts a new one (its cloud shows only part of the object, so
+    /// the next full view would fail NP and S-t against it). Default 2; 0 disables.
+    pub border_margin_px: f64,
     /// Initial voxel size of global clouds, metres (default 0.005).
     pub voxel_m: f64,
     /// A global cloud holding more points doubles its voxel size (default 4000).
@@ -246,15 +265,16 @@ impl Default for AssociationConfig {
             min_projected_points: 3,
             np_alpha: 0.05,
             np_use_continuity: false,
-            np_max_points: 100,
+            np_max_points: 30,
             t_alpha: 0.05,
             t_min_history: 3,
-            t_min_std_m: 0.002,
+            t_min_std_m: 0.005,
             merge_alpha: 0.05,
             merge_min_history: 3,
             merge_max_distance_m: 0.10,
             merge_forbid_co_observed: true,
             min_local_points: 3,
+            border_margin_px: 2.0,
             voxel_m: 0.005,
             max_points_per_object: 4000,
             max_history: 100,
@@ -282,6 +302,12 @@ impl AssociationConfig {
             return Err(AssociationError::BadConfig {
                 field: "projected_box_trim",
                 reason: format!("{} outside [0, 0.5)", self.projected_box_trim),
+            });
+        }
+        if !(self.border_margin_px.is_finite() && self.border_margin_px >= 0.0) {
+            return Err(AssociationError::BadConfig {
+                field: "border_margin_px",
+                reason: format!("{} is not a finite non-negative number", self.border_margin_px),
             });
         }
         if !(self.voxel_m.is_finite() && self.voxel_m > 0.0) {
@@ -340,6 +366,8 @@ pub enum SkipReason {
     TooFewPoints,
     /// The detection box does not overlap the image (or is not finite).
     OutsideImage,
+    /// The box touches the image border (within `border_margin_px`) and matched no object.
+    TruncatedAtBorder,
 }
 
 /// What happened to one detection.
@@ -380,7 +408,10 @@ pub struct DetectionOutcome {
     pub detection_index: usize,
     /// What happened.
     pub decision: Decision,
-    /// Tests against the object it was associated with (all `None` for new or skipped).
+    /// The object the tests were run against: the associated one, or for a new object the
+    /// same-label candidate with the best projected IoU (`None` if there was none).
+    pub candidate: Option<u32>,
+    /// Tests against `candidate` (all `None` without one).
     pub tests: TestOutcomes,
     /// Points dropped because a coordinate was NaN or infinite.
     pub dropped_non_finite: usize,
@@ -633,6 +664,7 @@ fn voxel_key(p: &Point3<f64>, voxel_m: f64) -> (i64, i64, i64) {
 /// A prepared local object (finite points, clipped box, centroid).
 struct PreparedLocal {
     bbox: Box2,
+    truncated: bool,
     label: Label,
     score: f64,
     points: Vec<Point3<f64>>,
@@ -727,14 +759,21 @@ impl Associator {
             outcomes.push(DetectionOutcome {
                 detection_index: i,
                 decision: Decision::Skipped { reason: skip.unwrap_or(SkipReason::TooFewPoints) },
+                candidate: None,
                 tests: TestOutcomes::default(),
                 dropped_non_finite: dropped,
             });
             match (skip, clipped) {
                 (None, Some(bbox)) => {
                     let centroid = points.iter().fold(Vector3::zeros(), |a, p| a + p.coords) / points.len() as f64;
+                    let m = cfg.border_margin_px;
+                    let truncated = bbox.min[0] < m
+                        || bbox.min[1] < m
+                        || bbox.max[0] > image.max[0] - m
+                        || bbox.max[1] > image.max[1] - m;
                     prepared.push(Some(PreparedLocal {
                         bbox,
+                        truncated,
                         label: local.detection.label,
                         score: local.detection.score,
                         points,
@@ -804,6 +843,12 @@ impl Associator {
         let mut touched: BTreeSet<u32> = BTreeSet::new();
         for di in 0..n_det {
             let Some(Some(local)) = prepared.get(di) else { continue };
+            if local.truncated && assigned.get(di).copied().flatten().is_none() {
+                if let Some(o) = outcomes.get_mut(di) {
+                    o.decision = Decision::Skipped { reason: SkipReason::TruncatedAtBorder };
+                }
+                continue;
+            }
             let record = ObservationRecord {
                 observation: Observation {
                     frame,
@@ -827,6 +872,21 @@ impl Associator {
                     (id, Decision::New { object_id: id }, TestOutcomes::default())
                 }
             };
+            let candidate = match assigned.get(di).copied().flatten() {
+                Some(oi) => ids.get(oi).map(|id| (*id, tests)),
+                None => {
+                    // Best rejected candidate, for diagnostics (first on equal score: lower id).
+                    let mut best: Option<(f64, u32, TestOutcomes)> = None;
+                    for (oi, id) in ids.iter().enumerate() {
+                        if let Some(e) = evals.get(di * n_obj + oi).copied().flatten() {
+                            if best.is_none_or(|(s, _, _)| e.score > s) {
+                                best = Some((e.score, *id, e.tests));
+                            }
+                        }
+                    }
+                    best.map(|(_, id, t)| (id, t))
+                }
+            };
             if let Some(obj) = self.objects.get_mut(&object_id) {
                 obj.label_votes[local.label.index()] += 1;
                 obj.add_points(&local.points, cfg.max_points_per_object);
@@ -837,7 +897,8 @@ impl Associator {
             }
             if let Some(o) = outcomes.get_mut(di) {
                 o.decision = decision;
-                o.tests = tests;
+                o.candidate = candidate.map(|c| c.0);
+                o.tests = candidate.map(|c| c.1).unwrap_or_default();
             }
         }
 

@@ -283,7 +283,7 @@ fn projected_box_trims_ignores_points_behind_and_clips() {
 #[test]
 fn np_and_t_tests_accept_same_and_reject_shifted() {
     let mut rng = ChaCha8Rng::seed_from_u64(6);
-    let cfg = AssociationConfig::default();
+    let cfg = AssociationConfig { np_max_points: 100, t_min_std_m: 0.002, ..AssociationConfig::default() };
     let pts = |rng: &mut ChaCha8Rng, dx: f64| -> Vec<Point3<f64>> {
         cloud(rng, Vector3::new(0.5 + dx, 0.0, 0.03), 0.03, 300).into_iter().map(Point3::from).collect()
     };
@@ -358,11 +358,12 @@ fn bad_input_is_defined() {
         .unwrap_or_else(|e| panic!("{e}"));
     let r = one.associate_frame(0, &camera(), &pose, &[single]).unwrap_or_else(|e| panic!("{e}"));
     assert_eq!(r.detections[0].decision, Decision::New { object_id: 0 });
-    // A box partly outside the image is clipped, not rejected.
+    // A box partly outside the image is clipped, not rejected; it matches nothing here and, being
+    // truncated at the border, does not start an object.
     let mut partly = good.clone();
     partly.detection.bbox.min[0] = -40.0;
     let r = one.associate_frame(1, &camera(), &pose, &[partly]).unwrap_or_else(|e| panic!("{e}"));
-    assert!(r.detections[0].decision.object_id().is_some());
+    assert_eq!(r.detections[0].decision, Decision::Skipped { reason: SkipReason::TruncatedAtBorder });
     // Invalid camera or pose: typed error, state unchanged.
     let before = a.clone();
     let bad_cam = PinholeCamera { fx: -1.0, ..camera() };
@@ -412,4 +413,31 @@ fn clouds_are_bounded_and_runs_are_deterministic() {
     assert_eq!(maps[1].label, Label::Cup);
     assert_eq!(maps[1].observations.len(), 5);
     assert!((maps[0].geometry().center - Vector3::new(0.45, -0.05, 0.025)).norm() < 0.01);
+}
+
+#[test]
+fn truncated_detections_update_but_never_create() {
+    let mut rng = ChaCha8Rng::seed_from_u64(10);
+    let mut a = associator(AssociationMode::Ensemble);
+    let block = Block::new(0.5, 0.0, 0.03, Label::Block);
+    let book = Block::new(0.5, 0.1, 0.02, Label::Book);
+    let centre = top_down(0.5, 0.0, 0.5);
+    let l = block.local(&mut rng, &centre, 150).unwrap_or_else(|| panic!("visible"));
+    let r = a.associate_frame(0, &camera(), &centre, &[l]).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(r.detections[0].decision, Decision::New { object_id: 0 });
+    // Camera moved so both blocks sit on the right image border (u up to 320, clipped).
+    let edge = top_down(0.15, 0.0, 0.5);
+    let l = block.local(&mut rng, &edge, 150).unwrap_or_else(|| panic!("visible"));
+    assert!(l.detection.bbox.max[0] > 319.0, "{:?}", l.detection.bbox);
+    let b = book.local(&mut rng, &edge, 150).unwrap_or_else(|| panic!("visible"));
+    let r = a.associate_frame(1, &camera(), &edge, &[l, b]).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(r.detections[0].decision, Decision::Existing { object_id: 0 });
+    assert_eq!(r.detections[1].decision, Decision::Skipped { reason: SkipReason::TruncatedAtBorder });
+    assert_eq!(a.len(), 1);
+    // With the margin at 0 the truncated book starts an object.
+    let mut z = Associator::new(AssociationConfig { border_margin_px: 0.0, ..AssociationConfig::default() })
+        .unwrap_or_else(|e| panic!("{e}"));
+    let b = book.local(&mut rng, &edge, 150).unwrap_or_else(|| panic!("visible"));
+    let r = z.associate_frame(0, &camera(), &edge, &[b]).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(r.detections[0].decision, Decision::New { object_id: 0 });
 }
