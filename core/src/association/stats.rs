@@ -373,6 +373,14 @@ mod tests {
     }
 
     #[test]
+    fn order_keys_sort_like_values() {
+        let keys: Vec<u64> = [-2.0, -1e-300, -0.0, 0.0, 1e-300, 3.5, f64::MAX].iter().map(|x| order_key(*x)).collect();
+        assert!(keys.windows(2).all(|w| w[0] <= w[1]));
+        assert_eq!(keys[2], keys[3], "−0 and +0 tie");
+        assert!(keys[1] < keys[2] && keys[3] < keys[4]);
+    }
+
+    #[test]
     fn p_value_helpers_match_closed_forms() {
         // P(|Z| ≥ 1.959963984540054) = 0.05.
         close(normal_two_sided_p(1.959963984540054), 0.05, "normal");
