@@ -12,11 +12,14 @@
 //! - [`frame`]: sensor frames and detections, validated at the boundary.
 //! - [`map`]: the object map, labels, versioned save/load.
 //! - [`naive`]: the foundation's baseline estimator (the `naive` association ablation).
+//! - [`explore`]: surface occupancy grids, ray-cast visibility, the next-best-view utility,
+//!   candidate views and exploration baselines.
 //! - [`eval`]: matching to ground truth, 3D/2D IoU, CDE, YAE, counts.
 //! - `record` (feature `rerun`): one Rerun recording per run.
 
 pub mod association;
 pub mod eval;
+pub mod explore;
 pub mod frame;
 pub mod geometry;
 pub mod map;
