@@ -69,9 +69,10 @@
 //!   standard deviation is floored at [`AssociationConfig::t_min_std_m`] (default 5 mm: a partial
 //!   cloud's centroid moves with the viewpoint) so a history from similar views does not reject
 //!   the next view; with the floor at 0 a zero-variance history makes the test not applicable.
-//! - D-t additionally requires the two objects never to have been seen in the same frame (two
-//!   detections of one frame are two objects) and centroids within
-//!   [`AssociationConfig::merge_max_distance_m`]; both guards can be disabled.
+//! - D-t uses the same standard-deviation floor on each history; it also requires that the two
+//!   objects were never seen in the same frame (two detections of one frame are two objects) and
+//!   that their mean centroids lie within [`AssociationConfig::merge_max_distance_m`]; both guards
+//!   can be disabled.
 //! - P-IoU's box is the `[trim, 1 − trim]` quantile box of the projected points
 //!   ([`AssociationConfig::projected_box_trim`]); points behind the camera are ignored; fewer than
 //!   [`AssociationConfig::min_projected_points`] in front → not applicable (does not pass).

@@ -441,3 +441,21 @@ fn truncated_detections_update_but_never_create() {
     let r = z.associate_frame(0, &camera(), &edge, &[b]).unwrap_or_else(|e| panic!("{e}"));
     assert_eq!(r.detections[0].decision, Decision::New { object_id: 0 });
 }
+
+#[test]
+fn modes_and_configs_round_trip_through_json() {
+    for mode in AssociationMode::ALL {
+        let json = serde_json::to_string(&mode).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(json, format!("\"{}\"", mode.as_str()));
+    }
+    let cfg: AssociationConfig =
+        serde_json::from_str(r#"{"mode": "iou_np", "np_alpha": 0.01}"#).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(cfg.mode, AssociationMode::IouNp);
+    assert_eq!(cfg.np_alpha, 0.01);
+    assert_eq!(cfg.t_alpha, AssociationConfig::default().t_alpha);
+    assert!(serde_json::from_str::<AssociationConfig>(r#"{"np_alpah": 0.01}"#).is_err(), "typos are rejected");
+    let m: super::mapper::EnsembleMapperConfig =
+        serde_json::from_str(r#"{"association": {"mode": "iou"}, "local": {"pixel_stride": 2}}"#)
+            .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!((m.association.mode, m.local.pixel_stride), (AssociationMode::Iou, 2));
+}
