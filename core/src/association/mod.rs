@@ -588,6 +588,7 @@ impl GlobalObject {
     }
 
     fn add_points(&mut self, new_points: &[Point3<f64>], max_points: usize) {
+        self.voxel_keys.reserve(new_points.len());
         for p in new_points {
             if self.voxel_keys.insert(voxel_key(p, self.voxel_m)) {
                 self.points.push(*p);
@@ -627,39 +628,44 @@ impl GlobalObject {
     }
 }
 
-/// Membership set of occupied voxels. Only queried, never iterated, so hash order cannot leak
-/// into results; a multiplicative hash (FxHash-style) keeps inserts cheap.
-type VoxelSet = HashSet<(i64, i64, i64), BuildHasherDefault<VoxelHasher>>;
+/// Membership set of occupied voxels (packed keys, [`voxel_key`]). Only queried, never iterated,
+/// so hash order cannot leak into results.
+type VoxelSet = HashSet<u64, BuildHasherDefault<VoxelHasher>>;
 
-/// FxHash-style hasher for voxel keys (not DoS-resistant; keys are our own coordinates).
+/// Cheap hasher for packed voxel keys: the SplitMix64 finaliser (not DoS-resistant; keys are our
+/// own coordinates).
 #[derive(Debug, Clone, Copy, Default)]
 struct VoxelHasher(u64);
 
 impl Hasher for VoxelHasher {
     fn finish(&self) -> u64 {
-        self.0
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
     }
 
     fn write(&mut self, bytes: &[u8]) {
         for b in bytes {
-            self.write_u64(u64::from(*b));
+            self.0 = self.0.rotate_left(8) ^ u64::from(*b);
         }
     }
 
-    fn write_i64(&mut self, i: i64) {
-        self.write_u64(i as u64);
-    }
-
     fn write_u64(&mut self, i: u64) {
-        self.0 = (self.0.rotate_left(5) ^ i).wrapping_mul(0x51_7c_c1_b7_27_22_0a_95);
+        self.0 = self.0.rotate_left(21) ^ i;
     }
 }
 
 /// A sighting's frame index and box.
 type FrameBox = (u32, Box2);
 
-fn voxel_key(p: &Point3<f64>, voxel_m: f64) -> (i64, i64, i64) {
-    ((p.x / voxel_m).floor() as i64, (p.y / voxel_m).floor() as i64, (p.z / voxel_m).floor() as i64)
+/// The voxel of a point, its three integer indices packed into 21 bits each (two's complement,
+/// so unique within ±2²⁰ voxels of the origin: ±5 km at 5 mm; farther points may share a voxel
+/// with another far point, which only thins absurd input).
+fn voxel_key(p: &Point3<f64>, voxel_m: f64) -> u64 {
+    const MASK: u64 = (1 << 21) - 1;
+    let idx = |v: f64| ((v / voxel_m).floor() as i64 as u64) & MASK;
+    (idx(p.x) << 42) | (idx(p.y) << 21) | idx(p.z)
 }
 
 /// A prepared local object (finite points, clipped box, centroid).
