@@ -10,7 +10,7 @@
 
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use objslam_core::association::mapper::{EnsembleMapper, EnsembleMapperConfig};
-use objslam_core::association::metrics::{association_metrics, AssociationMetrics, MetricsConfig, ObjectGtIds};
+use objslam_core::association::metrics::{association_metrics, observation_gt_ids, AssociationMetrics, MetricsConfig};
 use objslam_core::association::{AssociationConfig, AssociationMode, Decision};
 use objslam_core::frame::{DepthImage, Detection, Frame};
 use objslam_core::geometry::{Box2, ObjectGeometry, PinholeCamera, Se3, Shape};
@@ -141,18 +141,7 @@ fn run(mode: AssociationMode, noise: Noise) -> (AssociationMetrics, Vec<usize>) 
         let r = mapper.update(&frame).unwrap_or_else(|e| panic!("frame {f}: {e}"));
         created.push(r.detections.iter().filter(|d| matches!(d.decision, Decision::New { .. })).count());
     }
-    let objects: Vec<ObjectGtIds> = mapper
-        .associator()
-        .objects()
-        .map(|o| ObjectGtIds {
-            object_id: o.id(),
-            gt_ids: o
-                .observations()
-                .iter()
-                .map(|r| gt_of.get(&(r.observation.frame, r.detection_index)).copied())
-                .collect(),
-        })
-        .collect();
+    let objects = observation_gt_ids(mapper.associator(), |frame, det| gt_of.get(&(frame, det)).copied());
     let gt_ids: Vec<u32> = boxes.iter().map(|b| b.id).collect();
     let map = mapper.map();
     assert_eq!(map.objects.len(), objects.len());

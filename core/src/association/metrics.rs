@@ -2,9 +2,10 @@
 //! [`super::Associator`]).
 //!
 //! Input: for each map object, the ground-truth id of each of its observations (`None` for a
-//! detection of nothing: false positive or background), e.g. looked up from
-//! [`super::ObservationRecord::detection_index`] and the simulator's per-detection GT ids. The
-//! same function measures point purity when given one GT id per point instead.
+//! detection of nothing: false positive or background); [`observation_gt_ids`] builds it from the
+//! associator and a (frame, detection index) → GT id lookup (the simulator's per-detection GT
+//! ids). The same function measures point purity when given one GT id per point instead (e.g.
+//! the GT object whose geometry contains each point of [`super::GlobalObject::points_in_world`]).
 //!
 //! Definitions ([`association_metrics`]):
 //! - **majority GT** of a map object: its most frequent non-`None` id (ties → lower id); its
@@ -66,6 +67,22 @@ pub struct AssociationMetrics {
     pub purity: Option<f64>,
     /// GT ids of `gt_ids` that are the majority of no map object, sorted.
     pub missed: Vec<u32>,
+}
+
+/// The GT ids of every map object's observations, given a lookup from (frame index, detection
+/// index within that frame) to the GT id of that detection (`None` for a false positive). Objects
+/// by increasing id, observations in the associator's order.
+pub fn observation_gt_ids(
+    associator: &super::Associator,
+    gt_of_detection: impl Fn(u32, usize) -> Option<u32>,
+) -> Vec<ObjectGtIds> {
+    associator
+        .objects()
+        .map(|o| ObjectGtIds {
+            object_id: o.id(),
+            gt_ids: o.observations().iter().map(|r| gt_of_detection(r.observation.frame, r.detection_index)).collect(),
+        })
+        .collect()
 }
 
 /// Majority id and its share among all entries (see module docs).
