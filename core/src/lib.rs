@@ -7,6 +7,8 @@
 //!
 //! Modules, one concept each:
 //! - [`active`]: the exploration session: Init views, grid updates, next view per strategy.
+//! - [`association`]: ensemble object data association (M-IoU, Mann-Whitney, t-tests, P-IoU,
+//!   duplicate merge) and association metrics.
 //! - [`geometry`]: SE(3), pinhole camera, 2D boxes, yaw-oriented boxes and cylinders, IoUs.
 //! - [`frame`]: sensor frames and detections, validated at the boundary.
 //! - [`map`]: the object map, labels, versioned save/load.
@@ -18,6 +20,7 @@
 //! - `record` (feature `rerun`): one Rerun recording per run.
 
 pub mod active;
+pub mod association;
 pub mod eval;
 pub mod explore;
 pub mod frame;
