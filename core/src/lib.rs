@@ -10,6 +10,8 @@
 //! - [`frame`]: sensor frames and detections, validated at the boundary.
 //! - [`map`]: the object map, labels, versioned save/load.
 //! - [`naive`]: the foundation's baseline estimator (the `naive` association ablation).
+//! - [`objects`]: object parameterization: iForest centroid/scale, LSD segments, line-alignment yaw,
+//!   joint yaw/scale refinement, class → model (paper Sec. "Object parameterization").
 //! - [`eval`]: matching to ground truth, 3D/2D IoU, CDE, YAE, counts.
 //! - `record` (feature `rerun`): one Rerun recording per run.
 
@@ -18,5 +20,6 @@ pub mod frame;
 pub mod geometry;
 pub mod map;
 pub mod naive;
+pub mod objects;
 #[cfg(feature = "rerun")]
 pub mod record;
