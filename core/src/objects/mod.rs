@@ -379,8 +379,10 @@ mod tests {
         let inner = Vector4::new(n.x, n.y, 0.0, -(n.dot(&g.center) + 0.03));
         assert!((top.transpose() * q * top)[0].abs() < 1e-12);
         assert!((side.transpose() * q * side)[0].abs() < 1e-12);
-        // A plane cutting the ellipsoid is not tangent (negative).
-        assert!((inner.transpose() * q * inner)[0] < -1e-4);
+        // A plane cutting the ellipsoid gives s_x² − 0.03² > 0; one missing it gives < 0.
+        assert!(((inner.transpose() * q * inner)[0] - (0.06f64.powi(2) - 0.03f64.powi(2))).abs() < 1e-12);
+        let away = Vector4::new(0.0, 0.0, 1.0, -0.5);
+        assert!((away.transpose() * q * away)[0] < 0.0);
         // Q_o recovered at the origin with yaw 0.
         let g0 = cuboid(Vector3::zeros(), 0.0, Vector3::new(1.0, 2.0, 3.0));
         let q0 = dual_quadric_world(&g0);
