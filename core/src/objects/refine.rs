@@ -108,7 +108,10 @@ fn associate(g: &ObjectGeometry, frames: &[LineFrame], config: &RefineConfig) ->
         let edges = project_edges(g, &f.camera, &f.world_from_camera);
         for (si, s) in f.segments.iter().enumerate() {
             let m = s.midpoint();
-            let best = edges.iter().map(|e| (e, e.distance_to(m))).min_by(|x, y| x.1.total_cmp(&y.1));
+            let best = edges
+                .iter()
+                .map(|e| (e, e.distance_to(m)))
+                .min_by(|x, y| x.1.total_cmp(&y.1));
             if let Some((e, d)) = best {
                 let ang = angle_difference(e.angle_rad(), s.angle_rad()).to_degrees();
                 if d <= config.gate_px && ang <= config.gate_deg {
@@ -128,17 +131,29 @@ fn signed_angle_deg(edge: &ProjectedEdge, seg_angle: f64) -> f64 {
     d.to_degrees()
 }
 
-fn residuals(p: &Params, p0: &Params, frames: &[LineFrame], assoc: &Assoc, config: &RefineConfig) -> Vec<f64> {
+fn residuals(
+    p: &Params,
+    p0: &Params,
+    frames: &[LineFrame],
+    assoc: &Assoc,
+    config: &RefineConfig,
+) -> Vec<f64> {
     let g = to_geometry(p, config.min_half_extent_m);
     let mut r = Vec::with_capacity(assoc.len() * 3 + 6);
     let mut cached: Option<(usize, Vec<ProjectedEdge>)> = None;
     for &(fi, si, ei) in assoc {
-        let (Some(f), true) = (frames.get(fi), true) else { continue };
+        let (Some(f), true) = (frames.get(fi), true) else {
+            continue;
+        };
         if cached.as_ref().map(|c| c.0) != Some(fi) {
             cached = Some((fi, project_edges(&g, &f.camera, &f.world_from_camera)));
         }
-        let edge = cached.as_ref().and_then(|c| c.1.iter().find(|e| e.edge == ei));
-        let Some(s) = f.segments.get(si) else { continue };
+        let edge = cached
+            .as_ref()
+            .and_then(|c| c.1.iter().find(|e| e.edge == ei));
+        let Some(s) = f.segments.get(si) else {
+            continue;
+        };
         match edge {
             Some(e) => {
                 r.push(config.angle_weight_px_per_deg * signed_angle_deg(e, s.angle_rad()));
@@ -163,7 +178,11 @@ fn cost(r: &[f64]) -> f64 {
 
 /// Refine yaw, scale (and centre) of a cuboid against the window's line segments. Returns `None`
 /// when fewer than [`RefineConfig::min_segments`] segments associate with the initial cube.
-pub fn refine_yaw_scale(initial: &ObjectGeometry, frames: &[LineFrame], config: &RefineConfig) -> Option<Refinement> {
+pub fn refine_yaw_scale(
+    initial: &ObjectGeometry,
+    frames: &[LineFrame],
+    config: &RefineConfig,
+) -> Option<Refinement> {
     let p0 = to_params(initial);
     let mut p = p0;
     let mut assoc = associate(initial, frames, config);
@@ -196,7 +215,12 @@ pub fn refine_yaw_scale(initial: &ObjectGeometry, frames: &[LineFrame], config: 
                 pm[k] -= h;
                 let rp = residuals(&pp, &p0, frames, &assoc, config);
                 let rm = residuals(&pm, &p0, frames, &assoc, config);
-                jac.push(rp.iter().zip(&rm).map(|(a, b)| (a - b) / (2.0 * h)).collect());
+                jac.push(
+                    rp.iter()
+                        .zip(&rm)
+                        .map(|(a, b)| (a - b) / (2.0 * h))
+                        .collect(),
+                );
             }
             let mut jtj = SMatrix::<f64, NP, NP>::zeros();
             let mut jtr = Params::zeros();
@@ -238,9 +262,15 @@ pub fn refine_yaw_scale(initial: &ObjectGeometry, frames: &[LineFrame], config: 
         }
     }
     let mut geometry = to_geometry(&p, config.min_half_extent_m);
-    geometry.yaw_rad = (geometry.yaw_rad + std::f64::consts::FRAC_PI_2).rem_euclid(std::f64::consts::PI)
+    geometry.yaw_rad = (geometry.yaw_rad + std::f64::consts::FRAC_PI_2)
+        .rem_euclid(std::f64::consts::PI)
         - std::f64::consts::FRAC_PI_2;
     let r_final = residuals(&p, &p0, frames, &assoc, config);
     let rms_after_px = (data_cost(&r_final, &assoc) / n_data(&assoc)).sqrt();
-    Some(Refinement { geometry, rms_before_px, rms_after_px, associated: assoc.len() })
+    Some(Refinement {
+        geometry,
+        rms_before_px,
+        rms_after_px,
+        associated: assoc.len(),
+    })
 }

@@ -24,8 +24,20 @@ use super::lsd::LineSegment;
 use crate::geometry::{Box2, ObjectGeometry, PinholeCamera, Se3, Shape};
 
 /// The 12 edges of [`ObjectGeometry::corners`] (bottom ring, top ring, verticals).
-pub const CUBE_EDGES: [(usize, usize); 12] =
-    [(0, 1), (1, 2), (2, 3), (3, 0), (4, 5), (5, 6), (6, 7), (7, 4), (0, 4), (1, 5), (2, 6), (3, 7)];
+pub const CUBE_EDGES: [(usize, usize); 12] = [
+    (0, 1),
+    (1, 2),
+    (2, 3),
+    (3, 0),
+    (4, 5),
+    (5, 6),
+    (6, 7),
+    (7, 4),
+    (0, 4),
+    (1, 5),
+    (2, 6),
+    (3, 7),
+];
 
 /// One frame's line evidence for one object.
 #[derive(Debug, Clone, PartialEq)]
@@ -55,7 +67,11 @@ pub struct YawConfig {
 
 impl Default for YawConfig {
     fn default() -> Self {
-        Self { samples: 30, xi_deg: 5.0, bonus_per_deg: 0.1 }
+        Self {
+            samples: 30,
+            xi_deg: 5.0,
+            bonus_per_deg: 0.1,
+        }
     }
 }
 
@@ -73,14 +89,20 @@ pub struct ProjectedEdge {
 impl ProjectedEdge {
     /// Undirected angle in `[0, π)`.
     pub fn angle_rad(&self) -> f64 {
-        (self.b[1] - self.a[1]).atan2(self.b[0] - self.a[0]).rem_euclid(std::f64::consts::PI)
+        (self.b[1] - self.a[1])
+            .atan2(self.b[0] - self.a[0])
+            .rem_euclid(std::f64::consts::PI)
     }
 
     /// Distance from a point to this edge as a finite segment, pixels.
     pub fn distance_to(&self, p: [f64; 2]) -> f64 {
         let d = [self.b[0] - self.a[0], self.b[1] - self.a[1]];
         let len2 = d[0] * d[0] + d[1] * d[1];
-        let t = if len2 > 0.0 { (((p[0] - self.a[0]) * d[0] + (p[1] - self.a[1]) * d[1]) / len2).clamp(0.0, 1.0) } else { 0.0 };
+        let t = if len2 > 0.0 {
+            (((p[0] - self.a[0]) * d[0] + (p[1] - self.a[1]) * d[1]) / len2).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
         let q = [self.a[0] + t * d[0], self.a[1] + t * d[1]];
         (p[0] - q[0]).hypot(p[1] - q[1])
     }
@@ -98,16 +120,25 @@ impl ProjectedEdge {
 
 /// Project the 12 edges of a cuboid into a frame (edges with an endpoint behind the camera are
 /// left out).
-pub fn project_edges(geometry: &ObjectGeometry, camera: &PinholeCamera, world_from_camera: &Se3) -> Vec<ProjectedEdge> {
+pub fn project_edges(
+    geometry: &ObjectGeometry,
+    camera: &PinholeCamera,
+    world_from_camera: &Se3,
+) -> Vec<ProjectedEdge> {
     let camera_from_world = world_from_camera.inverse();
     let corners = geometry.corners();
-    let uv: Vec<Option<[f64; 2]>> = corners.iter().map(|c| camera.project(&(camera_from_world * c))).collect();
+    let uv: Vec<Option<[f64; 2]>> = corners
+        .iter()
+        .map(|c| camera.project(&(camera_from_world * c)))
+        .collect();
     CUBE_EDGES
         .iter()
         .enumerate()
-        .filter_map(|(edge, &(i, j))| match (uv.get(i).copied().flatten(), uv.get(j).copied().flatten()) {
-            (Some(a), Some(b)) => Some(ProjectedEdge { edge, a, b }),
-            _ => None,
+        .filter_map(|(edge, &(i, j))| {
+            match (uv.get(i).copied().flatten(), uv.get(j).copied().flatten()) {
+                (Some(a), Some(b)) => Some(ProjectedEdge { edge, a, b }),
+                _ => None,
+            }
         })
         .collect()
 }
@@ -128,14 +159,32 @@ pub fn nearest_edge(segment: &LineSegment, edges: &[ProjectedEdge]) -> Option<(u
         .map(|(k, e)| (k, e.distance_to(m)))
         .min_by(|x, y| x.1.total_cmp(&y.1))?;
     let e = edges.get(k)?;
-    Some((k, angle_difference(e.angle_rad(), segment.angle_rad()).to_degrees()))
+    Some((
+        k,
+        angle_difference(e.angle_rad(), segment.angle_rad()).to_degrees(),
+    ))
 }
 
 /// The paper's per-frame score (Eq. "cost") of a geometry against one frame's segments, and the
 /// frame's accumulated error (sum of `e` over the segments with `e < ξ`). `(0, 0)` when the frame
 /// has no segments or no edge projects.
 pub fn frame_score(geometry: &ObjectGeometry, frame: &LineFrame, config: &YawConfig) -> (f64, f64) {
-    let n_a = frame.segments.len();
+    let prepared: Vec<([f64; 2], f64)> = frame
+        .segments
+        .iter()
+        .map(|s| (s.midpoint(), s.angle_rad()))
+        .collect();
+    prepared_frame_score(geometry, frame, &prepared, config)
+}
+
+/// [`frame_score`] with the segments' midpoints and angles computed once.
+fn prepared_frame_score(
+    geometry: &ObjectGeometry,
+    frame: &LineFrame,
+    segments: &[([f64; 2], f64)],
+    config: &YawConfig,
+) -> (f64, f64) {
+    let n_a = segments.len();
     if n_a == 0 {
         return (0.0, 0.0);
     }
@@ -143,9 +192,34 @@ pub fn frame_score(geometry: &ObjectGeometry, frame: &LineFrame, config: &YawCon
     if edges.is_empty() {
         return (0.0, 0.0);
     }
+    // Per edge: start, direction, 1 / |direction|², angle; squared distances avoid square roots.
+    let pre: Vec<([f64; 2], [f64; 2], f64, f64)> = edges
+        .iter()
+        .map(|e| {
+            let d = [e.b[0] - e.a[0], e.b[1] - e.a[1]];
+            let len2 = d[0] * d[0] + d[1] * d[1];
+            (
+                e.a,
+                d,
+                if len2 > 0.0 { 1.0 / len2 } else { 0.0 },
+                e.angle_rad(),
+            )
+        })
+        .collect();
     let (mut n_p, mut sum) = (0usize, 0.0);
-    for s in &frame.segments {
-        if let Some((_, e)) = nearest_edge(s, &edges) {
+    for (mid, angle) in segments {
+        let mut best = (f64::INFINITY, 0.0);
+        for (a, d, inv_len2, edge_angle) in &pre {
+            let (px, py) = (mid[0] - a[0], mid[1] - a[1]);
+            let t = ((px * d[0] + py * d[1]) * inv_len2).clamp(0.0, 1.0);
+            let (qx, qy) = (px - t * d[0], py - t * d[1]);
+            let dist2 = qx * qx + qy * qy;
+            if dist2 < best.0 {
+                best = (dist2, *edge_angle);
+            }
+        }
+        if best.0.is_finite() {
+            let e = angle_difference(best.1, *angle).to_degrees();
             if e < config.xi_deg {
                 n_p += 1;
                 sum += e;
@@ -156,7 +230,10 @@ pub fn frame_score(geometry: &ObjectGeometry, frame: &LineFrame, config: &YawCon
         return (0.0, 0.0);
     }
     let mean = sum / n_p as f64;
-    (n_p as f64 / n_a as f64 * (1.0 + config.bonus_per_deg * (config.xi_deg - mean)), sum)
+    (
+        n_p as f64 / n_a as f64 * (1.0 + config.bonus_per_deg * (config.xi_deg - mean)),
+        sum,
+    )
 }
 
 /// Result of Alg. 2.
@@ -175,16 +252,29 @@ pub struct YawAlignment {
 /// Alg. 2: score every sampled yaw over the frames and return the argmax (the first on ties).
 /// `geometry_for_yaw(θ)` gives the cube for a candidate yaw (e.g. [`oriented_extent`] of the
 /// inlier points). Returns `None` when no sample scores above zero (no segments, or none aligned).
-pub fn align_yaw(frames: &[LineFrame], geometry_for_yaw: impl Fn(f64) -> ObjectGeometry, config: &YawConfig) -> Option<YawAlignment> {
+pub fn align_yaw(
+    frames: &[LineFrame],
+    geometry_for_yaw: impl Fn(f64) -> ObjectGeometry,
+    config: &YawConfig,
+) -> Option<YawAlignment> {
     let n = config.samples.max(1);
     let mut samples = Vec::with_capacity(n);
     let mut best: Option<(f64, f64, f64)> = None;
+    let prepared: Vec<Vec<([f64; 2], f64)>> = frames
+        .iter()
+        .map(|f| {
+            f.segments
+                .iter()
+                .map(|s| (s.midpoint(), s.angle_rad()))
+                .collect()
+        })
+        .collect();
     for k in 0..n {
         let yaw = -std::f64::consts::FRAC_PI_2 + k as f64 * std::f64::consts::PI / n as f64;
         let g = geometry_for_yaw(yaw);
         let (mut s_theta, mut e_theta) = (0.0, 0.0);
-        for f in frames {
-            let (s, e) = frame_score(&g, f, config);
+        for (f, segs) in frames.iter().zip(&prepared) {
+            let (s, e) = prepared_frame_score(&g, f, segs, config);
             s_theta += s;
             e_theta += e;
         }
@@ -193,13 +283,21 @@ pub fn align_yaw(frames: &[LineFrame], geometry_for_yaw: impl Fn(f64) -> ObjectG
             best = Some((yaw, s_theta, e_theta));
         }
     }
-    best.map(|(yaw_rad, score, error_deg)| YawAlignment { yaw_rad, score, error_deg, samples })
+    best.map(|(yaw_rad, score, error_deg)| YawAlignment {
+        yaw_rad,
+        score,
+        error_deg,
+        samples,
+    })
 }
 
 /// Centre and half-extents of a point set in the frame rotated by `yaw_rad` about world z: the
 /// points are rotated into that frame, their min/max taken per axis, and the mid-range centre
 /// rotated back. `None` for an empty set.
-pub fn oriented_extent(points: &[Point3<f64>], yaw_rad: f64) -> Option<(Vector3<f64>, Vector3<f64>)> {
+pub fn oriented_extent(
+    points: &[Point3<f64>],
+    yaw_rad: f64,
+) -> Option<(Vector3<f64>, Vector3<f64>)> {
     let (s, c) = yaw_rad.sin_cos();
     let mut lo = Vector3::repeat(f64::INFINITY);
     let mut hi = Vector3::repeat(f64::NEG_INFINITY);
@@ -218,7 +316,12 @@ pub fn oriented_extent(points: &[Point3<f64>], yaw_rad: f64) -> Option<(Vector3<
 
 /// A cuboid geometry from centre, yaw and half-extents.
 pub fn cuboid(center: Vector3<f64>, yaw_rad: f64, half_extents: Vector3<f64>) -> ObjectGeometry {
-    ObjectGeometry { shape: Shape::Cuboid, center, yaw_rad, half_extents }
+    ObjectGeometry {
+        shape: Shape::Cuboid,
+        center,
+        yaw_rad,
+        half_extents,
+    }
 }
 
 /// The same cuboid written with its longer horizontal side along the object x axis and yaw in
@@ -231,6 +334,7 @@ pub fn canonical_cuboid(g: &ObjectGeometry) -> ObjectGeometry {
         out.half_extents = Vector3::new(g.half_extents.y, g.half_extents.x, g.half_extents.z);
         out.yaw_rad += std::f64::consts::FRAC_PI_2;
     }
-    out.yaw_rad = (out.yaw_rad + std::f64::consts::FRAC_PI_2).rem_euclid(std::f64::consts::PI) - std::f64::consts::FRAC_PI_2;
+    out.yaw_rad = (out.yaw_rad + std::f64::consts::FRAC_PI_2).rem_euclid(std::f64::consts::PI)
+        - std::f64::consts::FRAC_PI_2;
     out
 }
