@@ -299,3 +299,42 @@ fn window_is_a_ring_buffer() {
     }
     assert_eq!(est.window_len(), 3);
 }
+
+#[test]
+fn table_filter_drops_support_points() {
+    let mut rng = ChaCha8Rng::seed_from_u64(8);
+    let mut pts = points(&mut rng);
+    // A dense patch of table points (z = 0) around the object's base.
+    for i in 0..300 {
+        let a = i as f64 * 0.37;
+        pts.push(Point3::new(
+            0.5 + 0.12 * a.cos() * (i as f64 / 300.0),
+            0.1 + 0.12 * a.sin(),
+            0.0,
+        ));
+    }
+    let cfg = ParamConfig {
+        table_z_m: Some(0.0),
+        ..Default::default()
+    };
+    let out = ObjectEstimator::new(Shape::Cuboid, cfg)
+        .estimate(&pts)
+        .unwrap_or_else(|e| panic!("{e}"));
+    let ifo = out
+        .stages
+        .iforest
+        .unwrap_or_else(|| panic!("no iforest stage"));
+    let bottom = ifo.center.z - ifo.half_extents.z;
+    assert!(bottom > 0.004, "bottom {bottom}");
+    let plain = ObjectEstimator::new(Shape::Cuboid, ParamConfig::default())
+        .estimate(&pts)
+        .unwrap_or_else(|e| panic!("{e}"));
+    let g = plain
+        .stages
+        .iforest
+        .unwrap_or_else(|| panic!("no iforest stage"));
+    assert!(
+        g.center.z < ifo.center.z,
+        "table points pull the plain centre down"
+    );
+}

@@ -229,3 +229,86 @@ fn gaussian_downscale(
     }
     (out, new_w, new_h)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn step_image(w: u32, h: u32, split: u32) -> GreyImage {
+        let data = (0..w * h)
+            .map(|i| if i % w < split { 40 } else { 210 })
+            .collect();
+        GreyImage::new(w, h, data).unwrap_or_else(|e| panic!("{e}"))
+    }
+
+    #[test]
+    fn vertical_step_gives_one_long_vertical_segment() {
+        let img = step_image(160, 120, 80);
+        let segs = detect_segments(&img, &LsdConfig::default()).unwrap_or_else(|e| panic!("{e}"));
+        let longest = segs.first().unwrap_or_else(|| panic!("no segment"));
+        assert!(longest.length_px() > 100.0, "{longest:?}");
+        let u = (longest.a[0] + longest.b[0]) / 2.0;
+        assert!((u - 80.0).abs() < 1.5, "edge at u = {u}");
+        assert!((longest.angle_rad() - std::f64::consts::FRAC_PI_2).abs() < 0.02);
+    }
+
+    #[test]
+    fn flat_image_and_bad_input() {
+        let flat = GreyImage {
+            width: 64,
+            height: 48,
+            data: vec![128; 64 * 48],
+        };
+        assert!(detect_segments(&flat, &LsdConfig::default())
+            .unwrap_or_else(|e| panic!("{e}"))
+            .is_empty());
+        let short = GreyImage {
+            width: 64,
+            height: 48,
+            data: vec![0; 10],
+        };
+        assert_eq!(
+            detect_segments(&short, &LsdConfig::default()),
+            Err(ObjectsError::BadImage {
+                expected: 64 * 48,
+                actual: 10
+            })
+        );
+        let bad = LsdConfig {
+            scale: 0.0,
+            ..Default::default()
+        };
+        assert!(matches!(
+            detect_segments(&flat, &bad),
+            Err(ObjectsError::BadConfig { .. })
+        ));
+        let tiny = GreyImage {
+            width: 2,
+            height: 2,
+            data: vec![0, 255, 0, 255],
+        };
+        assert!(detect_segments(&tiny, &LsdConfig::default())
+            .unwrap_or_else(|e| panic!("{e}"))
+            .is_empty());
+    }
+
+    #[test]
+    fn segments_are_assigned_to_boxes() {
+        let bbox = Box2::new(100.0, 100.0, 200.0, 180.0);
+        let inside = LineSegment::new([110.0, 120.0], [190.0, 125.0]);
+        let outside = LineSegment::new([300.0, 120.0], [390.0, 125.0]);
+        let crossing = LineSegment::new([150.0, 150.0], [260.0, 150.0]); // leaves the box by 60 px
+        let on_edge = LineSegment::new([99.0, 101.0], [99.0, 179.0]); // the box's own left edge
+        let got = segments_in_box(&[inside, outside, crossing, on_edge], &bbox, 4.0);
+        assert_eq!(got, vec![inside, on_edge]);
+    }
+
+    #[test]
+    fn segment_angles_are_undirected() {
+        let a = LineSegment::new([0.0, 0.0], [10.0, 10.0]);
+        let b = LineSegment::new([10.0, 10.0], [0.0, 0.0]);
+        assert!((a.angle_rad() - b.angle_rad()).abs() < 1e-12);
+        assert!((a.angle_rad() - std::f64::consts::FRAC_PI_4).abs() < 1e-12);
+        assert!((a.length_px() - 200f64.sqrt()).abs() < 1e-12);
+    }
+}

@@ -115,6 +115,13 @@ pub struct ParamConfig {
     pub refine_enabled: bool,
     /// When a later call finds no line evidence, keep the last line-based yaw (default true).
     pub keep_previous_yaw: bool,
+    /// Optional support plane (table top) height, metres: when set, points below
+    /// `table_z_m + table_margin_m` are dropped before the isolation forest (the raw stage keeps
+    /// them). Default `None` (the paper has no such step); depth points inside a detection box
+    /// include the table around the object, a dense cluster the forest does not isolate.
+    pub table_z_m: Option<f64>,
+    /// Margin above the support plane, metres (default 0.005).
+    pub table_margin_m: f64,
     /// Extents below this on every axis count as degenerate ("all points identical"), metres
     /// (default 1e-4).
     pub degenerate_extent_m: f64,
@@ -131,6 +138,8 @@ impl Default for ParamConfig {
             refine_enabled: true,
             keep_previous_yaw: true,
             degenerate_extent_m: 1e-4,
+            table_z_m: None,
+            table_margin_m: 0.005,
         }
     }
 }
@@ -314,6 +323,18 @@ impl ObjectEstimator {
             confidence: Confidence::Low,
             stages,
             inliers,
+        };
+        let above_table: Vec<Point3<f64>>;
+        let points = match self.config.table_z_m {
+            Some(z) => {
+                above_table = points
+                    .iter()
+                    .filter(|p| p.z >= z + self.config.table_margin_m)
+                    .copied()
+                    .collect();
+                &above_table[..]
+            }
+            None => points,
         };
         let robust = match robust_centroid_scale(points, &self.config.iforest) {
             Ok(r) => r,

@@ -338,3 +338,68 @@ pub fn canonical_cuboid(g: &ObjectGeometry) -> ObjectGeometry {
         - std::f64::consts::FRAC_PI_2;
     out
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::{Isometry3, Translation3, UnitQuaternion};
+
+    #[test]
+    fn angle_difference_is_undirected() {
+        let d = |a: f64, b: f64| angle_difference(a.to_radians(), b.to_radians()).to_degrees();
+        assert!((d(10.0, 170.0) - 20.0).abs() < 1e-9);
+        assert!((d(0.0, 90.0) - 90.0).abs() < 1e-9);
+        assert!((d(5.0, 185.0)).abs() < 1e-9);
+        assert!((d(-30.0, 30.0) - 60.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn canonical_cuboid_puts_the_long_side_on_x() {
+        let g = cuboid(
+            Vector3::new(0.5, 0.0, 0.05),
+            0.3,
+            Vector3::new(0.02, 0.06, 0.05),
+        );
+        let c = canonical_cuboid(&g);
+        assert_eq!(c.half_extents, Vector3::new(0.06, 0.02, 0.05));
+        assert!(
+            (c.yaw_rad - (0.3 + std::f64::consts::FRAC_PI_2 - std::f64::consts::PI)).abs() < 1e-12
+        );
+        // Same footprint.
+        assert!(crate::geometry::iou3d(&g, &c) > 1.0 - 1e-9);
+        let already = cuboid(Vector3::zeros(), 2.0, Vector3::new(0.06, 0.02, 0.05));
+        assert!((canonical_cuboid(&already).yaw_rad - (2.0 - std::f64::consts::PI)).abs() < 1e-12);
+    }
+
+    #[test]
+    fn edges_behind_the_camera_are_skipped_and_scores_vanish_without_segments() {
+        let cam = PinholeCamera::from_fovy(640, 480, 1.0).unwrap_or_else(|e| panic!("{e}"));
+        // Camera at the origin looking along world +x (OpenCV axes: z_c = +x_w, x_c = −y_w, y_c = −z_w).
+        let r = nalgebra::Matrix3::new(0.0, 0.0, 1.0, -1.0, 0.0, 0.0, 0.0, -1.0, 0.0);
+        let rot = UnitQuaternion::from_matrix(&r);
+        let pose: Se3 = Isometry3::from_parts(Translation3::new(0.0, 0.0, 0.0), rot);
+        let in_front = cuboid(Vector3::new(1.0, 0.0, 0.0), 0.0, Vector3::repeat(0.1));
+        assert_eq!(project_edges(&in_front, &cam, &pose).len(), 12);
+        let behind = cuboid(Vector3::new(-1.0, 0.0, 0.0), 0.0, Vector3::repeat(0.1));
+        assert!(project_edges(&behind, &cam, &pose).is_empty());
+        let straddling = cuboid(Vector3::new(0.0, 0.0, 0.0), 0.0, Vector3::repeat(0.1));
+        assert_eq!(project_edges(&straddling, &cam, &pose).len(), 4); // the four edges at x = +0.1
+        let frame = LineFrame {
+            frame: 0,
+            camera: cam,
+            world_from_camera: pose,
+            bbox: Box2::new(0.0, 0.0, 640.0, 480.0),
+            segments: vec![],
+        };
+        assert_eq!(
+            frame_score(&in_front, &frame, &YawConfig::default()),
+            (0.0, 0.0)
+        );
+        assert!(align_yaw(
+            &[frame],
+            |y| cuboid(in_front.center, y, in_front.half_extents),
+            &YawConfig::default()
+        )
+        .is_none());
+    }
+}
