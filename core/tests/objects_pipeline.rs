@@ -180,7 +180,8 @@ fn yaw_within_two_degrees_with_clutter() {
             i > r && l > i,
             "seed {seed}: iou3d raw {r:.3} iforest {i:.3} lines {l:.3}"
         );
-        assert!(f >= l - 0.02, "seed {seed}: refined {f:.3} vs lines {l:.3}");
+        // Envelope pinned at seeds 1–4 (measured 0.94–0.98): refinement recovers the box.
+        assert!(f > 0.85 && f > l, "seed {seed}: refined {f:.3} vs lines {l:.3}");
     }
 }
 

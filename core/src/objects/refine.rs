@@ -29,13 +29,17 @@ type Params = SVector<f64, NP>;
 /// Configuration of the yaw/scale refinement.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RefineConfig {
-    /// Outer iterations (re-association of segments to edges), default 4.
+    /// Outer iterations (re-association of segments to edges), default 6.
     pub outer_iterations: usize,
     /// Levenberg–Marquardt iterations per association, default 10.
     pub lm_iterations: usize,
     /// A segment is associated with its nearest projected edge only if its midpoint is within this
     /// distance of the edge, pixels (default 20).
     pub gate_px: f64,
+    /// Gate of the first outer iteration, pixels (default 60); the gate shrinks geometrically to
+    /// [`RefineConfig::gate_px`] by the last one, so a cube that starts too large (residual
+    /// outliers in Alg. 1) can still reach its true edges.
+    pub initial_gate_px: f64,
     /// … and its angle differs by less than this, degrees (default 10 = 2 ξ).
     pub gate_deg: f64,
     /// Weight of the angle residual: pixels per degree (default 2).
@@ -53,9 +57,10 @@ pub struct RefineConfig {
 impl Default for RefineConfig {
     fn default() -> Self {
         Self {
-            outer_iterations: 4,
+            outer_iterations: 6,
             lm_iterations: 10,
             gate_px: 20.0,
+            initial_gate_px: 60.0,
             gate_deg: 10.0,
             angle_weight_px_per_deg: 2.0,
             prior_px_per_m: 200.0,
@@ -102,7 +107,7 @@ fn to_geometry(p: &Params, min_half: f64) -> ObjectGeometry {
 /// Association: (frame index, segment index, cube edge index).
 type Assoc = Vec<(usize, usize, usize)>;
 
-fn associate(g: &ObjectGeometry, frames: &[LineFrame], config: &RefineConfig) -> Assoc {
+fn associate(g: &ObjectGeometry, frames: &[LineFrame], gate_px: f64, config: &RefineConfig) -> Assoc {
     let mut out = Vec::new();
     for (fi, f) in frames.iter().enumerate() {
         let edges = project_edges(g, &f.camera, &f.world_from_camera);
@@ -114,7 +119,7 @@ fn associate(g: &ObjectGeometry, frames: &[LineFrame], config: &RefineConfig) ->
                 .min_by(|x, y| x.1.total_cmp(&y.1));
             if let Some((e, d)) = best {
                 let ang = angle_difference(e.angle_rad(), s.angle_rad()).to_degrees();
-                if d <= config.gate_px && ang <= config.gate_deg {
+                if d <= gate_px && ang <= config.gate_deg {
                     out.push((fi, si, e.edge));
                 }
             }
@@ -185,7 +190,15 @@ pub fn refine_yaw_scale(
 ) -> Option<Refinement> {
     let p0 = to_params(initial);
     let mut p = p0;
-    let mut assoc = associate(initial, frames, config);
+    let outer_n = config.outer_iterations.max(1);
+    let gate = |k: usize| {
+        if outer_n <= 1 {
+            return config.gate_px;
+        }
+        let ratio = (config.gate_px / config.initial_gate_px.max(config.gate_px)).max(1e-9);
+        config.initial_gate_px.max(config.gate_px) * ratio.powf(k as f64 / (outer_n - 1) as f64)
+    };
+    let mut assoc = associate(initial, frames, gate(0), config);
     if assoc.len() < config.min_segments {
         return None;
     }
@@ -196,7 +209,7 @@ pub fn refine_yaw_scale(
     let mut lambda = 1e-3;
     for outer in 0..config.outer_iterations {
         if outer > 0 {
-            let a = associate(&to_geometry(&p, config.min_half_extent_m), frames, config);
+            let a = associate(&to_geometry(&p, config.min_half_extent_m), frames, gate(outer), config);
             if a.len() < config.min_segments {
                 break;
             }
