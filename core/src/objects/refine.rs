@@ -14,7 +14,7 @@
 //! - a weak prior `(p − p₀) · prior_px_per_m` on centre and scale so directions the segments do not
 //!   constrain (e.g. the height in a top-down view) stay at the Alg. 1 values.
 //!
-//! Jacobians are central differences; the damped normal equations `(JᵀJ + λ diag(JᵀJ) + λ ε I) δ =
+//! Jacobians are forward differences; the damped normal equations `(JᵀJ + λ diag(JᵀJ) + λ ε I) δ =
 //! −Jᵀr` are solved by Cholesky; λ is divided by 3 after an accepted step and multiplied by 4
 //! after a rejected one.
 
@@ -24,6 +24,8 @@ use super::yaw::{angle_difference, cuboid, project_edges, LineFrame, ProjectedEd
 use crate::geometry::ObjectGeometry;
 
 const NP: usize = 7;
+/// LM stops when an accepted step lowers the cost by less than this fraction.
+const RELATIVE_TOLERANCE: f64 = 1e-6;
 type Params = SVector<f64, NP>;
 
 /// Configuration of the yaw/scale refinement.
@@ -107,7 +109,12 @@ fn to_geometry(p: &Params, min_half: f64) -> ObjectGeometry {
 /// Association: (frame index, segment index, cube edge index).
 type Assoc = Vec<(usize, usize, usize)>;
 
-fn associate(g: &ObjectGeometry, frames: &[LineFrame], gate_px: f64, config: &RefineConfig) -> Assoc {
+fn associate(
+    g: &ObjectGeometry,
+    frames: &[LineFrame],
+    gate_px: f64,
+    config: &RefineConfig,
+) -> Assoc {
     let mut out = Vec::new();
     for (fi, f) in frames.iter().enumerate() {
         let edges = project_edges(g, &f.camera, &f.world_from_camera);
@@ -209,7 +216,12 @@ pub fn refine_yaw_scale(
     let mut lambda = 1e-3;
     for outer in 0..config.outer_iterations {
         if outer > 0 {
-            let a = associate(&to_geometry(&p, config.min_half_extent_m), frames, gate(outer), config);
+            let a = associate(
+                &to_geometry(&p, config.min_half_extent_m),
+                frames,
+                gate(outer),
+                config,
+            );
             if a.len() < config.min_segments {
                 break;
             }
@@ -218,22 +230,15 @@ pub fn refine_yaw_scale(
         let mut r = residuals(&p, &p0, frames, &assoc, config);
         let mut c = cost(&r);
         for _ in 0..config.lm_iterations {
-            // Central-difference Jacobian, accumulated straight into JᵀJ and Jᵀr.
+            // Forward-difference Jacobian (steps 1e-6 rad / 1e-7 m: residuals are smooth and
+            // well scaled in pixels), then JᵀJ and Jᵀr.
             let mut jac: Vec<Vec<f64>> = Vec::with_capacity(NP);
             for k in 0..NP {
-                let h = if k == 0 { 1e-5 } else { 1e-6 };
+                let h = if k == 0 { 1e-6 } else { 1e-7 };
                 let mut pp = p;
                 pp[k] += h;
-                let mut pm = p;
-                pm[k] -= h;
                 let rp = residuals(&pp, &p0, frames, &assoc, config);
-                let rm = residuals(&pm, &p0, frames, &assoc, config);
-                jac.push(
-                    rp.iter()
-                        .zip(&rm)
-                        .map(|(a, b)| (a - b) / (2.0 * h))
-                        .collect(),
-                );
+                jac.push(rp.iter().zip(&r).map(|(a, b)| (a - b) / h).collect());
             }
             let mut jtj = SMatrix::<f64, NP, NP>::zeros();
             let mut jtr = Params::zeros();
@@ -246,6 +251,7 @@ pub fn refine_yaw_scale(
                 }
             }
             let mut improved = false;
+            let mut converged = false;
             for _ in 0..8 {
                 let mut damped = jtj;
                 for d in 0..NP {
@@ -260,6 +266,8 @@ pub fn refine_yaw_scale(
                 let rc = residuals(&candidate, &p0, frames, &assoc, config);
                 let cc = cost(&rc);
                 if cc < c {
+                    // Converged when a step gains less than RELATIVE_TOLERANCE of the cost.
+                    converged = c - cc < RELATIVE_TOLERANCE * c;
                     p = candidate;
                     r = rc;
                     c = cc;
@@ -269,7 +277,7 @@ pub fn refine_yaw_scale(
                 }
                 lambda *= 4.0;
             }
-            if !improved {
+            if !improved || converged {
                 break;
             }
         }
