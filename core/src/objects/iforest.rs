@@ -142,14 +142,17 @@ impl IsolationForest {
         let mut all: Vec<u32> = (0..n as u32).collect();
         let mut nodes = Vec::with_capacity(config.n_trees * 2 * sample_size.min(1 << height_limit));
         let mut roots = Vec::with_capacity(config.n_trees);
-        let mut sample = vec![0u32; sample_size];
+        let mut sample = vec![[0.0f64; 3]; sample_size];
+        let mut scratch = vec![[0.0f64; 3]; sample_size];
         for _ in 0..config.n_trees {
             // Partial Fisher–Yates: the first `sample_size` entries become a uniform subsample.
             for i in 0..sample_size {
                 let j = rng.random_range(i..n);
                 all.swap(i, j);
             }
-            sample.copy_from_slice(&all[..sample_size]);
+            for (dst, &i) in sample.iter_mut().zip(&all[..sample_size]) {
+                *dst = data[i as usize];
+            }
             let root = nodes.len() as u32;
             nodes.push(Node {
                 dim: LEAF,
@@ -157,8 +160,8 @@ impl IsolationForest {
                 left: 0,
             });
             build(
-                &data,
                 &mut sample,
+                &mut scratch,
                 0,
                 height_limit,
                 root as usize,
@@ -216,8 +219,8 @@ impl IsolationForest {
 
 /// Recursively build the subtree for `idx` into `nodes[at]` (Alg. 1 `buildTree`).
 fn build(
-    data: &[[f64; 3]],
-    idx: &mut [u32],
+    pts: &mut [[f64; 3]],
+    scratch: &mut [[f64; 3]],
     depth: usize,
     height_limit: usize,
     at: usize,
@@ -226,17 +229,18 @@ fn build(
 ) {
     let leaf = Node {
         dim: LEAF,
-        split: average_path_length(idx.len()),
+        split: average_path_length(pts.len()),
         left: 0,
     };
-    if depth >= height_limit || idx.len() <= 1 {
-        nodes[at] = leaf;
+    if depth >= height_limit || pts.len() <= 1 {
+        if let Some(n) = nodes.get_mut(at) {
+            *n = leaf;
+        }
         return;
     }
     let mut lo = [f64::INFINITY; 3];
     let mut hi = [f64::NEG_INFINITY; 3];
-    for &i in idx.iter() {
-        let p = &data[i as usize];
+    for p in pts.iter() {
         for d in 0..3 {
             lo[d] = lo[d].min(p[d]);
             hi[d] = hi[d].max(p[d]);
@@ -251,31 +255,45 @@ fn build(
         }
     }
     if count == 0 {
-        nodes[at] = leaf;
+        if let Some(n) = nodes.get_mut(at) {
+            *n = leaf;
+        }
         return;
     }
     let dim = candidates[rng.random_range(0..count)];
     let d = usize::from(dim);
     let split = rng.random_range(lo[d]..hi[d]);
-    // Partition: left = x[d] < split (non-empty: the minimum), right = the rest (holds the maximum).
-    let mut left_len = 0;
-    for k in 0..idx.len() {
-        if data[idx[k] as usize][d] < split {
-            idx.swap(k, left_len);
-            left_len += 1;
-        }
+    // Partition in place: left = x[d] < split (non-empty: holds the minimum), right = the rest
+    // (holds the maximum).
+    // Branchless two-ended partition through `scratch` (the comparison is a coin flip, so a
+    // branch would mispredict half the time): every point is written at both open ends and the
+    // end it belongs to advances.
+    let n = pts.len();
+    let (mut lo_i, mut hi_i) = (0usize, n);
+    for k in 0..n {
+        let p = pts[k];
+        let goes_left = p[d] < split;
+        scratch[lo_i] = p;
+        scratch[hi_i - 1] = p;
+        lo_i += usize::from(goes_left);
+        hi_i -= usize::from(!goes_left);
     }
+    pts.copy_from_slice(&scratch[..n]);
+    let left_len = lo_i;
     let left = nodes.len();
     nodes.push(leaf);
     nodes.push(leaf);
-    nodes[at] = Node {
-        dim,
-        split,
-        left: left as u32,
-    };
-    let (l, r) = idx.split_at_mut(left_len);
-    build(data, l, depth + 1, height_limit, left, nodes, rng);
-    build(data, r, depth + 1, height_limit, left + 1, nodes, rng);
+    if let Some(n) = nodes.get_mut(at) {
+        *n = Node {
+            dim,
+            split,
+            left: left as u32,
+        };
+    }
+    let (l, r) = pts.split_at_mut(left_len);
+    let (sl, sr) = scratch.split_at_mut(left_len);
+    build(l, sl, depth + 1, height_limit, left, nodes, rng);
+    build(r, sr, depth + 1, height_limit, left + 1, nodes, rng);
 }
 
 /// Result of the robust centroid/scale estimate (Alg. 1 lines 10–12).
