@@ -270,8 +270,7 @@ fn build(
     // end it belongs to advances.
     let n = pts.len();
     let (mut lo_i, mut hi_i) = (0usize, n);
-    for k in 0..n {
-        let p = pts[k];
+    for &p in pts.iter() {
         let goes_left = p[d] < split;
         scratch[lo_i] = p;
         scratch[hi_i - 1] = p;
