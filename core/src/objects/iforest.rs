@@ -27,7 +27,8 @@ use super::ObjectsError;
 pub const EULER_GAMMA: f64 = 0.577_215_664_9;
 
 /// Configuration of the isolation forest (paper Alg. 1).
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct IForestConfig {
     /// Number of isolation trees `t` (Liu et al. and the paper: 100).
     pub n_trees: usize,

@@ -50,7 +50,8 @@ impl LineSegment {
 }
 
 /// Configuration of the line-segment detector.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct LsdConfig {
     /// Working scale: the image is Gaussian-blurred and subsampled by this factor first (LSD
     /// article and OpenCV default 0.8; 1.0 = full resolution, slower, more short segments).

@@ -125,7 +125,8 @@ pub enum ObjectsError {
 }
 
 /// Configuration of the per-object estimator.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct ParamConfig {
     /// Isolation forest (Alg. 1).
     pub iforest: IForestConfig,
@@ -507,5 +508,25 @@ mod tests {
             q0,
             Matrix4::from_diagonal(&Vector4::new(1.0, 4.0, 9.0, -1.0))
         );
+    }
+}
+
+#[cfg(test)]
+mod config_tests {
+    use super::*;
+
+    #[test]
+    fn config_round_trips_and_fills_defaults() {
+        let cfg = ParamConfig::default();
+        let text = serde_json::to_string(&cfg).unwrap_or_else(|e| panic!("{e}"));
+        let back: ParamConfig = serde_json::from_str(&text).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(back, cfg);
+        let partial: ParamConfig =
+            serde_json::from_str(r#"{"window_frames": 5, "iforest": {"passes": 1}}"#)
+                .unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(partial.window_frames, 5);
+        assert_eq!(partial.iforest.passes, 1);
+        assert_eq!(partial.iforest.n_trees, 100);
+        assert!(serde_json::from_str::<ParamConfig>(r#"{"typo": 1}"#).is_err());
     }
 }

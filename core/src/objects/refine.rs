@@ -29,7 +29,8 @@ const RELATIVE_TOLERANCE: f64 = 1e-6;
 type Params = SVector<f64, NP>;
 
 /// Configuration of the yaw/scale refinement.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct RefineConfig {
     /// Outer iterations (re-association of segments to edges), default 6.
     pub outer_iterations: usize,

@@ -55,7 +55,8 @@ pub struct LineFrame {
 }
 
 /// Configuration of the line-alignment yaw initialisation (Alg. 2).
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct YawConfig {
     /// Number of yaw samples over `[−π/2, π/2)` (paper: 30, i.e. 6° apart).
     pub samples: usize,
