@@ -15,6 +15,8 @@
 //! - [`naive`]: the foundation's baseline estimator (the `naive` association ablation).
 //! - [`explore`]: surface occupancy grids, ray-cast visibility, the next-best-view utility,
 //!   candidate views and exploration baselines.
+//! - [`objects`]: object parameterization: iForest centroid/scale, LSD segments, line-alignment yaw,
+//!   joint yaw/scale refinement, class → model (paper Sec. "Object parameterization").
 //! - [`eval`]: matching to ground truth, 3D/2D IoU, CDE, YAE, counts.
 //! - [`plan`]: Panda kinematics, collision checking, RRT-Connect, Ruckig trajectories, grasps.
 //! - `record` (feature `rerun`): one Rerun recording per run.
@@ -27,6 +29,7 @@ pub mod frame;
 pub mod geometry;
 pub mod map;
 pub mod naive;
+pub mod objects;
 pub mod plan;
 #[cfg(feature = "rerun")]
 pub mod record;
