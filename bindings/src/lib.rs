@@ -118,6 +118,9 @@ pub(crate) fn detections(list: &Bound<'_, PyAny>) -> PyResult<Vec<Detection>> {
         .into_iter()
         .enumerate()
         .map(|(i, (u0, v0, u1, v1, label, score))| {
+            if ![u0, v0, u1, v1].iter().all(|v| v.is_finite()) {
+                return Err(input_err(format!("detections[{i}]: box has a non-finite coordinate")));
+            }
             let label = Label::parse(&label).map_err(|e| input_err(format!("detections[{i}].label: {e}")))?;
             Ok(Detection { bbox: Box2::new(u0, v0, u1, v1), label, score })
         })

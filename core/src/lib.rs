@@ -18,6 +18,7 @@
 //! - [`objects`]: object parameterization: iForest centroid/scale, LSD segments, line-alignment yaw,
 //!   joint yaw/scale refinement, class → model (paper Sec. "Object parameterization").
 //! - [`eval`]: matching to ground truth, 3D/2D IoU, CDE, YAE, counts.
+//! - [`pipeline`]: association (naive or ensemble modes) + parameterization → the object map.
 //! - [`plan`]: Panda kinematics, collision checking, RRT-Connect, Ruckig trajectories, grasps.
 //! - `record` (feature `rerun`): one Rerun recording per run.
 
@@ -30,6 +31,7 @@ pub mod geometry;
 pub mod map;
 pub mod naive;
 pub mod objects;
+pub mod pipeline;
 pub mod plan;
 #[cfg(feature = "rerun")]
 pub mod record;
