@@ -11,6 +11,7 @@
 //! - [`map`]: the object map, labels, versioned save/load.
 //! - [`naive`]: the foundation's baseline estimator (the `naive` association ablation).
 //! - [`eval`]: matching to ground truth, 3D/2D IoU, CDE, YAE, counts.
+//! - [`topo`]: semantic topological map, random-walk descriptors, scene matching, relocalisation.
 //! - `record` (feature `rerun`): one Rerun recording per run.
 
 pub mod eval;
@@ -20,3 +21,4 @@ pub mod map;
 pub mod naive;
 #[cfg(feature = "rerun")]
 pub mod record;
+pub mod topo;

@@ -1,0 +1,247 @@
+//! Random-walk object descriptors (paper Eq. "Descriptor", Alg. 3 `objectDescriptor`) and their
+//! similarity score (Alg. 3 `match` / `maxScore`).
+
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+
+use super::graph::TopoMap;
+use crate::map::Label;
+
+/// Descriptor generation and comparison settings.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct DescriptorConfig {
+    /// Walk depth `i`: steps per walk after the start object. Paper: "a certain depth i" (value not
+    /// given). Default 3 (tabletop maps have 4–14 objects).
+    pub depth: usize,
+    /// Walks per object `j` (rows of the descriptor). Paper: "time j" (value not given). Default 12.
+    pub walks: usize,
+    /// Seed of the walk RNG (ChaCha8). The same seed is used for both maps.
+    pub seed: u64,
+    /// Relative size tolerance when comparing two steps' sizes after undoing the pair's scale.
+    /// Default 0.2 (5 % size noise per map, with margin).
+    pub size_tolerance: f64,
+    /// Absolute distance tolerance, in prior-map units (metres), of a step's edge length after
+    /// undoing the pair's scale. Default 0.04 (1 cm position noise per axis per map).
+    pub distance_tolerance: f64,
+    /// Relative distance tolerance added to `distance_tolerance` (covers the size-derived pair scale
+    /// error). Default 0.15.
+    pub distance_tolerance_rel: f64,
+    /// Tolerance on the angle between consecutive edges, radians. Default 0.35 (20°).
+    pub angle_tolerance_rad: f64,
+}
+
+impl Default for DescriptorConfig {
+    fn default() -> Self {
+        Self {
+            depth: 3,
+            walks: 12,
+            seed: 0x70b0,
+            size_tolerance: 0.2,
+            distance_tolerance: 0.04,
+            distance_tolerance_rel: 0.15,
+            angle_tolerance_rad: 0.35,
+        }
+    }
+}
+
+/// One step of a random walk: the reached object's label and size, the edge length from the
+/// previous object, and the angle between this edge and the previous one.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct WalkStep {
+    /// Label of the reached object.
+    pub label: Label,
+    /// Size ‖s‖ of the reached object (map units).
+    pub size: f64,
+    /// Edge length `d` from the previous object (map units).
+    pub distance: f64,
+    /// Unsigned angle `α` between the previous edge (reversed, pointing back) and this edge, radians
+    /// in [0, π]; invariant to any similarity transform. 0 (and never compared) on the first step,
+    /// which has no previous edge.
+    pub angle_rad: f64,
+}
+
+/// The descriptors of every object of a map, stored flat: object `o`, walk `w` occupies
+/// `steps[(o * walks + w) * depth ..][.. lengths[o * walks + w]]`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DescriptorSet {
+    /// Walk depth `i`.
+    pub depth: usize,
+    /// Walks per object `j`.
+    pub walks: usize,
+    /// Steps, padded to `depth` per walk.
+    pub steps: Vec<WalkStep>,
+    /// Number of valid steps per walk (a walk stops early when every neighbour is already on it).
+    pub lengths: Vec<usize>,
+}
+
+impl DescriptorSet {
+    /// Generate the descriptors of every node (paper Alg. 3 `objectDescriptor`): `walks` random walks
+    /// of up to `depth` steps from each object, never revisiting an object within a walk.
+    pub fn generate(map: &TopoMap, config: &DescriptorConfig) -> Self {
+        let n = map.len();
+        let (depth, walks) = (config.depth, config.walks);
+        let filler = WalkStep { label: Label::Block, size: 0.0, distance: 0.0, angle_rad: 0.0 };
+        let mut steps = vec![filler; n * walks * depth];
+        let mut lengths = vec![0usize; n * walks];
+        let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
+        let mut path: Vec<usize> = Vec::with_capacity(depth + 1);
+        let mut options: Vec<usize> = Vec::with_capacity(16);
+        for start in 0..n {
+            for w in 0..walks {
+                let slot = start * walks + w;
+                path.clear();
+                path.push(start);
+                let mut previous_direction: Option<nalgebra::Vector3<f64>> = None;
+                let mut len = 0;
+                while len < depth {
+                    let Some(&current) = path.last() else { break };
+                    let Some(edges) = map.adjacency.get(current) else { break };
+                    options.clear();
+                    options.extend((0..edges.len()).filter(|&k| !path.contains(&edges[k].to)));
+                    if options.is_empty() {
+                        break;
+                    }
+                    let pick = options[rng.random_range(0..options.len())];
+                    let edge = &edges[pick];
+                    let angle_rad = match previous_direction {
+                        // Angle at `current` between the way back and the way on.
+                        Some(prev) => (-prev).dot(&edge.direction).clamp(-1.0, 1.0).acos(),
+                        None => 0.0,
+                    };
+                    let Some(node) = map.nodes.get(edge.to) else { break };
+                    steps[slot * depth + len] =
+                        WalkStep { label: node.label, size: node.size(), distance: edge.distance, angle_rad };
+                    previous_direction = Some(edge.direction);
+                    path.push(edge.to);
+                    len += 1;
+                }
+                lengths[slot] = len;
+            }
+        }
+        Self { depth, walks, steps, lengths }
+    }
+
+    /// Walk `w` of object `object` (empty when out of range).
+    pub fn walk(&self, object: usize, w: usize) -> &[WalkStep] {
+        let slot = object * self.walks + w;
+        let len = self.lengths.get(slot).copied().unwrap_or(0);
+        self.steps.get(slot * self.depth..slot * self.depth + len).unwrap_or(&[])
+    }
+
+    /// Number of objects described.
+    pub fn objects(&self) -> usize {
+        self.lengths.len().checked_div(self.walks).unwrap_or(0)
+    }
+}
+
+/// Number of leading steps of `query` that agree with `prior` under the scale `scale`
+/// (query units per prior unit): same label, size, distance and (from the second step) angle.
+fn matched_prefix(prior: &[WalkStep], query: &[WalkStep], scale: f64, config: &DescriptorConfig) -> usize {
+    let mut k = 0;
+    for (p, q) in prior.iter().zip(query) {
+        let size_ok = (q.size / (scale * p.size) - 1.0).abs() <= config.size_tolerance;
+        let dist_ok = (q.distance / scale - p.distance).abs()
+            <= config.distance_tolerance + config.distance_tolerance_rel * p.distance;
+        let angle_ok = k == 0 || (q.angle_rad - p.angle_rad).abs() <= config.angle_tolerance_rad;
+        if p.label != q.label || !size_ok || !dist_ok || !angle_ok {
+            break;
+        }
+        k += 1;
+    }
+    k
+}
+
+/// Similarity of prior object `a` and query object `b` in [0, 1] under the scale hypothesis
+/// `scale` (query units per prior unit): the mean over `a`'s walks of the best matched-prefix
+/// fraction among `b`'s walks, averaged with the same score from `b`'s side.
+pub fn similarity(
+    prior: &DescriptorSet,
+    a: usize,
+    query: &DescriptorSet,
+    b: usize,
+    scale: f64,
+    config: &DescriptorConfig,
+) -> f64 {
+    let depth = prior.depth.max(1) as f64;
+    let one_side = |x: &DescriptorSet, xi: usize, y: &DescriptorSet, yi: usize, forward: bool| {
+        let mut total = 0.0;
+        for wx in 0..x.walks {
+            let walk_x = x.walk(xi, wx);
+            let mut best = 0;
+            for wy in 0..y.walks {
+                let walk_y = y.walk(yi, wy);
+                let k = if forward {
+                    matched_prefix(walk_x, walk_y, scale, config)
+                } else {
+                    matched_prefix(walk_y, walk_x, scale, config)
+                };
+                best = best.max(k);
+                if best == walk_x.len() {
+                    break;
+                }
+            }
+            total += best as f64 / depth;
+        }
+        total / x.walks.max(1) as f64
+    };
+    0.5 * (one_side(prior, a, query, b, true) + one_side(query, b, prior, a, false))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::topo::graph::{TopoConfig, TopoNode};
+    use nalgebra::Vector3;
+
+    fn nodes() -> Vec<TopoNode> {
+        let labels = [Label::Cup, Label::Book, Label::Can, Label::Bowl, Label::Block];
+        (0..5)
+            .map(|i| TopoNode {
+                label: labels[i],
+                center: Vector3::new(0.3 + 0.1 * i as f64, 0.05 * (i * i) as f64 - 0.2, 0.03),
+                yaw_rad: 0.0,
+                half_extents: Vector3::new(0.03 + 0.01 * i as f64, 0.03, 0.03),
+            })
+            .collect()
+    }
+
+    #[test]
+    fn walks_never_repeat_and_are_seeded() {
+        let map = TopoMap::from_nodes(&nodes(), &TopoConfig::default());
+        let config = DescriptorConfig { depth: 4, walks: 8, ..DescriptorConfig::default() };
+        let d = DescriptorSet::generate(&map, &config);
+        assert_eq!(d.objects(), 5);
+        for o in 0..5 {
+            for w in 0..8 {
+                let walk = d.walk(o, w);
+                assert_eq!(walk.len(), 4, "fully connected 5 nodes: every walk reaches depth 4");
+                // Labels are unique per node here, so repeated labels mean a repeated node.
+                let mut labels: Vec<Label> = walk.iter().map(|s| s.label).collect();
+                labels.push(map.nodes[o].label);
+                labels.sort();
+                labels.dedup();
+                assert_eq!(labels.len(), 5);
+            }
+        }
+        assert_eq!(d, DescriptorSet::generate(&map, &config));
+    }
+
+    #[test]
+    fn similarity_is_one_for_a_scaled_copy_and_low_for_strangers() {
+        let config = DescriptorConfig::default();
+        let a = TopoMap::from_nodes(&nodes(), &TopoConfig::default());
+        let scaled: Vec<TopoNode> = nodes()
+            .iter()
+            .map(|n| TopoNode { center: n.center * 2.0, half_extents: n.half_extents * 2.0, ..*n })
+            .collect();
+        let b = TopoMap::from_nodes(&scaled, &TopoConfig::default());
+        let (da, db) = (DescriptorSet::generate(&a, &config), DescriptorSet::generate(&b, &config));
+        let same = similarity(&da, 2, &db, 2, 2.0, &config);
+        assert!((same - 1.0).abs() < 1e-12, "{same}");
+        let other = similarity(&da, 2, &db, 3, 2.0, &config);
+        assert!(other < 0.5, "{other}");
+        let wrong_scale = similarity(&da, 2, &db, 2, 1.0, &config);
+        assert!(wrong_scale < 0.2, "{wrong_scale}");
+    }
+}
