@@ -164,6 +164,146 @@ pub fn scale_from_distance_ratios(prior: &[Vector3<f64>], query: &[Vector3<f64>]
     (count > 0).then(|| sum / count as f64)
 }
 
+/// Expected noise of each map, used to weight the cues of [`fuse_cues`].
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct NoiseModel {
+    /// Standard deviation of an object centre per axis, prior units (m). Default 0.01.
+    pub position: f64,
+    /// Standard deviation of an object yaw, radians. Default 3° (0.0524). Not finite or ≤ 0:
+    /// the yaw cue is off.
+    pub yaw_rad: f64,
+    /// Relative standard deviation of each half-extent. Default 0.05. Not finite or ≤ 0: the size
+    /// cue is off.
+    pub size_rel: f64,
+    /// A cuboid whose footprint sides differ by less than this fraction is treated as square (yaw
+    /// known modulo 90° instead of 180°). Default 0.15.
+    pub square_tolerance: f64,
+    /// An object's yaw difference is used only within this distance of the position-based rotation
+    /// (after folding by the object's symmetry), radians. Default 20° (0.349).
+    pub yaw_gate_rad: f64,
+}
+
+impl Default for NoiseModel {
+    fn default() -> Self {
+        Self {
+            position: 0.01,
+            yaw_rad: 3f64.to_radians(),
+            size_rel: 0.05,
+            square_tolerance: 0.15,
+            yaw_gate_rad: 20f64.to_radians(),
+        }
+    }
+}
+
+/// One matched object for [`fuse_cues`]: centres, sorted extents, yaws and whether yaw is defined.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CuePair {
+    /// Prior centre.
+    pub prior_center: Vector3<f64>,
+    /// Query centre.
+    pub query_center: Vector3<f64>,
+    /// Prior half-extents sorted decreasingly.
+    pub prior_extents: [f64; 3],
+    /// Query half-extents sorted decreasingly.
+    pub query_extents: [f64; 3],
+    /// Prior yaw, radians.
+    pub prior_yaw: f64,
+    /// Query yaw, radians.
+    pub query_yaw: f64,
+    /// Yaw symmetry period (π for a cuboid, π/2 for a square one), `None` when yaw is undefined
+    /// (cylinders).
+    pub yaw_period: Option<f64>,
+}
+
+/// Wrap `a` into [−period/2, period/2).
+fn wrap_period(a: f64, period: f64) -> f64 {
+    a - period * (a / period).round()
+}
+
+/// Weighted fusion of the position-based transform with the objects' own cues (beyond the paper):
+/// the scale from positions (Σ q'·R p' / Σ‖p'‖², relative variance 2σ²/Σ‖p'‖²) and from the
+/// ratios of sorted extents (variance 2σ_s² / 3n), fused in the log domain; with `yaw_cue`, the
+/// rotation about z from positions (variance 2σ²/Σ‖p'_xy‖²) and from each cuboid's yaw difference
+/// folded by its symmetry (variance 2σ_θ²). Translation t = μ_q − s R μ_p. `None` on degenerate input.
+pub fn fuse_cues(
+    transform: &Similarity3<f64>,
+    pairs: &[CuePair],
+    noise: &NoiseModel,
+    yaw_cue: bool,
+) -> Option<Similarity3<f64>> {
+    let n = pairs.len();
+    if n == 0 {
+        return None;
+    }
+    let inv_n = 1.0 / n as f64;
+    let mu_p = pairs.iter().map(|c| c.prior_center).sum::<Vector3<f64>>() * inv_n;
+    let mu_q = pairs.iter().map(|c| c.query_center).sum::<Vector3<f64>>() * inv_n;
+    let sigma2 = noise.position * noise.position;
+    let mut rotation = transform.isometry.rotation;
+    if yaw_cue && noise.yaw_rad.is_finite() && noise.yaw_rad > 0.0 {
+        let (mut a, mut b, mut var_xy) = (0.0, 0.0, 0.0);
+        for c in pairs {
+            let (dp, dq) = (c.prior_center - mu_p, c.query_center - mu_q);
+            a += dp.x * dq.x + dp.y * dq.y;
+            b += dp.x * dq.y - dp.y * dq.x;
+            var_xy += dp.x * dp.x + dp.y * dp.y;
+        }
+        let theta_pos = b.atan2(a);
+        let w_pos = if sigma2 > 0.0 { var_xy / (2.0 * sigma2) } else { f64::INFINITY };
+        let w_obj = 1.0 / (2.0 * noise.yaw_rad * noise.yaw_rad);
+        let (mut sum_w, mut sum_wr) = (w_pos, 0.0);
+        for c in pairs {
+            let Some(period) = c.yaw_period else { continue };
+            let r = wrap_period(c.query_yaw - c.prior_yaw - theta_pos, period);
+            if r.is_finite() && r.abs() <= noise.yaw_gate_rad {
+                sum_w += w_obj;
+                sum_wr += w_obj * r;
+            }
+        }
+        if w_pos.is_finite() && sum_w > 0.0 && sum_w.is_finite() {
+            let theta = theta_pos + sum_wr / sum_w;
+            rotation = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), theta);
+        }
+    }
+    let (mut num, mut den) = (0.0, 0.0);
+    for c in pairs {
+        let (dp, dq) = (c.prior_center - mu_p, c.query_center - mu_q);
+        num += dq.dot(&(rotation * dp));
+        den += dp.norm_squared();
+    }
+    let mut log_s = if den > DEGENERATE_EPS && num > 0.0 { Some((num / den).ln()) } else { None };
+    if noise.size_rel.is_finite() && noise.size_rel > 0.0 {
+        let (mut sum, mut count) = (0.0, 0usize);
+        for c in pairs {
+            for k in 0..3 {
+                let r = (c.query_extents[k] / c.prior_extents[k]).ln();
+                if r.is_finite() {
+                    sum += r;
+                    count += 1;
+                }
+            }
+        }
+        if count > 0 {
+            let log_size = sum / count as f64;
+            let v_size = 2.0 * noise.size_rel * noise.size_rel / count as f64;
+            log_s = Some(match log_s {
+                Some(ls) if sigma2 > 0.0 => {
+                    let v_pos = 2.0 * sigma2 / den;
+                    (ls / v_pos + log_size / v_size) / (1.0 / v_pos + 1.0 / v_size)
+                }
+                Some(ls) => ls,
+                None => log_size,
+            });
+        }
+    }
+    let scale = log_s?.exp();
+    if !(scale.is_finite() && scale > 0.0) {
+        return None;
+    }
+    let t = mu_q - scale * (rotation * mu_p);
+    t.iter().all(|v| v.is_finite()).then(|| Similarity3::from_parts(Translation3::from(t), rotation, scale))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
