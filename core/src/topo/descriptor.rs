@@ -14,7 +14,7 @@ pub struct DescriptorConfig {
     /// Walk depth `i`: steps per walk after the start object. Paper: "a certain depth i" (value not
     /// given). Default 3 (tabletop maps have 4–14 objects).
     pub depth: usize,
-    /// Walks per object `j` (rows of the descriptor). Paper: "time j" (value not given). Default 12.
+    /// Walks per object `j` (rows of the descriptor). Paper: "time j" (value not given). Default 8.
     pub walks: usize,
     /// Seed of the walk RNG (ChaCha8). The same seed is used for both maps.
     pub seed: u64,
@@ -35,7 +35,7 @@ impl Default for DescriptorConfig {
     fn default() -> Self {
         Self {
             depth: 3,
-            walks: 12,
+            walks: 8,
             seed: 0x70b0,
             size_tolerance: 0.2,
             distance_tolerance: 0.04,
@@ -77,17 +77,29 @@ pub struct DescriptorSet {
 
 impl DescriptorSet {
     /// Generate the descriptors of every node (paper Alg. 3 `objectDescriptor`): `walks` random walks
-    /// of up to `depth` steps from each object, never revisiting an object within a walk.
+    /// of up to `depth` steps from each object, never revisiting an object within a walk. Object `o`'s
+    /// walks use their own ChaCha8 stream seeded by (`seed`, `o`), so they do not depend on which
+    /// other objects are described.
     pub fn generate(map: &TopoMap, config: &DescriptorConfig) -> Self {
+        Self::generate_for(map, config, &[])
+    }
+
+    /// As [`DescriptorSet::generate`], but only for the objects with `wanted[o] == true` (an empty
+    /// slice means all); the others get empty walks. The matcher skips objects whose label does not
+    /// occur in the other map.
+    pub fn generate_for(map: &TopoMap, config: &DescriptorConfig, wanted: &[bool]) -> Self {
         let n = map.len();
         let (depth, walks) = (config.depth, config.walks);
         let filler = WalkStep { label: Label::Block, size: 0.0, distance: 0.0, angle_rad: 0.0 };
         let mut steps = vec![filler; n * walks * depth];
         let mut lengths = vec![0usize; n * walks];
-        let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
         let mut path: Vec<usize> = Vec::with_capacity(depth + 1);
         let mut options: Vec<usize> = Vec::with_capacity(16);
         for start in 0..n {
+            if !wanted.is_empty() && !wanted.get(start).copied().unwrap_or(false) {
+                continue;
+            }
+            let mut rng = ChaCha8Rng::seed_from_u64(config.seed ^ (start as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15));
             for w in 0..walks {
                 let slot = start * walks + w;
                 path.clear();

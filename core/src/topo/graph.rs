@@ -108,7 +108,7 @@ impl TopoMap {
     /// [`MIN_EDGE_LENGTH`] get no edge.
     pub fn from_nodes(nodes: &[TopoNode], config: &TopoConfig) -> Self {
         let n = nodes.len();
-        let mut selected = vec![vec![false; n]; n];
+        let mut selected = vec![false; n * n];
         let mut order: Vec<(f64, usize)> = Vec::with_capacity(n);
         for i in 0..n {
             if !nodes[i].is_valid() {
@@ -126,14 +126,14 @@ impl TopoMap {
             }
             order.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
             for &(_, j) in order.iter().take(config.max_neighbours) {
-                selected[i][j] = true;
-                selected[j][i] = true;
+                selected[i * n + j] = true;
+                selected[j * n + i] = true;
             }
         }
         let adjacency = (0..n)
             .map(|i| {
                 (0..n)
-                    .filter(|&j| selected[i][j])
+                    .filter(|&j| selected[i * n + j])
                     .map(|j| {
                         let delta = nodes[j].center - nodes[i].center;
                         let distance = delta.norm();

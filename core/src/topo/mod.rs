@@ -427,6 +427,27 @@ struct Hypothesis {
     transform: Similarity3<f64>,
 }
 
+/// Yaw symmetry period of a matched pair: π/2 for square-footprint cuboids (either map), π for other
+/// cuboids, `None` for cylinders (yaw undefined).
+fn yaw_period(a: &TopoNode, b: &TopoNode, square_tolerance: f64) -> Option<f64> {
+    let square = |n: &TopoNode| {
+        let (x, y) = (n.half_extents.x.abs(), n.half_extents.y.abs());
+        (x - y).abs() <= square_tolerance * x.max(y)
+    };
+    match a.label.shape() {
+        Shape::Cuboid if square(a) || square(b) => Some(std::f64::consts::FRAC_PI_2),
+        Shape::Cuboid => Some(std::f64::consts::PI),
+        Shape::Cylinder => None,
+    }
+}
+
+/// Reusable buffers of the inlier search.
+struct Scratch {
+    raw: Vec<(f64, usize)>,
+    used_p: Vec<bool>,
+    used_q: Vec<bool>,
+}
+
 /// Matching workspace shared by the RANSAC loop.
 struct Matcher<'a> {
     prior: &'a [TopoNode],
@@ -465,22 +486,36 @@ impl Matcher<'_> {
 
     /// One-to-one inliers of `transform` among the candidates: (residual, candidate index), sorted
     /// by residual.
-    fn inliers(&self, transform: &Similarity3<f64>, out: &mut Vec<(f64, usize)>, used: &mut [bool], used_q: &mut [bool]) {
+    fn inliers(&self, transform: &Similarity3<f64>, out: &mut Vec<(f64, usize)>, scratch: &mut Scratch) {
         out.clear();
         let s = transform.scaling();
         let cfg = self.config;
-        let mut raw: Vec<(f64, usize)> = Vec::new();
+        let Scratch { raw, used_p: used, used_q } = scratch;
+        let yaw = (cfg.yaw_cue && cfg.model == TransformModel::YawSimilarity && cfg.noise.yaw_rad > 0.0).then(|| {
+            let axis = transform.isometry.rotation.scaled_axis();
+            axis.z
+        });
+        raw.clear();
         for (k, c) in self.candidates.iter().enumerate() {
             let (p, q) = (&self.prior[c.prior], &self.query[c.query]);
             let r = (transform.transform_point(&p.center.into()).coords - q.center).norm() / s;
-            if r <= cfg.inlier_threshold && (q.size() / (s * p.size()) - 1.0).abs() <= cfg.size_tolerance {
-                raw.push((r, k));
+            if r > cfg.inlier_threshold || (q.size() / (s * p.size()) - 1.0).abs() > cfg.size_tolerance {
+                continue;
             }
+            // Gravity-aligned model: a cuboid's yaw must follow the hypothesis's rotation (modulo its
+            // symmetry); rejects look-alikes lying at the right place with the wrong heading.
+            if let (Some(theta), Some(period)) = (yaw, yaw_period(p, q, cfg.noise.square_tolerance)) {
+                let d = q.yaw_rad - p.yaw_rad - theta;
+                if (d - period * (d / period).round()).abs() > cfg.noise.yaw_gate_rad {
+                    continue;
+                }
+            }
+            raw.push((r, k));
         }
         raw.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
         used.iter_mut().for_each(|u| *u = false);
         used_q.iter_mut().for_each(|u| *u = false);
-        for (r, k) in raw {
+        for &(r, k) in raw.iter() {
             let c = &self.candidates[k];
             if !used[c.prior] && !used_q[c.query] {
                 used[c.prior] = true;
@@ -501,15 +536,7 @@ impl Matcher<'_> {
             let (a, b) = (self.prior.get(c.prior)?, self.query.get(c.query)?);
             p.push(a.center);
             q.push(b.center);
-            let square = |n: &TopoNode| {
-                let (x, y) = (n.half_extents.x.abs(), n.half_extents.y.abs());
-                (x - y).abs() <= self.config.noise.square_tolerance * x.max(y)
-            };
-            let yaw_period = match a.label.shape() {
-                Shape::Cuboid if square(a) || square(b) => Some(std::f64::consts::FRAC_PI_2),
-                Shape::Cuboid => Some(std::f64::consts::PI),
-                Shape::Cylinder => None,
-            };
+            let yaw_period = yaw_period(a, b, self.config.noise.square_tolerance);
             cues.push(CuePair {
                 prior_center: a.center,
                 query_center: b.center,
@@ -534,14 +561,23 @@ impl Matcher<'_> {
 
     /// Solve the model on a set of candidate indices.
     fn solve(&self, sample: &[usize]) -> Option<Similarity3<f64>> {
-        let mut p = Vec::with_capacity(sample.len());
-        let mut q = Vec::with_capacity(sample.len());
-        for &k in sample {
+        const STACK: usize = 3;
+        let mut p_stack = [Vector3::zeros(); STACK];
+        let mut q_stack = [Vector3::zeros(); STACK];
+        let (mut p_heap, mut q_heap) = (Vec::new(), Vec::new());
+        let (p, q): (&mut [Vector3<f64>], &mut [Vector3<f64>]) = if sample.len() <= STACK {
+            (&mut p_stack[..sample.len()], &mut q_stack[..sample.len()])
+        } else {
+            p_heap.resize(sample.len(), Vector3::zeros());
+            q_heap.resize(sample.len(), Vector3::zeros());
+            (&mut p_heap[..], &mut q_heap[..])
+        };
+        for (i, &k) in sample.iter().enumerate() {
             let c = self.candidates.get(k)?;
-            p.push(self.prior.get(c.prior)?.center);
-            q.push(self.query.get(c.query)?.center);
+            p[i] = self.prior.get(c.prior)?.center;
+            q[i] = self.query.get(c.query)?.center;
         }
-        let t = solve::solve(self.config.model, &p, &q)?;
+        let t = solve::solve(self.config.model, p, q)?;
         let s = t.scaling();
         (s >= self.config.scale_min && s <= self.config.scale_max).then_some(t)
     }
@@ -581,8 +617,11 @@ pub fn match_maps(prior: &[TopoNode], query: &[TopoNode], config: &MatchConfig) 
     // 1–2. Topological maps and descriptors (Alg. 3 lines 3–4).
     let prior_map = TopoMap::from_nodes(prior, &config.topo);
     let query_map = TopoMap::from_nodes(query, &config.topo);
-    let prior_desc = DescriptorSet::generate(&prior_map, &config.descriptor);
-    let query_desc = DescriptorSet::generate(&query_map, &config.descriptor);
+    // Only objects whose label occurs in the other map can be matched: describe only those.
+    let wanted_p: Vec<bool> = prior.iter().map(|a| query.iter().any(|b| b.label == a.label)).collect();
+    let wanted_q: Vec<bool> = query.iter().map(|b| prior.iter().any(|a| a.label == b.label)).collect();
+    let prior_desc = DescriptorSet::generate_for(&prior_map, &config.descriptor, &wanted_p);
+    let query_desc = DescriptorSet::generate_for(&query_map, &config.descriptor, &wanted_q);
 
     // 3–4. Gate by label and size, score by descriptor (Alg. 3 lines 5–7).
     let mut candidates: Vec<ScoredPair> = Vec::new();
@@ -681,8 +720,7 @@ pub fn match_maps(prior: &[TopoNode], query: &[TopoNode], config: &MatchConfig) 
     }
     let upper_bound = seen_p.iter().filter(|&&n| n > 0).count().min(seen_q.iter().filter(|&&n| n > 0).count());
 
-    let mut used_p = vec![false; prior.len()];
-    let mut used_q = vec![false; query.len()];
+    let mut scratch = Scratch { raw: Vec::with_capacity(nc), used_p: vec![false; prior.len()], used_q: vec![false; query.len()] };
     let mut inl: Vec<(f64, usize)> = Vec::new();
     let mut best: Option<(usize, f64, Similarity3<f64>, Vec<(f64, usize)>)> = None;
     let mut tried: Vec<Hypothesis> = Vec::with_capacity(samples.len());
@@ -690,7 +728,7 @@ pub fn match_maps(prior: &[TopoNode], query: &[TopoNode], config: &MatchConfig) 
     for (sample, _) in &samples {
         stats.iterations += 1;
         let Some(transform) = matcher.solve(&sample[..m]) else { continue };
-        matcher.inliers(&transform, &mut inl, &mut used_p, &mut used_q);
+        matcher.inliers(&transform, &mut inl, &mut scratch);
         let count = inl.len();
         let sum_r: f64 = inl.iter().map(|x| x.0).sum();
         tried.push(Hypothesis { inliers: count, transform });
@@ -731,7 +769,7 @@ pub fn match_maps(prior: &[TopoNode], query: &[TopoNode], config: &MatchConfig) 
             break;
         }
         let Some((refit, s_umeyama, s_ratio)) = matcher.estimate(&idx) else { break };
-        matcher.inliers(&refit, &mut inl, &mut used_p, &mut used_q);
+        matcher.inliers(&refit, &mut inl, &mut scratch);
         if inl.len() < best_inl.len() {
             break;
         }
