@@ -6,6 +6,9 @@
 //! 1 cm / 5 % noise per map, and a random yaw similarity (scale 1.6) on the query.
 //! Run: `cargo bench --bench topo -- --warm-up-time 1 --measurement-time 3`.
 
+// `criterion_group!` generates an undocumented public function.
+#![allow(missing_docs)]
+
 use criterion::{criterion_group, criterion_main, Criterion};
 use nalgebra::{Similarity3, Translation3, UnitQuaternion, Vector3};
 use objslam_core::map::Label;
@@ -49,7 +52,12 @@ fn pair(n_prior: usize, n_query: usize, seed: u64) -> (Vec<TopoNode>, Vec<TopoNo
         1.6,
     );
     let mut noisy = |n: &TopoNode| TopoNode {
-        center: n.center + Vector3::new(rng.random_range(-0.017..0.017), rng.random_range(-0.017..0.017), rng.random_range(-0.017..0.017)),
+        center: n.center
+            + Vector3::new(
+                rng.random_range(-0.017..0.017),
+                rng.random_range(-0.017..0.017),
+                rng.random_range(-0.017..0.017),
+            ),
         half_extents: n.half_extents.map(|e| e * rng.random_range(0.92..1.08)),
         ..*n
     };

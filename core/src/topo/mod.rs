@@ -89,7 +89,8 @@ mod solve;
 pub use descriptor::{similarity, DescriptorConfig, DescriptorSet, WalkStep};
 pub use graph::{nodes_from_map, TopoConfig, TopoEdge, TopoMap, TopoNode, MIN_EDGE_LENGTH};
 pub use solve::{
-    fuse_cues, scale_from_distance_ratios, solve, umeyama, with_scale, yaw_similarity, CuePair, NoiseModel, TransformModel,
+    fuse_cues, scale_from_distance_ratios, solve, umeyama, with_scale, yaw_similarity, CuePair, NoiseModel,
+    TransformModel,
 };
 
 use nalgebra::{Similarity3, Vector3};
@@ -223,6 +224,15 @@ pub struct MatchConfig {
     pub min_inliers: usize,
     /// Refits of the best hypothesis on its inliers. Default 2.
     pub refine_rounds: usize,
+    /// Leave-one-out residual above which an inlier is dropped after refinement, prior units (m).
+    /// Default 0.075 (1.25 × `inlier_threshold`: a true inlier's residual grows by ~1.1–1.25 when it
+    /// is left out of a 4–6 object fit).
+    pub loo_threshold: f64,
+    /// The leave-one-out check runs only with at least this many inliers (with fewer, leaving one
+    /// out inflates true residuals too much). Default 6.
+    pub loo_min_inliers: usize,
+    /// Inliers the leave-one-out check may drop. Default 1. 0 disables it.
+    pub loo_max_removals: usize,
     /// Scale (and, when fused, rotation) of the returned transform. Default [`ScaleSource::Fused`].
     pub scale_source: ScaleSource,
     /// Expected map noise: weights of the fused cues.
@@ -256,6 +266,9 @@ impl Default for MatchConfig {
             inlier_threshold: 0.06,
             min_inliers: 3,
             refine_rounds: 2,
+            loo_threshold: 0.075,
+            loo_min_inliers: 6,
+            loo_max_removals: 1,
             scale_source: ScaleSource::Fused,
             noise: NoiseModel::default(),
             yaw_cue: true,
@@ -406,7 +419,11 @@ pub fn match_object_maps(prior: &ObjectMap, query: &ObjectMap, config: &MatchCon
 
 /// Relocalise a map built in a new session (`query_map`, its own frame and scale) against a prior
 /// map: `prior_from_query` and the matched object ids.
-pub fn relocalise(prior_map: &ObjectMap, query_map: &ObjectMap, config: &MatchConfig) -> Result<Relocalisation, TopoError> {
+pub fn relocalise(
+    prior_map: &ObjectMap,
+    query_map: &ObjectMap,
+    config: &MatchConfig,
+) -> Result<Relocalisation, TopoError> {
     match match_object_maps(prior_map, query_map, config) {
         MatchResult::Match(m) => {
             let mut matched_ids: Vec<(u32, u32)> = m
@@ -415,7 +432,12 @@ pub fn relocalise(prior_map: &ObjectMap, query_map: &ObjectMap, config: &MatchCo
                 .filter_map(|p| Some((prior_map.objects.get(p.prior)?.id, query_map.objects.get(p.query)?.id)))
                 .collect();
             matched_ids.sort_unstable();
-            Ok(Relocalisation { prior_from_query: m.prior_from_query(), matched_ids, confidence: m.confidence, details: m })
+            Ok(Relocalisation {
+                prior_from_query: m.prior_from_query(),
+                matched_ids,
+                confidence: m.confidence,
+                details: m,
+            })
         }
         MatchResult::NoMatch { reason, .. } => Err(reason),
     }
@@ -446,6 +468,14 @@ struct Scratch {
     raw: Vec<(f64, usize)>,
     used_p: Vec<bool>,
     used_q: Vec<bool>,
+}
+
+/// The best hypothesis so far: its inliers (residual, candidate index), their residual sum, and
+/// its transform.
+struct Best {
+    inliers: Vec<(f64, usize)>,
+    residual_sum: f64,
+    transform: Similarity3<f64>,
 }
 
 /// Matching workspace shared by the RANSAC loop.
@@ -720,9 +750,10 @@ pub fn match_maps(prior: &[TopoNode], query: &[TopoNode], config: &MatchConfig) 
     }
     let upper_bound = seen_p.iter().filter(|&&n| n > 0).count().min(seen_q.iter().filter(|&&n| n > 0).count());
 
-    let mut scratch = Scratch { raw: Vec::with_capacity(nc), used_p: vec![false; prior.len()], used_q: vec![false; query.len()] };
+    let mut scratch =
+        Scratch { raw: Vec::with_capacity(nc), used_p: vec![false; prior.len()], used_q: vec![false; query.len()] };
     let mut inl: Vec<(f64, usize)> = Vec::new();
-    let mut best: Option<(usize, f64, Similarity3<f64>, Vec<(f64, usize)>)> = None;
+    let mut best: Option<Best> = None;
     let mut tried: Vec<Hypothesis> = Vec::with_capacity(samples.len());
     let log_fail = (1.0 - config.ransac_confidence.clamp(1e-6, 1.0 - 1e-12)).ln();
     for (sample, _) in &samples {
@@ -734,28 +765,29 @@ pub fn match_maps(prior: &[TopoNode], query: &[TopoNode], config: &MatchConfig) 
         tried.push(Hypothesis { inliers: count, transform });
         let better = match &best {
             None => true,
-            Some((bc, bs, _, _)) => count > *bc || (count == *bc && sum_r < *bs),
+            Some(b) => count > b.inliers.len() || (count == b.inliers.len() && sum_r < b.residual_sum),
         };
         if better {
-            best = Some((count, sum_r, transform, inl.clone()));
+            best = Some(Best { residual_sum: sum_r, transform, inliers: inl.clone() });
         }
-        let Some((bc, _, _, binl)) = &best else { continue };
+        let Some(Best { inliers: binl, .. }) = &best else { continue };
+        let bc = binl.len();
         // Early stop: everything explained and no inlier object has an alternative candidate.
         let unique = binl.iter().all(|&(_, k)| {
             let c = &matcher.candidates[k];
             seen_p[c.prior] == 1 && seen_q[c.query] == 1
         });
-        if *bc >= upper_bound && unique {
+        if bc >= upper_bound && unique {
             break;
         }
         // Classic adaptive RANSAC count.
-        let w = (*bc as f64 / nc as f64).clamp(0.0, 1.0);
+        let w = (bc as f64 / nc as f64).clamp(0.0, 1.0);
         let denom = (1.0 - w.powi(m as i32)).ln();
         if denom < 0.0 && (stats.iterations as f64) >= log_fail / denom {
             break;
         }
     }
-    let Some((_, _, hypothesis, mut best_inl)) = best else {
+    let Some(Best { transform: hypothesis, inliers: mut best_inl, .. }) = best else {
         return no_match(TopoError::NoConsistentSample { candidates: nc, required: m }, stats);
     };
 
@@ -781,6 +813,38 @@ pub fn match_maps(prior: &[TopoNode], query: &[TopoNode], config: &MatchConfig) 
         if unchanged {
             break;
         }
+    }
+    // Leave-one-out check (beyond the paper): an inlier whose residual under the fit of the *other*
+    // inliers exceeds `loo_threshold` is a look-alike that the fit had absorbed; drop the worst one
+    // and refit, up to `loo_max_removals` times.
+    for _ in 0..config.loo_max_removals {
+        if best_inl.len() < config.loo_min_inliers.max(config.min_inliers + 1).max(m + 1) {
+            break;
+        }
+        let idx: Vec<usize> = best_inl.iter().map(|x| x.1).collect();
+        let mut worst: Option<(f64, usize)> = None;
+        for leave in 0..idx.len() {
+            let others: Vec<usize> = idx.iter().enumerate().filter(|(i, _)| *i != leave).map(|(_, &k)| k).collect();
+            let Some((fit, _, _)) = matcher.estimate(&others) else { continue };
+            let c = &matcher.candidates[idx[leave]];
+            let r = (fit.transform_point(&prior[c.prior].center.into()).coords - query[c.query].center).norm()
+                / fit.scaling();
+            if worst.is_none_or(|(wr, _)| r > wr) {
+                worst = Some((r, leave));
+            }
+        }
+        let Some((r, leave)) = worst else { break };
+        if r <= config.loo_threshold {
+            break;
+        }
+        let mut kept = best_inl.clone();
+        kept.remove(leave);
+        let idx: Vec<usize> = kept.iter().map(|x| x.1).collect();
+        let Some((refit, s_umeyama, s_ratio)) = matcher.estimate(&idx) else { break };
+        transform = refit;
+        scale_umeyama = s_umeyama;
+        scale_distance_ratio = s_ratio;
+        best_inl = kept;
     }
     if scale_distance_ratio.is_none() {
         let pts_p: Vec<Vector3<f64>> = best_inl.iter().map(|x| prior[matcher.candidates[x.1].prior].center).collect();
@@ -811,7 +875,8 @@ pub fn match_maps(prior: &[TopoNode], query: &[TopoNode], config: &MatchConfig) 
         .iter()
         .map(|&(_, k)| {
             let c = matcher.candidates[k];
-            let r = (transform.transform_point(&prior[c.prior].center.into()).coords - query[c.query].center).norm() / s;
+            let r =
+                (transform.transform_point(&prior[c.prior].center.into()).coords - query[c.query].center).norm() / s;
             MatchedPair { prior: c.prior, query: c.query, score: c.score, residual: r }
         })
         .collect();

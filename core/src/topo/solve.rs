@@ -311,7 +311,9 @@ mod tests {
     use rand_chacha::ChaCha8Rng;
 
     fn cloud(rng: &mut ChaCha8Rng, n: usize) -> Vec<Vector3<f64>> {
-        (0..n).map(|_| Vector3::new(rng.random_range(0.2..0.8), rng.random_range(-0.4..0.4), rng.random_range(0.0..0.1))).collect()
+        (0..n)
+            .map(|_| Vector3::new(rng.random_range(0.2..0.8), rng.random_range(-0.4..0.4), rng.random_range(0.0..0.1)))
+            .collect()
     }
 
     #[test]
@@ -319,10 +321,12 @@ mod tests {
         let mut rng = ChaCha8Rng::seed_from_u64(3);
         for _ in 0..20 {
             let p = cloud(&mut rng, 5);
-            let axis = Vector3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0));
+            let axis =
+                Vector3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0));
             let rot = UnitQuaternion::from_scaled_axis(axis * 1.5);
             let truth = Similarity3::from_parts(Translation3::new(0.3, -1.0, 2.0), rot, rng.random_range(0.5..2.0));
-            let q: Vec<Vector3<f64>> = p.iter().map(|v| truth.transform_vector(v) + truth.isometry.translation.vector).collect();
+            let q: Vec<Vector3<f64>> =
+                p.iter().map(|v| truth.transform_vector(v) + truth.isometry.translation.vector).collect();
             let est = umeyama(&p, &q).unwrap_or_else(|| panic!("degenerate"));
             assert!((est.to_homogeneous() - truth.to_homogeneous()).abs().max() < 1e-9);
             let s = scale_from_distance_ratios(&p, &q, 1e-6).unwrap_or(0.0);
@@ -338,7 +342,8 @@ mod tests {
             UnitQuaternion::from_euler_angles(0.4, -0.7, 2.0),
             0.7,
         );
-        let q: Vec<Vector3<f64>> = p.iter().map(|v| truth.transform_vector(v) + truth.isometry.translation.vector).collect();
+        let q: Vec<Vector3<f64>> =
+            p.iter().map(|v| truth.transform_vector(v) + truth.isometry.translation.vector).collect();
         let est = umeyama(&p, &q).unwrap_or_else(|| panic!("degenerate"));
         assert!((est.to_homogeneous() - truth.to_homogeneous()).abs().max() < 1e-9);
         let line: Vec<Vector3<f64>> = (0..4).map(|i| Vector3::new(i as f64, 0.0, 0.0)).collect();
@@ -354,7 +359,8 @@ mod tests {
         let p = cloud(&mut rng, 2);
         let rot = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), -2.5);
         let truth = Similarity3::from_parts(Translation3::new(0.3, -1.0, 0.2), rot, 1.7);
-        let q: Vec<Vector3<f64>> = p.iter().map(|v| truth.transform_vector(v) + truth.isometry.translation.vector).collect();
+        let q: Vec<Vector3<f64>> =
+            p.iter().map(|v| truth.transform_vector(v) + truth.isometry.translation.vector).collect();
         let est = yaw_similarity(&p, &q).unwrap_or_else(|| panic!("degenerate"));
         assert!((est.to_homogeneous() - truth.to_homogeneous()).abs().max() < 1e-9);
         let fixed = with_scale(&est, &p, &q, 1.7).unwrap_or_else(|| panic!("bad scale"));

@@ -20,7 +20,8 @@ fn layout(seed: u64, n: usize, labels: &[Label]) -> Vec<TopoNode> {
             continue;
         }
         let label = labels[nodes.len() % labels.len()];
-        let half = Vector3::new(rng.random_range(0.02..0.06), rng.random_range(0.02..0.05), rng.random_range(0.02..0.08));
+        let half =
+            Vector3::new(rng.random_range(0.02..0.06), rng.random_range(0.02..0.05), rng.random_range(0.02..0.08));
         nodes.push(TopoNode {
             label,
             center: Vector3::new(center.x, center.y, half.z),
