@@ -252,3 +252,54 @@ fn matching_is_deterministic() {
     let b = match_maps(&prior, &query, &MatchConfig::default());
     assert_eq!(a, b);
 }
+
+#[test]
+fn a_cuboid_with_the_wrong_heading_is_not_an_inlier() {
+    // Six objects; in the query, the (non-square) book at index 1 is turned by 90°.
+    let prior = layout(41, 6, &[Label::Cup, Label::Book, Label::Can, Label::Block]);
+    let mut query = transformed(&prior, &yaw_transform());
+    query[1].half_extents = Vector3::new(0.08, 0.05, 0.02) * 1.7;
+    let mut prior = prior;
+    prior[1].half_extents = Vector3::new(0.08, 0.05, 0.02);
+    let m = expect_match(&match_maps(&prior, &query, &MatchConfig::default())).clone();
+    assert_eq!(m.inliers.len(), 6);
+    query[1].yaw_rad += std::f64::consts::FRAC_PI_2;
+    let m = expect_match(&match_maps(&prior, &query, &MatchConfig::default())).clone();
+    assert_eq!(m.inliers.len(), 5, "{:?}", m.inliers);
+    assert!(m.inliers.iter().all(|p| p.prior != 1));
+    // Without the yaw cue the heading is ignored.
+    let no_yaw = MatchConfig { yaw_cue: false, ..MatchConfig::default() };
+    assert_eq!(expect_match(&match_maps(&prior, &query, &no_yaw)).inliers.len(), 6);
+}
+
+#[test]
+fn fused_cues_are_exact_on_exact_data_and_sizes_pull_the_scale() {
+    let nodes = layout(51, 5, &[Label::Book, Label::Block]);
+    let truth = yaw_transform();
+    let query = transformed(&nodes, &truth);
+    let pairs: Vec<CuePair> = nodes
+        .iter()
+        .zip(&query)
+        .map(|(a, b)| CuePair {
+            prior_center: a.center,
+            query_center: b.center,
+            prior_extents: a.sorted_extents(),
+            query_extents: b.sorted_extents(),
+            prior_yaw: a.yaw_rad,
+            query_yaw: b.yaw_rad,
+            yaw_period: Some(std::f64::consts::PI),
+        })
+        .collect();
+    let noise = NoiseModel::default();
+    let fused = fuse_cues(&truth, &pairs, &noise, true).unwrap_or_else(|| panic!("degenerate"));
+    assert!((fused.to_homogeneous() - truth.to_homogeneous()).abs().max() < 1e-9);
+    // Sizes all say 10 % larger while positions say 1.7: the fused scale lies strictly between,
+    // closer to the cue with the smaller variance.
+    let bigger: Vec<CuePair> =
+        pairs.iter().map(|c| CuePair { query_extents: c.query_extents.map(|e| e * 1.1), ..*c }).collect();
+    let s = fuse_cues(&truth, &bigger, &noise, false).map_or(0.0, |t| t.scaling());
+    assert!(s > 1.7 && s < 1.7 * 1.1, "{s}");
+    let no_sizes = NoiseModel { size_rel: 0.0, ..noise };
+    let s0 = fuse_cues(&truth, &bigger, &no_sizes, false).map_or(0.0, |t| t.scaling());
+    assert!((s0 - 1.7).abs() < 1e-9);
+}
