@@ -55,10 +55,20 @@ pub struct WalkStep {
     pub size: f64,
     /// Edge length `d` from the previous object (map units).
     pub distance: f64,
-    /// Unsigned angle `α` between the previous edge (reversed, pointing back) and this edge, radians
-    /// in [0, π]; invariant to any similarity transform. 0 (and never compared) on the first step,
-    /// which has no previous edge.
-    pub angle_rad: f64,
+    /// Cosine of the unsigned angle `α` ∈ [0, π] between the previous edge (reversed, pointing back)
+    /// and this edge; invariant to any similarity transform. Stored as cosine and sine so that
+    /// comparing two angles needs no `acos`. 1 (α = 0, never compared) on the first step, which has
+    /// no previous edge.
+    pub angle_cos: f64,
+    /// Sine of `α` (≥ 0).
+    pub angle_sin: f64,
+}
+
+impl WalkStep {
+    /// The angle `α`, radians in [0, π].
+    pub fn angle_rad(&self) -> f64 {
+        self.angle_sin.atan2(self.angle_cos)
+    }
 }
 
 /// The descriptors of every object of a map, stored flat: object `o`, walk `w` occupies
@@ -90,7 +100,7 @@ impl DescriptorSet {
     pub fn generate_for(map: &TopoMap, config: &DescriptorConfig, wanted: &[bool]) -> Self {
         let n = map.len();
         let (depth, walks) = (config.depth, config.walks);
-        let filler = WalkStep { label: Label::Block, size: 0.0, distance: 0.0, angle_rad: 0.0 };
+        let filler = WalkStep { label: Label::Block, size: 0.0, distance: 0.0, angle_cos: 1.0, angle_sin: 0.0 };
         let mut steps = vec![filler; n * walks * depth];
         let mut lengths = vec![0usize; n * walks];
         let mut path: Vec<usize> = Vec::with_capacity(depth + 1);
@@ -116,14 +126,22 @@ impl DescriptorSet {
                     }
                     let pick = options[rng.random_range(0..options.len())];
                     let edge = &edges[pick];
-                    let angle_rad = match previous_direction {
+                    let (angle_cos, angle_sin) = match previous_direction {
                         // Angle at `current` between the way back and the way on.
-                        Some(prev) => (-prev).dot(&edge.direction).clamp(-1.0, 1.0).acos(),
-                        None => 0.0,
+                        Some(prev) => {
+                            let back = -prev;
+                            (back.dot(&edge.direction).clamp(-1.0, 1.0), back.cross(&edge.direction).norm())
+                        }
+                        None => (1.0, 0.0),
                     };
                     let Some(node) = map.nodes.get(edge.to) else { break };
-                    steps[slot * depth + len] =
-                        WalkStep { label: node.label, size: node.size(), distance: edge.distance, angle_rad };
+                    steps[slot * depth + len] = WalkStep {
+                        label: node.label,
+                        size: node.size(),
+                        distance: edge.distance,
+                        angle_cos,
+                        angle_sin,
+                    };
                     previous_direction = Some(edge.direction);
                     path.push(edge.to);
                     len += 1;
@@ -150,12 +168,14 @@ impl DescriptorSet {
 /// Number of leading steps of `query` that agree with `prior` under the scale `scale`
 /// (query units per prior unit): same label, size, distance and (from the second step) angle.
 fn matched_prefix(prior: &[WalkStep], query: &[WalkStep], scale: f64, config: &DescriptorConfig) -> usize {
+    let angle_tolerance_cos = config.angle_tolerance_rad.min(std::f64::consts::PI).cos();
     let mut k = 0;
     for (p, q) in prior.iter().zip(query) {
         let size_ok = (q.size / (scale * p.size) - 1.0).abs() <= config.size_tolerance;
         let dist_ok = (q.distance / scale - p.distance).abs()
             <= config.distance_tolerance + config.distance_tolerance_rel * p.distance;
-        let angle_ok = k == 0 || (q.angle_rad - p.angle_rad).abs() <= config.angle_tolerance_rad;
+        // |α_q − α_p| ≤ tol  ⇔  cos(α_q − α_p) ≥ cos(tol), both angles in [0, π].
+        let angle_ok = k == 0 || q.angle_cos * p.angle_cos + q.angle_sin * p.angle_sin >= angle_tolerance_cos;
         if p.label != q.label || !size_ok || !dist_ok || !angle_ok {
             break;
         }
@@ -176,28 +196,34 @@ pub fn similarity(
     config: &DescriptorConfig,
 ) -> f64 {
     let depth = prior.depth.max(1) as f64;
-    let one_side = |x: &DescriptorSet, xi: usize, y: &DescriptorSet, yi: usize, forward: bool| {
-        let mut total = 0.0;
-        for wx in 0..x.walks {
-            let walk_x = x.walk(xi, wx);
-            let mut best = 0;
-            for wy in 0..y.walks {
-                let walk_y = y.walk(yi, wy);
-                let k = if forward {
-                    matched_prefix(walk_x, walk_y, scale, config)
-                } else {
-                    matched_prefix(walk_y, walk_x, scale, config)
-                };
-                best = best.max(k);
-                if best == walk_x.len() {
-                    break;
-                }
-            }
-            total += best as f64 / depth;
-        }
-        total / x.walks.max(1) as f64
+    // M[wp][wq] = matched prefix of prior walk wp and query walk wq, computed once; the score from
+    // the prior side takes row maxima, the score from the query side column maxima.
+    const MAX_STACK_WALKS: usize = 32;
+    let (np, nq) = (prior.walks, query.walks);
+    if np == 0 || nq == 0 {
+        return 0.0;
+    }
+    let mut col_best_stack = [0usize; MAX_STACK_WALKS];
+    let mut col_best_heap = Vec::new();
+    let col_best: &mut [usize] = if nq <= MAX_STACK_WALKS {
+        &mut col_best_stack[..nq]
+    } else {
+        col_best_heap.resize(nq, 0);
+        &mut col_best_heap[..]
     };
-    0.5 * (one_side(prior, a, query, b, true) + one_side(query, b, prior, a, false))
+    let mut row_total = 0.0;
+    for wp in 0..np {
+        let walk_p = prior.walk(a, wp);
+        let mut row_best = 0;
+        for (wq, best_q) in col_best.iter_mut().enumerate() {
+            let k = matched_prefix(walk_p, query.walk(b, wq), scale, config);
+            row_best = row_best.max(k);
+            *best_q = (*best_q).max(k);
+        }
+        row_total += row_best as f64 / depth;
+    }
+    let col_total: f64 = col_best.iter().map(|&k| k as f64 / depth).sum();
+    0.5 * (row_total / np as f64 + col_total / nq as f64)
 }
 
 #[cfg(test)]

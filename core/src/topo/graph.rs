@@ -68,11 +68,16 @@ pub struct TopoEdge {
     pub to: usize,
     /// Distance `d` between the two centres, map units.
     pub distance: f64,
-    /// Angle `α`: heading of the edge in the map's xy plane, `atan2(Δy, Δx)`, radians. Expressed in
-    /// the map frame, so not invariant; descriptors use the angle *between* consecutive edges.
-    pub angle_rad: f64,
     /// Unit direction from this node to `to`, map frame.
     pub direction: Vector3<f64>,
+}
+
+impl TopoEdge {
+    /// Angle `α`: heading of the edge in the map's xy plane, `atan2(Δy, Δx)`, radians. Expressed in
+    /// the map frame, so not invariant; descriptors use the angle *between* consecutive edges.
+    pub fn angle_rad(&self) -> f64 {
+        self.direction.y.atan2(self.direction.x)
+    }
 }
 
 /// Edge construction limits.
@@ -137,7 +142,7 @@ impl TopoMap {
                     .map(|j| {
                         let delta = nodes[j].center - nodes[i].center;
                         let distance = delta.norm();
-                        TopoEdge { to: j, distance, angle_rad: delta.y.atan2(delta.x), direction: delta / distance }
+                        TopoEdge { to: j, distance, direction: delta / distance }
                     })
                     .collect()
             })
@@ -196,8 +201,8 @@ mod tests {
         let all = TopoMap::from_nodes(&nodes, &TopoConfig { max_edge_distance: 0.25, max_neighbours: 10 });
         // Within 0.25: the 5 consecutive pairs and (0, 2) at 0.22.
         assert_eq!(all.edge_count(), 6);
-        assert!((all.adjacency[0][0].angle_rad - 0.0).abs() < 1e-12);
-        assert!((all.adjacency[1][0].angle_rad - std::f64::consts::PI).abs() < 1e-12);
+        assert!((all.adjacency[0][0].angle_rad() - 0.0).abs() < 1e-12);
+        assert!((all.adjacency[1][0].angle_rad() - std::f64::consts::PI).abs() < 1e-12);
     }
 
     #[test]
