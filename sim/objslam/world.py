@@ -33,6 +33,8 @@ ARM_STIFFNESS, ARM_DAMPING, ARM_FORCE_LIMIT = 1000.0, 100.0, 100.0
 #: Gripper finger drive.
 GRIPPER_STIFFNESS, GRIPPER_DAMPING, GRIPPER_FORCE_LIMIT = 1000.0, 100.0, 100.0
 GRIPPER_OPEN_M = 0.04
+#: The camera path length is sampled every this many physics steps (30 Hz).
+PATH_SAMPLE_STEPS = PHYSICS_HZ // 30
 #: A comfortable start configuration (camera looking down over the table).
 READY_QPOS = np.array([0.0, -0.6, 0.0, -2.4, 0.0, 1.8, math.pi / 4, GRIPPER_OPEN_M, GRIPPER_OPEN_M])
 
@@ -131,6 +133,10 @@ class SimWorld:
         self.rng = rng
         self.frame_index = 0
         self.sim_time_s = 0.0
+        self.camera_path_length_m = 0.0
+        """Length of the camera's path so far, metres (forward kinematics sampled at 30 Hz)."""
+        self._steps = 0
+        self._last_camera_xyz: np.ndarray | None = None
 
         scene = sapien.Scene()
         scene.set_timestep(1.0 / PHYSICS_HZ)
@@ -238,6 +244,12 @@ class SimWorld:
         self.robot.set_qf(self.robot.compute_passive_force(gravity=True, coriolis_and_centrifugal=True))
         self.scene.step()
         self.sim_time_s += 1.0 / PHYSICS_HZ
+        self._steps += 1
+        if self._steps % PATH_SAMPLE_STEPS == 0:
+            xyz = self.world_from_camera_fk(self.qpos())[:3, 3]
+            if self._last_camera_xyz is not None:
+                self.camera_path_length_m += float(np.linalg.norm(xyz - self._last_camera_xyz))
+            self._last_camera_xyz = xyz
 
     # ----- kinematics -----------------------------------------------------------------------------
     def hand_from_camera_cv(self) -> np.ndarray:
