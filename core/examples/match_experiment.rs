@@ -6,7 +6,8 @@
 //! cargo run --release -p objslam-core --example match_experiment -- --scenes scenes --out reports
 //! ```
 //! Options: `--trials N` (default 500 per row), `--seed S` (default 2026), `--full-rotation`
-//! (random 3D rotation and the 7-DoF model instead of the gravity-aligned one).
+//! (random 3D rotation and the 7-DoF model instead of the gravity-aligned one). Set `MATCH_DEBUG=1`
+//! to print every failed trial with its inlier pairs (diagnosis only).
 //!
 //! Protocol, per trial (seeded by seed, row and trial index; scenes taken round-robin):
 //! 1. A union layout of `U` objects: the scene's ground-truth objects (a random subset if the scene
@@ -186,6 +187,7 @@ struct TrialOutcome {
     inliers: usize,
     wrong_inliers: usize,
     iterations: usize,
+    confidence: f64,
     time_us: f64,
 }
 
@@ -294,6 +296,7 @@ fn trial(
         inliers,
         wrong_inliers: wrong,
         iterations: result.stats().iterations,
+        confidence: result.as_match().map_or(0.0, |m| m.confidence),
         time_us,
     }
 }
@@ -321,6 +324,10 @@ struct Row {
     mean_inliers: f64,
     trials_with_wrong_inlier_pairs: usize,
     mean_ransac_iterations: f64,
+    /// Mean `confidence` of the successful matches.
+    mean_confidence_success: f64,
+    /// Mean `confidence` of the matches outside the success bounds.
+    mean_confidence_failure: f64,
     match_time_us_median: f64,
 }
 
@@ -332,6 +339,16 @@ struct Report {
     sim_pairs: Vec<serde_json::Value>,
     protocol: serde_json::Value,
     command: String,
+}
+
+/// Mean of an iterator (NaN when empty).
+fn mean(values: impl Iterator<Item = f64>) -> f64 {
+    let (sum, n) = values.fold((0.0, 0usize), |(s, n), v| (s + v, n + 1));
+    if n == 0 {
+        f64::NAN
+    } else {
+        sum / n as f64
+    }
 }
 
 fn quantile(values: &[f64], q: f64) -> f64 {
@@ -347,11 +364,11 @@ fn quantile(values: &[f64], q: f64) -> f64 {
 /// A markdown table of rows.
 fn table(rows: &[Row]) -> String {
     let mut md = String::new();
-    md.push_str("| shared | k / U | prior + query | trials | successes | success % | paper-scale success % | no match | wrong | of which correct pairs | rot err median / p95 (°) | trans err median / p95 (cm) | scale err median Umeyama / ratio (%) | wrong-pair trials | RANSAC its | time median (µs) |\n");
-    md.push_str("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+    md.push_str("| shared | k / U | prior + query | trials | successes | success % | paper-scale success % | no match | wrong | of which correct pairs | rot err median / p95 (°) | trans err median / p95 (cm) | scale err median Umeyama / ratio (%) | wrong-pair trials | RANSAC its | confidence success / failure | time median (µs) |\n");
+    md.push_str("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
     for r in rows {
         md.push_str(&format!(
-            "| {:.0} % | {}/{} | {}+{} | {} | {} | {:.1} | {:.1} | {} | {} | {} | {:.2} / {:.2} | {:.2} / {:.2} | {:.2} / {:.2} | {} | {:.1} | {:.1} |\n",
+            "| {:.0} % | {}/{} | {}+{} | {} | {} | {:.1} | {:.1} | {} | {} | {} | {:.2} / {:.2} | {:.2} / {:.2} | {:.2} / {:.2} | {} | {:.1} | {:.2} / {:.2} | {:.1} |\n",
             r.shared_ratio * 100.0,
             r.shared_objects,
             r.union_objects,
@@ -372,6 +389,8 @@ fn table(rows: &[Row]) -> String {
             r.scale_error_pct_median_distance_ratio,
             r.trials_with_wrong_inlier_pairs,
             r.mean_ransac_iterations,
+            r.mean_confidence_success,
+            r.mean_confidence_failure,
             r.match_time_us_median,
         ));
     }
@@ -431,6 +450,8 @@ fn run_plan(
             mean_inliers: matched.iter().map(|o| o.inliers as f64).sum::<f64>() / matched.len().max(1) as f64,
             trials_with_wrong_inlier_pairs: matched.iter().filter(|o| o.wrong_inliers > 0).count(),
             mean_ransac_iterations: outcomes.iter().map(|o| o.iterations as f64).sum::<f64>() / n as f64,
+            mean_confidence_success: mean(matched.iter().filter(|o| o.success).map(|o| o.confidence)),
+            mean_confidence_failure: mean(matched.iter().filter(|o| !o.success).map(|o| o.confidence)),
             match_time_us_median: quantile(&outcomes.iter().map(|o| o.time_us).collect::<Vec<_>>(), 0.5),
         };
         eprintln!(
