@@ -2,7 +2,7 @@
 //! its gravity-aligned 4-DoF special case (rotation about z only), plus the paper's scale from
 //! averaged distance ratios.
 
-use nalgebra::{Matrix3, Similarity3, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Matrix3, Rotation3, Similarity3, Translation3, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 
 /// Which transform family relates the two maps.
@@ -56,7 +56,8 @@ pub fn umeyama(prior: &[Vector3<f64>], query: &[Vector3<f64>]) -> Option<Similar
     if !var_p.is_finite() || var_p <= DEGENERATE_EPS || sigma.iter().any(|v| !v.is_finite()) {
         return None;
     }
-    let svd = sigma.svd(true, true);
+    // Bounded iterations (the plain `svd` iterates without limit).
+    let svd = sigma.try_svd(true, true, 1e-14, 200)?;
     let (u, v_t) = (svd.u?, svd.v_t?);
     // Rank ≥ 2 (the prior points span a plane); do not rely on the singular values' order.
     let d = svd.singular_values;
@@ -78,7 +79,12 @@ pub fn umeyama(prior: &[Vector3<f64>], query: &[Vector3<f64>]) -> Option<Similar
     if !(scale.is_finite() && scale > 0.0) {
         return None;
     }
-    let rotation = UnitQuaternion::from_matrix(&r);
+    // U S Vᵀ is orthonormal up to rounding: convert directly. (`UnitQuaternion::from_matrix` iterates
+    // until convergence and can spin forever on ill-conditioned input.)
+    if r.iter().any(|v| !v.is_finite()) || (r.determinant() - 1.0).abs() > 1e-6 {
+        return None;
+    }
+    let rotation = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(r));
     let t = mu_q - scale * (rotation * mu_p);
     Some(Similarity3::from_parts(Translation3::from(t), rotation, scale))
 }

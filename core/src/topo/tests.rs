@@ -303,3 +303,34 @@ fn fused_cues_are_exact_on_exact_data_and_sizes_pull_the_scale() {
     let s0 = fuse_cues(&truth, &bigger, &no_sizes, false).map_or(0.0, |t| t.scaling());
     assert!((s0 - 1.7).abs() < 1e-9);
 }
+
+#[test]
+fn odd_inputs_never_panic() {
+    // Seeded sweep over degenerate layouts: collinear, coincident, huge/tiny coordinates, one label,
+    // zero-height objects, both models. Every result is a NoMatch or a finite match.
+    let mut rng = ChaCha8Rng::seed_from_u64(99);
+    for case in 0..200 {
+        let n = rng.random_range(0..9);
+        let scale = [1e-6, 1.0, 1e6][case % 3];
+        let nodes: Vec<TopoNode> = (0..n)
+            .map(|i| {
+                let x = if case % 5 == 0 { 0.3 } else { rng.random_range(0.0..1.0) * scale };
+                let y = if case % 7 == 0 { 0.0 } else { rng.random_range(-1.0..1.0) * scale };
+                TopoNode {
+                    label: if case % 2 == 0 { Label::Cup } else { Label::ALL[i % 8] },
+                    center: Vector3::new(x, y, 0.0),
+                    yaw_rad: rng.random_range(-4.0..4.0),
+                    half_extents: Vector3::new(0.03, 0.03, if case % 11 == 0 { 0.0 } else { 0.05 }) * scale,
+                }
+            })
+            .collect();
+        let query = transformed(&nodes, &yaw_transform());
+        for model in [TransformModel::YawSimilarity, TransformModel::Similarity3] {
+            let config = MatchConfig { model, ..MatchConfig::default() };
+            if let MatchResult::Match(m) = match_maps(&nodes, &query, &config) {
+                assert!(m.query_from_prior.to_homogeneous().iter().all(|v| v.is_finite()));
+                assert!((0.0..=1.0).contains(&m.confidence));
+            }
+        }
+    }
+}
