@@ -20,6 +20,7 @@
 //! - [`eval`]: matching to ground truth, 3D/2D IoU, CDE, YAE, counts.
 //! - [`pipeline`]: association (naive or ensemble modes) + parameterization → the object map.
 //! - [`plan`]: Panda kinematics, collision checking, RRT-Connect, Ruckig trajectories, grasps.
+//! - [`topo`]: semantic topological map, random-walk descriptors, scene matching, relocalisation.
 //! - `record` (feature `rerun`): one Rerun recording per run.
 
 pub mod active;
@@ -35,3 +36,4 @@ pub mod pipeline;
 pub mod plan;
 #[cfg(feature = "rerun")]
 pub mod record;
+pub mod topo;

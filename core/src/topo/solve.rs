@@ -1,0 +1,375 @@
+//! Closed-form similarity transforms from point correspondences: Umeyama (1991) in 3D via SVD, and
+//! its gravity-aligned 4-DoF special case (rotation about z only), plus the paper's scale from
+//! averaged distance ratios.
+
+use nalgebra::{Matrix3, Rotation3, Similarity3, Translation3, UnitQuaternion, Vector3};
+use serde::{Deserialize, Serialize};
+
+/// Which transform family relates the two maps.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum TransformModel {
+    /// Rotation about z + translation + scale (4 + 1 DoF). For gravity-aligned maps (objslam maps
+    /// are expressed in the robot base frame, z up; the paper's nodes carry a single yaw θ).
+    /// Minimal sample: 2 correspondences.
+    #[default]
+    YawSimilarity,
+    /// Any rotation + translation + scale (7 DoF), Umeyama with SVD. Minimal sample: 3
+    /// non-collinear correspondences.
+    Similarity3,
+}
+
+impl TransformModel {
+    /// Correspondences in a minimal sample.
+    pub fn minimal_sample(self) -> usize {
+        match self {
+            TransformModel::YawSimilarity => 2,
+            TransformModel::Similarity3 => 3,
+        }
+    }
+}
+
+/// Relative threshold below which a spread or singular value counts as zero.
+const DEGENERATE_EPS: f64 = 1e-10;
+
+/// `query_from_prior` minimising Σ‖q − (s R p + t)‖² (Umeyama 1991, with the reflection fix).
+///
+/// `None` when the prior points do not span a plane (fewer than 3 non-collinear points, or all
+/// coincident), or when any value is non-finite.
+pub fn umeyama(prior: &[Vector3<f64>], query: &[Vector3<f64>]) -> Option<Similarity3<f64>> {
+    let n = prior.len();
+    if n < 3 || query.len() != n {
+        return None;
+    }
+    let inv_n = 1.0 / n as f64;
+    let mu_p = prior.iter().sum::<Vector3<f64>>() * inv_n;
+    let mu_q = query.iter().sum::<Vector3<f64>>() * inv_n;
+    let mut sigma = Matrix3::zeros();
+    let mut var_p = 0.0;
+    for (p, q) in prior.iter().zip(query) {
+        let (dp, dq) = (p - mu_p, q - mu_q);
+        sigma += dq * dp.transpose();
+        var_p += dp.norm_squared();
+    }
+    sigma *= inv_n;
+    var_p *= inv_n;
+    if !var_p.is_finite() || var_p <= DEGENERATE_EPS || sigma.iter().any(|v| !v.is_finite()) {
+        return None;
+    }
+    // Bounded iterations (the plain `svd` iterates without limit).
+    let svd = sigma.try_svd(true, true, 1e-14, 200)?;
+    let (u, v_t) = (svd.u?, svd.v_t?);
+    // Rank ≥ 2 (the prior points span a plane); do not rely on the singular values' order.
+    let d = svd.singular_values;
+    let mut sorted = [d[0], d[1], d[2]];
+    sorted.sort_by(|a, b| b.total_cmp(a));
+    if sorted[1] <= DEGENERATE_EPS * sorted[0].max(DEGENERATE_EPS) {
+        return None;
+    }
+    // Reflection fix: flip the direction of the smallest singular value when det(U)·det(V) < 0.
+    let mut sdiag = Vector3::new(1.0, 1.0, 1.0);
+    if u.determinant() * v_t.determinant() < 0.0 {
+        let smallest = (0..3).min_by(|&a, &b| d[a].total_cmp(&d[b])).unwrap_or(2);
+        sdiag[smallest] = -1.0;
+    }
+    let s_mat = Matrix3::from_diagonal(&sdiag);
+    let r = u * s_mat * v_t;
+    let trace_ds = d.component_mul(&sdiag).sum();
+    let scale = trace_ds / var_p;
+    if !(scale.is_finite() && scale > 0.0) {
+        return None;
+    }
+    // U S Vᵀ is orthonormal up to rounding: convert directly. (`UnitQuaternion::from_matrix` iterates
+    // until convergence and can spin forever on ill-conditioned input.)
+    if r.iter().any(|v| !v.is_finite()) || (r.determinant() - 1.0).abs() > 1e-6 {
+        return None;
+    }
+    let rotation = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(r));
+    let t = mu_q - scale * (rotation * mu_p);
+    Some(Similarity3::from_parts(Translation3::from(t), rotation, scale))
+}
+
+/// `query_from_prior` with rotation about z only, minimising Σ‖q − (s R_z p + t)‖².
+///
+/// Closed form: θ = atan2(Σ p'×q' (z), Σ p'·q' (xy)) on centred points, s = Σ q'·R p' / Σ‖p'‖².
+/// `None` when the prior points are coincident in xy, or on non-finite values.
+pub fn yaw_similarity(prior: &[Vector3<f64>], query: &[Vector3<f64>]) -> Option<Similarity3<f64>> {
+    let n = prior.len();
+    if n < 2 || query.len() != n {
+        return None;
+    }
+    let inv_n = 1.0 / n as f64;
+    let mu_p = prior.iter().sum::<Vector3<f64>>() * inv_n;
+    let mu_q = query.iter().sum::<Vector3<f64>>() * inv_n;
+    let (mut a, mut b, mut zz, mut var_xy, mut var) = (0.0, 0.0, 0.0, 0.0, 0.0);
+    for (p, q) in prior.iter().zip(query) {
+        let (dp, dq) = (p - mu_p, q - mu_q);
+        a += dp.x * dq.x + dp.y * dq.y;
+        b += dp.x * dq.y - dp.y * dq.x;
+        zz += dp.z * dq.z;
+        var_xy += dp.x * dp.x + dp.y * dp.y;
+        var += dp.norm_squared();
+    }
+    if !(var_xy.is_finite() && a.is_finite() && b.is_finite() && zz.is_finite()) || var_xy <= DEGENERATE_EPS {
+        return None;
+    }
+    let yaw = b.atan2(a);
+    let scale = ((a * a + b * b).sqrt() + zz) / var;
+    if !(scale.is_finite() && scale > 0.0) {
+        return None;
+    }
+    let rotation = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), yaw);
+    let t = mu_q - scale * (rotation * mu_p);
+    Some(Similarity3::from_parts(Translation3::from(t), rotation, scale))
+}
+
+/// Solve with the given model.
+pub fn solve(model: TransformModel, prior: &[Vector3<f64>], query: &[Vector3<f64>]) -> Option<Similarity3<f64>> {
+    match model {
+        TransformModel::YawSimilarity => yaw_similarity(prior, query),
+        TransformModel::Similarity3 => umeyama(prior, query),
+    }
+}
+
+/// Re-solve rotation and translation for a fixed scale: R is scale-independent in both closed
+/// forms, and t = μ_q − s R μ_p.
+pub fn with_scale(
+    transform: &Similarity3<f64>,
+    prior: &[Vector3<f64>],
+    query: &[Vector3<f64>],
+    scale: f64,
+) -> Option<Similarity3<f64>> {
+    if prior.is_empty() || prior.len() != query.len() || !(scale.is_finite() && scale > 0.0) {
+        return None;
+    }
+    let inv_n = 1.0 / prior.len() as f64;
+    let mu_p = prior.iter().sum::<Vector3<f64>>() * inv_n;
+    let mu_q = query.iter().sum::<Vector3<f64>>() * inv_n;
+    let rotation = transform.isometry.rotation;
+    let t = mu_q - scale * (rotation * mu_p);
+    Some(Similarity3::from_parts(Translation3::from(t), rotation, scale))
+}
+
+/// The paper's scale: the mean over all pairs of matched objects of the ratio of their distances
+/// (query / prior). Pairs closer than `min_distance` in the prior are skipped. `None` without a
+/// usable pair.
+pub fn scale_from_distance_ratios(prior: &[Vector3<f64>], query: &[Vector3<f64>], min_distance: f64) -> Option<f64> {
+    let (mut sum, mut count) = (0.0, 0usize);
+    for i in 0..prior.len().min(query.len()) {
+        for j in i + 1..prior.len().min(query.len()) {
+            let dp = (prior[i] - prior[j]).norm();
+            if dp >= min_distance && dp.is_finite() {
+                let ratio = (query[i] - query[j]).norm() / dp;
+                if ratio.is_finite() {
+                    sum += ratio;
+                    count += 1;
+                }
+            }
+        }
+    }
+    (count > 0).then(|| sum / count as f64)
+}
+
+/// Expected noise of each map, used to weight the cues of [`fuse_cues`].
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct NoiseModel {
+    /// Standard deviation of an object centre per axis, prior units (m). Default 0.01.
+    pub position: f64,
+    /// Standard deviation of an object yaw, radians. Default 3° (0.0524). Not finite or ≤ 0:
+    /// the yaw cue is off.
+    pub yaw_rad: f64,
+    /// Relative standard deviation of each half-extent. Default 0.05. Not finite or ≤ 0: the size
+    /// cue is off.
+    pub size_rel: f64,
+    /// A cuboid whose footprint sides differ by less than this fraction is treated as square (yaw
+    /// known modulo 90° instead of 180°). Default 0.15.
+    pub square_tolerance: f64,
+    /// An object's yaw difference is used only within this distance of the position-based rotation
+    /// (after folding by the object's symmetry), radians. Default 20° (0.349).
+    pub yaw_gate_rad: f64,
+}
+
+impl Default for NoiseModel {
+    fn default() -> Self {
+        Self {
+            position: 0.01,
+            yaw_rad: 3f64.to_radians(),
+            size_rel: 0.05,
+            square_tolerance: 0.15,
+            yaw_gate_rad: 20f64.to_radians(),
+        }
+    }
+}
+
+/// One matched object for [`fuse_cues`]: centres, sorted extents, yaws and whether yaw is defined.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CuePair {
+    /// Prior centre.
+    pub prior_center: Vector3<f64>,
+    /// Query centre.
+    pub query_center: Vector3<f64>,
+    /// Prior half-extents sorted decreasingly.
+    pub prior_extents: [f64; 3],
+    /// Query half-extents sorted decreasingly.
+    pub query_extents: [f64; 3],
+    /// Prior yaw, radians.
+    pub prior_yaw: f64,
+    /// Query yaw, radians.
+    pub query_yaw: f64,
+    /// Yaw symmetry period (π for a cuboid, π/2 for a square one), `None` when yaw is undefined
+    /// (cylinders).
+    pub yaw_period: Option<f64>,
+}
+
+/// Wrap `a` into [−period/2, period/2).
+fn wrap_period(a: f64, period: f64) -> f64 {
+    a - period * (a / period).round()
+}
+
+/// Weighted fusion of the position-based transform with the objects' own cues (beyond the paper):
+/// the scale from positions (Σ q'·R p' / Σ‖p'‖², relative variance 2σ²/Σ‖p'‖²) and from the
+/// ratios of sorted extents (variance 2σ_s² / 3n), fused in the log domain; with `yaw_cue`, the
+/// rotation about z from positions (variance 2σ²/Σ‖p'_xy‖²) and from each cuboid's yaw difference
+/// folded by its symmetry (variance 2σ_θ²). Translation t = μ_q − s R μ_p. `None` on degenerate input.
+pub fn fuse_cues(
+    transform: &Similarity3<f64>,
+    pairs: &[CuePair],
+    noise: &NoiseModel,
+    yaw_cue: bool,
+) -> Option<Similarity3<f64>> {
+    let n = pairs.len();
+    if n == 0 {
+        return None;
+    }
+    let inv_n = 1.0 / n as f64;
+    let mu_p = pairs.iter().map(|c| c.prior_center).sum::<Vector3<f64>>() * inv_n;
+    let mu_q = pairs.iter().map(|c| c.query_center).sum::<Vector3<f64>>() * inv_n;
+    let sigma2 = noise.position * noise.position;
+    let mut rotation = transform.isometry.rotation;
+    if yaw_cue && noise.yaw_rad.is_finite() && noise.yaw_rad > 0.0 {
+        let (mut a, mut b, mut var_xy) = (0.0, 0.0, 0.0);
+        for c in pairs {
+            let (dp, dq) = (c.prior_center - mu_p, c.query_center - mu_q);
+            a += dp.x * dq.x + dp.y * dq.y;
+            b += dp.x * dq.y - dp.y * dq.x;
+            var_xy += dp.x * dp.x + dp.y * dp.y;
+        }
+        let theta_pos = b.atan2(a);
+        let w_pos = if sigma2 > 0.0 { var_xy / (2.0 * sigma2) } else { f64::INFINITY };
+        let w_obj = 1.0 / (2.0 * noise.yaw_rad * noise.yaw_rad);
+        let (mut sum_w, mut sum_wr) = (w_pos, 0.0);
+        for c in pairs {
+            let Some(period) = c.yaw_period else { continue };
+            let r = wrap_period(c.query_yaw - c.prior_yaw - theta_pos, period);
+            if r.is_finite() && r.abs() <= noise.yaw_gate_rad {
+                sum_w += w_obj;
+                sum_wr += w_obj * r;
+            }
+        }
+        if w_pos.is_finite() && sum_w > 0.0 && sum_w.is_finite() {
+            let theta = theta_pos + sum_wr / sum_w;
+            rotation = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), theta);
+        }
+    }
+    let (mut num, mut den) = (0.0, 0.0);
+    for c in pairs {
+        let (dp, dq) = (c.prior_center - mu_p, c.query_center - mu_q);
+        num += dq.dot(&(rotation * dp));
+        den += dp.norm_squared();
+    }
+    let mut log_s = if den > DEGENERATE_EPS && num > 0.0 { Some((num / den).ln()) } else { None };
+    if noise.size_rel.is_finite() && noise.size_rel > 0.0 {
+        let (mut sum, mut count) = (0.0, 0usize);
+        for c in pairs {
+            for k in 0..3 {
+                let r = (c.query_extents[k] / c.prior_extents[k]).ln();
+                if r.is_finite() {
+                    sum += r;
+                    count += 1;
+                }
+            }
+        }
+        if count > 0 {
+            let log_size = sum / count as f64;
+            let v_size = 2.0 * noise.size_rel * noise.size_rel / count as f64;
+            log_s = Some(match log_s {
+                Some(ls) if sigma2 > 0.0 => {
+                    let v_pos = 2.0 * sigma2 / den;
+                    (ls / v_pos + log_size / v_size) / (1.0 / v_pos + 1.0 / v_size)
+                }
+                Some(ls) => ls,
+                None => log_size,
+            });
+        }
+    }
+    let scale = log_s?.exp();
+    if !(scale.is_finite() && scale > 0.0) {
+        return None;
+    }
+    let t = mu_q - scale * (rotation * mu_p);
+    t.iter().all(|v| v.is_finite()).then(|| Similarity3::from_parts(Translation3::from(t), rotation, scale))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
+    fn cloud(rng: &mut ChaCha8Rng, n: usize) -> Vec<Vector3<f64>> {
+        (0..n)
+            .map(|_| Vector3::new(rng.random_range(0.2..0.8), rng.random_range(-0.4..0.4), rng.random_range(0.0..0.1)))
+            .collect()
+    }
+
+    #[test]
+    fn umeyama_recovers_a_random_similarity_exactly() {
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        for _ in 0..20 {
+            let p = cloud(&mut rng, 5);
+            let axis =
+                Vector3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0));
+            let rot = UnitQuaternion::from_scaled_axis(axis * 1.5);
+            let truth = Similarity3::from_parts(Translation3::new(0.3, -1.0, 2.0), rot, rng.random_range(0.5..2.0));
+            let q: Vec<Vector3<f64>> =
+                p.iter().map(|v| truth.transform_vector(v) + truth.isometry.translation.vector).collect();
+            let est = umeyama(&p, &q).unwrap_or_else(|| panic!("degenerate"));
+            assert!((est.to_homogeneous() - truth.to_homogeneous()).abs().max() < 1e-9);
+            let s = scale_from_distance_ratios(&p, &q, 1e-6).unwrap_or(0.0);
+            assert!((s - truth.scaling()).abs() < 1e-9);
+        }
+    }
+
+    #[test]
+    fn umeyama_handles_coplanar_points_and_refuses_collinear_ones() {
+        let p = vec![Vector3::new(0.0, 0.0, 0.0), Vector3::new(1.0, 0.0, 0.0), Vector3::new(0.0, 1.0, 0.0)];
+        let truth = Similarity3::from_parts(
+            Translation3::new(1.0, 2.0, 3.0),
+            UnitQuaternion::from_euler_angles(0.4, -0.7, 2.0),
+            0.7,
+        );
+        let q: Vec<Vector3<f64>> =
+            p.iter().map(|v| truth.transform_vector(v) + truth.isometry.translation.vector).collect();
+        let est = umeyama(&p, &q).unwrap_or_else(|| panic!("degenerate"));
+        assert!((est.to_homogeneous() - truth.to_homogeneous()).abs().max() < 1e-9);
+        let line: Vec<Vector3<f64>> = (0..4).map(|i| Vector3::new(i as f64, 0.0, 0.0)).collect();
+        assert!(umeyama(&line, &line).is_none());
+        let same = vec![Vector3::new(1.0, 1.0, 1.0); 4];
+        assert!(umeyama(&same, &same).is_none());
+        assert!(yaw_similarity(&same, &same).is_none());
+    }
+
+    #[test]
+    fn yaw_similarity_recovers_exactly() {
+        let mut rng = ChaCha8Rng::seed_from_u64(4);
+        let p = cloud(&mut rng, 2);
+        let rot = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), -2.5);
+        let truth = Similarity3::from_parts(Translation3::new(0.3, -1.0, 0.2), rot, 1.7);
+        let q: Vec<Vector3<f64>> =
+            p.iter().map(|v| truth.transform_vector(v) + truth.isometry.translation.vector).collect();
+        let est = yaw_similarity(&p, &q).unwrap_or_else(|| panic!("degenerate"));
+        assert!((est.to_homogeneous() - truth.to_homogeneous()).abs().max() < 1e-9);
+        let fixed = with_scale(&est, &p, &q, 1.7).unwrap_or_else(|| panic!("bad scale"));
+        assert!((fixed.to_homogeneous() - truth.to_homogeneous()).abs().max() < 1e-9);
+    }
+}
