@@ -4,8 +4,10 @@ SHELL := /bin/bash
 PY := .venv/bin/python
 CARGO_FEATURES := --features rerun
 RUN_ARGS ?=
+BENCHMARK_ARGS ?=
+ABLATION_ARGS ?=
 
-.PHONY: help setup run test test-rust test-py bench view lint fmt clean
+.PHONY: help setup run test test-rust test-py bench benchmark associate parameterize match report view lint fmt clean
 
 help: ## List the targets
 	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*## "}; {printf "  \033[1m%-12s\033[0m %s\n", $$1, $$2}'
@@ -26,6 +28,21 @@ test-py: ## Python tests only (needs `make setup`)
 
 bench: setup ## Benchmarks (criterion + Python references in one run) → reports/bench.{md,json}
 	$(PY) experiments/bench.py
+
+benchmark: setup ## Exploration benchmark: 7 scenes × 5 strategies × seeds → reports/exploration.{md,json,png}
+	$(PY) experiments/benchmark.py $(BENCHMARK_ARGS)
+
+associate: setup ## Association ablation (scenes × modes) → reports/association.{md,json}
+	$(PY) experiments/ablations.py associate $(ABLATION_ARGS)
+
+parameterize: setup ## Parameterization stages (raw → iForest → lines → refined) → reports/parameterization.{md,json}
+	$(PY) experiments/ablations.py parameterize $(ABLATION_ARGS)
+
+match: ## Scene matching vs shared-object ratio (500 trials per row) → reports/scene_matching.{md,json}
+	cargo run --release -p objslam-core --example match_experiment -- --scenes scenes --out reports
+
+report: ## Report of the latest run folder → reports/foundation_run.{md,json}
+	$(PY) experiments/report_run.py
 
 view: ## Open the latest run's recording in the Rerun viewer
 	@test -e runs/latest/run.rrd || { echo "no runs/latest/run.rrd: run 'make run' first"; exit 1; }

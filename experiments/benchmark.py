@@ -17,32 +17,25 @@ import json
 import statistics
 import sys
 import time
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 from typing import Any
 
 REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO / "experiments"))
+
+from sweep import Job, run_sweep, scene_files  # noqa: E402
 STRATEGIES = ("object-driven", "random", "coverage", "init", "expected-gain")
 METRICS = ("iou3d", "iou2d", "cde_cm", "yae_deg")
 
 
-def _episode(args: tuple[str, str, int, list[str], list[str]]) -> dict[str, Any]:
-    scene, strategy, seed, overlays, overrides = args
-    from objslam.config import load_run_config
-    from objslam.episode import run_episode
-
-    sets = [*overrides, f'scene="{scene}"', f"seed={seed}"]
-    cfg = load_run_config(overlays=overlays, overrides=sets, strategy=strategy)
-    try:
-        result = run_episode(cfg, progress=False)
-    except Exception as e:  # noqa: BLE001 - one failed episode must not stop the benchmark
-        return {"scene": Path(scene).stem, "strategy": strategy, "seed": seed, "error": f"{type(e).__name__}: {e}"}
-    m = result.metrics
+def _row(m: dict[str, Any]) -> dict[str, Any]:
+    if "error" in m:
+        return {k: m[k] for k in ("scene", "strategy", "seed", "error")}
     return {
         "scene": m["scene"],
-        "strategy": strategy,
-        "seed": seed,
-        "run_dir": str(result.run_dir.relative_to(REPO) if result.run_dir.is_relative_to(REPO) else result.run_dir),
+        "strategy": m["strategy"],
+        "seed": m["seed"],
+        "run_dir": m["run_dir"],
         **{k: m["mean"][k] for k in METRICS},
         "views": m["views"],
         "nbv_views": m["nbv_views"],
@@ -153,7 +146,7 @@ def _plots(ok: list[dict[str, Any]], strategies: list[str], out: Path, command: 
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--scenes", nargs="*", default=[str(p.relative_to(REPO)) for p in sorted((REPO / "scenes").glob("scene*.toml"))])
+    ap.add_argument("--scenes", nargs="*", default=scene_files())
     ap.add_argument("--strategies", nargs="*", default=list(STRATEGIES))
     ap.add_argument("--seeds", nargs="*", type=int, default=[0, 1, 2])
     ap.add_argument("--workers", type=int, default=2)
@@ -161,19 +154,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--set", action="append", default=[])
     ap.add_argument("--out", default=str(REPO / "reports"))
     a = ap.parse_args(argv)
-    jobs = [(sc, st, sd, a.config, a.set) for sc in a.scenes for st in a.strategies for sd in a.seeds]
+    jobs = [
+        Job(sc, st, sd, tuple(a.config), tuple(a.set)) for sc in a.scenes for st in a.strategies for sd in a.seeds
+    ]
     command = "python experiments/benchmark.py " + " ".join(argv if argv is not None else sys.argv[1:])
     t0 = time.perf_counter()
-    rows: list[dict[str, Any]] = []
-    from tqdm import tqdm
-
-    with ProcessPoolExecutor(max_workers=a.workers) as pool, tqdm(total=len(jobs), unit="episode") as bar:
-        futures = [pool.submit(_episode, j) for j in jobs]
-        for f in as_completed(futures):
-            r = f.result()
-            rows.append(r)
-            bar.set_postfix_str(f"{r['strategy']} {r['scene']} {'FAILED' if 'error' in r else format(r['iou3d'], '.3f')}")
-            bar.update(1)
+    rows = [_row(m) for m in run_sweep(jobs, a.workers)]
     rows.sort(key=lambda r: (r["scene"], STRATEGIES.index(r["strategy"]) if r["strategy"] in STRATEGIES else 99, r["seed"]))
     write_reports(rows, Path(a.out), command.strip())
     print(f"{len(rows)} episodes in {time.perf_counter() - t0:.0f} s → {a.out}/exploration.md")

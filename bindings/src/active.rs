@@ -7,7 +7,11 @@ use objslam_core::active::{ActiveConfig, ActiveSession, NextView};
 use objslam_core::explore::{ExploreError, ObservedPoints, TableRect};
 use objslam_core::frame::Frame;
 use objslam_core::geometry::Se3;
-use objslam_core::naive::{NaiveConfig, NaiveMapper};
+use objslam_core::association::metrics::{association_metrics, MetricsConfig, ObjectGtIds};
+use objslam_core::frame::GreyImage;
+use objslam_core::map::EstimateStage;
+use objslam_core::pipeline::{ObjectPipeline, PipelineConfig, PipelineError};
+use numpy::PyReadonlyArray2;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
@@ -15,6 +19,19 @@ use crate::{camera, depth_image, detections, input_err, json_err, objects_json, 
 
 fn explore_err(e: ExploreError) -> PyErr {
     input_err(e)
+}
+
+fn pipeline_err(e: PipelineError) -> PyErr {
+    input_err(e)
+}
+
+fn grey_image(obj: &Bound<'_, PyAny>) -> PyResult<GreyImage> {
+    let arr: PyReadonlyArray2<'_, u8> = obj.extract().map_err(|_| {
+        pyo3::exceptions::PyTypeError::new_err("grey: expected a uint8 array of shape (H, W)")
+    })?;
+    let a = arr.as_array();
+    let (h, w) = (a.shape()[0], a.shape()[1]);
+    GreyImage::new(w as u32, h as u32, a.iter().copied().collect()).map_err(input_err)
 }
 
 fn matrix_py<'py>(py: Python<'py>, t: &Se3) -> Bound<'py, PyArray2<f64>> {
@@ -27,7 +44,7 @@ fn matrix_py<'py>(py: Python<'py>, t: &Se3) -> Bound<'py, PyArray2<f64>> {
 /// Mapper + exploration session (see `objslam_core::active`).
 #[pyclass(module = "objslam._native", name = "ActiveMapper")]
 pub struct ActiveMapperPy {
-    mapper: NaiveMapper,
+    mapper: ObjectPipeline,
     session: ActiveSession,
 }
 
@@ -37,11 +54,12 @@ impl ActiveMapperPy {
     #[new]
     #[pyo3(signature = (*, mapper_config_json, active_config_json, table))]
     fn new(mapper_config_json: &str, active_config_json: &str, table: (f64, f64, f64, f64)) -> PyResult<Self> {
-        let mc: NaiveConfig = serde_json::from_str(mapper_config_json).map_err(|e| json_err("mapper_config", e))?;
+        let mc: PipelineConfig =
+            serde_json::from_str(mapper_config_json).map_err(|e| json_err("mapper_config", e))?;
         let ac: ActiveConfig = serde_json::from_str(active_config_json).map_err(|e| json_err("active_config", e))?;
         let rect = TableRect { center_m: [table.0, table.1], size_m: [table.2, table.3], height_m: 0.0 };
         let session = ActiveSession::new(ac, rect).map_err(explore_err)?;
-        Ok(Self { mapper: NaiveMapper::new(mc), session })
+        Ok(Self { mapper: ObjectPipeline::new(mc).map_err(pipeline_err)?, session })
     }
 
     /// The Init views as a list of 4x4 `world_from_camera` matrices.
@@ -51,7 +69,7 @@ impl ActiveMapperPy {
     }
 
     /// Fuse one frame into the map and the surface grids; returns per-detection object ids.
-    #[pyo3(signature = (*, index, intrinsics, depth, world_from_camera, detections))]
+    #[pyo3(signature = (*, index, intrinsics, depth, world_from_camera, detections, grey = None))]
     fn update(
         &mut self,
         index: u32,
@@ -59,7 +77,9 @@ impl ActiveMapperPy {
         depth: &Bound<'_, PyAny>,
         world_from_camera: &Bound<'_, PyAny>,
         detections: &Bound<'_, PyAny>,
+        grey: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Vec<Option<u32>>> {
+        let grey = grey.map(grey_image).transpose()?;
         let depth = depth_image(depth)?;
         let frame = Frame {
             index,
@@ -68,19 +88,20 @@ impl ActiveMapperPy {
             depth,
             detections: self::detections(detections)?,
         };
-        let summary = self.mapper.update(&frame).map_err(|e| input_err(e))?;
+        let summary = self.mapper.update(&frame, grey.as_ref()).map_err(pipeline_err)?;
         let observed: Vec<ObservedPoints> = summary
             .observed
             .into_iter()
             .map(|(object_id, points_in_world)| ObservedPoints { object_id, points_in_world })
             .collect();
-        self.session.integrate_frame(self.mapper.map(), &frame, &observed).map_err(explore_err)?;
+        self.session.integrate_frame(&self.mapper.map(), &frame, &observed).map_err(explore_err)?;
         Ok(summary.assigned)
     }
 
     /// A view was reached and its frames fused (`counts_as_view` false for Init views).
     fn view_done(&mut self, counts_as_view: bool) {
-        self.session.view_done(self.mapper.map(), counts_as_view);
+        self.mapper.refresh_estimates();
+        self.session.view_done(&self.mapper.map(), counts_as_view);
         self.session.mark_entropy();
     }
 
@@ -112,7 +133,7 @@ impl ActiveMapperPy {
                 }
             }
         };
-        let decision = self.session.next_view(self.mapper.map(), &cam, &current, &check).map_err(explore_err)?;
+        let decision = self.session.next_view(&self.mapper.map(), &cam, &current, &check).map_err(explore_err)?;
         if let Some(e) = callback_error.into_inner() {
             return Err(e);
         }
@@ -151,9 +172,49 @@ impl ActiveMapperPy {
         self.mapper.map().to_json()
     }
 
+    /// The map after one parameterization stage (raw | iforest | lines | refined), versioned JSON.
+    fn stage_map_json(&self, stage: &str) -> PyResult<String> {
+        let s = match stage {
+            "raw" => EstimateStage::Raw,
+            "iforest" => EstimateStage::Iforest,
+            "lines" => EstimateStage::Lines,
+            "refined" => EstimateStage::Refined,
+            other => return Err(input_err(format!("stage: unknown {other:?} (raw, iforest, lines, refined)"))),
+        };
+        Ok(self.mapper.stage_map(s).to_json())
+    }
+
+    /// Re-run parameterization for objects observed since the last refresh.
+    fn refresh_estimates(&mut self) {
+        self.mapper.refresh_estimates();
+    }
+
+    /// The surviving object id of any id returned by `update` (follows duplicate merges).
+    fn resolve_id(&self, id: u32) -> u32 {
+        self.mapper.resolve_id(id)
+    }
+
+    /// Association metrics (JSON) from (object id, GT id or None) pairs of every assigned detection;
+    /// ids are resolved through merges and only objects still in the map count.
+    fn association_metrics_json(&self, pairs: Vec<(u32, Option<u32>)>, gt_ids: Vec<u32>) -> PyResult<String> {
+        let map = self.mapper.map();
+        let mut by_object: std::collections::BTreeMap<u32, Vec<Option<u32>>> = std::collections::BTreeMap::new();
+        for o in &map.objects {
+            by_object.insert(o.id, Vec::new());
+        }
+        for (id, gt) in pairs {
+            if let Some(v) = by_object.get_mut(&self.mapper.resolve_id(id)) {
+                v.push(gt);
+            }
+        }
+        let objs: Vec<ObjectGtIds> = by_object.into_iter().map(|(object_id, gt_ids)| ObjectGtIds { object_id, gt_ids }).collect();
+        let m = association_metrics(&objs, &gt_ids, &MetricsConfig::default());
+        serde_json::to_string(&m).map_err(|e| json_err("association", e))
+    }
+
     /// The map's objects as JSON records.
     fn objects_json(&self) -> PyResult<String> {
-        objects_json(self.mapper.map())
+        objects_json(&self.mapper.map())
     }
 
     /// Surface grid cells of every object: (N, 3) centres in the world and (N,) states
@@ -161,8 +222,9 @@ impl ActiveMapperPy {
     fn grid_cells<'py>(&self, py: Python<'py>) -> (Bound<'py, PyArray2<f64>>, Vec<u8>) {
         let mut pts: Vec<[f64; 3]> = Vec::new();
         let mut states = Vec::new();
+        let map = self.mapper.map();
         for (id, grid) in &self.session.grids().grids {
-            if let Some(obj) = self.mapper.map().get(*id) {
+            if let Some(obj) = map.get(*id) {
                 for c in grid.cells_in_world(&obj.world_from_object) {
                     pts.push([c.p_in_world.x, c.p_in_world.y, c.p_in_world.z]);
                     states.push(match c.state {

@@ -104,8 +104,11 @@ class RunConfig:
     """Frames rendered per simulated second while the arm moves."""
     max_joint_speed: float = 1.0
     """Peak joint speed of camera moves, rad/s."""
-    mapper: str = "naive"
-    """Estimator: ``naive`` (the foundation baseline)."""
+    association_mode: str = "ensemble"
+    """Association: ``naive`` (the foundation baseline), ``iou``, ``iou_np``, ``iou_t`` or
+    ``ensemble`` (the paper's method; see the core's ``association`` module)."""
+    parameterize: bool = True
+    """Run object parameterization (iForest, line-alignment yaw, refinement) after association."""
     camera: CameraConfig = field(default_factory=CameraConfig)
     detector: DetectorConfig = field(default_factory=DetectorConfig)
     naive: NaiveMapperConfig = field(default_factory=NaiveMapperConfig)
@@ -117,8 +120,8 @@ class RunConfig:
         """Raise :class:`ConfigError` naming the key if a value is out of range."""
         if self.strategy not in STRATEGIES:
             raise ConfigError(f"strategy: unknown {self.strategy!r}; known: {', '.join(STRATEGIES)}")
-        if self.mapper not in ("naive",):
-            raise ConfigError(f"mapper: unknown {self.mapper!r}; known: naive")
+        if self.association_mode not in ASSOCIATION_MODES:
+            raise ConfigError(f"association_mode: unknown {self.association_mode!r}; known: {', '.join(ASSOCIATION_MODES)}")
         if self.seed < 0:
             raise ConfigError("seed: must be ≥ 0")
         if not (0 < self.frame_rate_hz <= 60):
@@ -136,6 +139,7 @@ class RunConfig:
             raise ConfigError(str(e)) from e
 
 
+ASSOCIATION_MODES = ("naive", "iou", "iou_np", "iou_t", "ensemble")
 STRATEGIES = ("init", "object-driven", "random", "coverage", "expected-gain")
 
 

@@ -50,6 +50,12 @@ class EpisodeResult:
 GRID_COLORS = np.array([[150, 150, 150], [60, 200, 60], [220, 50, 50]], dtype=np.uint8)
 
 
+def grey_of(rgb: np.ndarray) -> np.ndarray:
+    """ITU-R BT.601 luma of an (H, W, 3) uint8 image, as uint8."""
+    g = rgb[..., 0].astype(np.float32) * 0.299 + rgb[..., 1].astype(np.float32) * 0.587 + rgb[..., 2].astype(np.float32) * 0.114
+    return np.clip(g + 0.5, 0, 255).astype(np.uint8)
+
+
 def active_config(cfg: RunConfig) -> dict[str, Any]:
     """The core's ``ActiveConfig`` JSON from a run config."""
     e = to_dict(cfg.explore)
@@ -134,7 +140,9 @@ def run_episode(cfg: RunConfig, *, progress: bool = True, on_frame: Callable[[Se
     (run_dir / "config.toml").write_text(tomli_w.dumps(to_dict(cfg)))
     rec = _Recorder(run_dir / "run.rrd" if cfg.record.enabled else None)
     mapper = _native.ActiveMapper(
-        mapper_config_json=json.dumps(to_dict(cfg.naive)),
+        mapper_config_json=json.dumps(
+            {"association_mode": cfg.association_mode, "parameterize": cfg.parameterize, "naive": to_dict(cfg.naive)}
+        ),
         active_config_json=json.dumps(active_config(cfg)),
         table=(*scene.table.center, *scene.table.size),
     )
@@ -145,6 +153,7 @@ def run_episode(cfg: RunConfig, *, progress: bool = True, on_frame: Callable[[Se
     gt_positions: list[np.ndarray] = []
     frames = 0
     views_done = 0
+    assignments: list[tuple[int, int | None]] = []
     try:
         rng_sensor = np.random.default_rng([cfg.seed, 1])
         rng_detector = np.random.default_rng([cfg.seed, 2])
@@ -164,13 +173,15 @@ def run_episode(cfg: RunConfig, *, progress: bool = True, on_frame: Callable[[Se
             t0 = time.perf_counter()
             dets: list[Detection] = detector.detect(frame.segmentation, world.actor_to_object)
             t1 = time.perf_counter()
-            mapper.update(
+            assigned = mapper.update(
                 index=frame.index,
                 intrinsics=frame.intrinsics,
                 depth=frame.depth_m,
                 world_from_camera=frame.world_from_camera_fk,
                 detections=[d.as_tuple() for d in dets],
+                grey=grey_of(frame.rgb) if cfg.parameterize else None,
             )
+            assignments.extend((oid, d.gt_id) for oid, d in zip(assigned, dets) if oid is not None)
             t2 = time.perf_counter()
             est_positions.append(frame.world_from_camera_fk[:3, 3].copy())
             gt_positions.append(frame.world_from_camera_gt[:3, 3].copy())
@@ -249,10 +260,11 @@ def run_episode(cfg: RunConfig, *, progress: bool = True, on_frame: Callable[[Se
             rec.log_scalar("explore/mean_normalized_entropy", mapper.entropy_curve()[-1])
             if cfg.record.grids:
                 pts, states = mapper.grid_cells()
-                rec.log_colored_points("world/map/grids", pts, GRID_COLORS[np.asarray(states, dtype=np.int64)], 0.004)
+                rec.log_colored_points("world/map/grids", pts, GRID_COLORS[np.frombuffer(states, dtype=np.uint8)], 0.004)
         if bar is not None:
             bar.close()
 
+        mapper.refresh_estimates()
         map_json = mapper.map_json()
         _native.save_map(map_json, str(run_dir / "map.json"))
         (run_dir / "map.json.partial").unlink(missing_ok=True)
@@ -261,6 +273,11 @@ def run_episode(cfg: RunConfig, *, progress: bool = True, on_frame: Callable[[Se
         evaluation = json.loads(
             _native.evaluate_map(json.dumps(gt), map_json, json.dumps(to_dict(cfg.eval)))
         )
+        stages = {}
+        for stage in ("raw", "iforest", "lines", "refined"):
+            ev = json.loads(_native.evaluate_map(json.dumps(gt), mapper.stage_map_json(stage), json.dumps(to_dict(cfg.eval))))
+            stages[stage] = ev["mean"]
+        association = json.loads(mapper.association_metrics_json(assignments, [o.id for o in scene.objects]))
         wall_s = time.perf_counter() - t_start
         metrics = {
             "scene": scene.name,
@@ -276,6 +293,9 @@ def run_episode(cfg: RunConfig, *, progress: bool = True, on_frame: Callable[[Se
             "objects": evaluation["objects"],
             "n_matched": evaluation["n_matched"],
             "nbv_views": mapper.views_taken(),
+            "association_mode": cfg.association_mode,
+            "association": association,
+            "stages": stages,
             "stop_reason": stop_reason,
             "entropy_curve": mapper.entropy_curve(),
             "timings_ms_median": {s: (statistics.median(v) if v else None) for s, v in times.items()},

@@ -108,7 +108,7 @@ pub mod mapper;
 pub mod metrics;
 pub mod stats;
 
-use std::cell::OnceCell;
+use std::sync::OnceLock;
 use std::collections::{BTreeMap, BTreeSet, HashSet};
 use std::hash::{BuildHasherDefault, Hasher};
 
@@ -497,7 +497,7 @@ pub struct GlobalObject {
     history: Vec<CentroidSample>,
     observations: Vec<ObservationRecord>,
     frames_seen: BTreeSet<u32>,
-    np_cache: OnceCell<SortedAxes>,
+    np_cache: OnceLock<SortedAxes>,
 }
 
 impl GlobalObject {
@@ -583,7 +583,7 @@ impl GlobalObject {
             history: Vec::new(),
             observations: Vec::new(),
             frames_seen: BTreeSet::new(),
-            np_cache: OnceCell::new(),
+            np_cache: OnceLock::new(),
         }
     }
 
@@ -607,7 +607,7 @@ impl GlobalObject {
             }
             guard += 1;
         }
-        self.np_cache = OnceCell::new();
+        self.np_cache = OnceLock::new();
     }
 
     fn push_history(&mut self, sample: CentroidSample, max_history: usize) {

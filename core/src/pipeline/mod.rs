@@ -27,7 +27,8 @@ use crate::geometry::{se3_from_yaw, ObjectGeometry};
 use crate::map::{EstimateStage, MapObject, ObjectMap};
 use crate::naive::{NaiveConfig, NaiveMapper};
 use crate::objects::lsd::{detect_segments, segments_in_box, LsdConfig};
-use crate::objects::{LineFrame, ObjectEstimate, ObjectEstimator, ParamConfig};
+use crate::objects::yaw::LineFrame;
+use crate::objects::{ObjectEstimate, ObjectEstimator, ParamConfig};
 
 /// Errors of the pipeline.
 #[derive(Debug, thiserror::Error)]
@@ -223,7 +224,7 @@ impl ObjectPipeline {
             }
         }
         if self.config.parameterize {
-            let segments = grey.map(|g| detect_segments(g, &self.config.lsd));
+            let segments = grey.and_then(|g| detect_segments(g, &self.config.lsd).ok());
             let map = self.raw_map();
             for (di, id) in out.assigned.iter().enumerate() {
                 let (Some(id), Some(det)) = (id, frame.detections.get(di)) else { continue };
