@@ -89,12 +89,14 @@ impl ActiveMapperPy {
             detections: self::detections(detections)?,
         };
         let summary = self.mapper.update(&frame, grey.as_ref()).map_err(pipeline_err)?;
+        let map = self.mapper.map();
         let observed: Vec<ObservedPoints> = summary
             .observed
             .into_iter()
+            .filter(|(id, _)| map.get(*id).is_some())
             .map(|(object_id, points_in_world)| ObservedPoints { object_id, points_in_world })
             .collect();
-        self.session.integrate_frame(&self.mapper.map(), &frame, &observed).map_err(explore_err)?;
+        self.session.integrate_frame(&map, &frame, &observed).map_err(explore_err)?;
         Ok(summary.assigned)
     }
 

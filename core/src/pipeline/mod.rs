@@ -77,6 +77,18 @@ pub struct PipelineConfig {
     pub lsd: LsdConfig,
     /// Segments within this margin of a detection box are assigned to it, pixels.
     pub segment_box_margin_px: f64,
+    /// Beyond the paper: after each refresh, fold same-label objects whose raw boxes overlap
+    /// (3D IoU ≥ `consolidate_iou` or centres within `consolidate_distance_m`) into the older one.
+    /// The statistical tests split objects seen from very different viewpoints during active
+    /// exploration; this geometric check repairs it. Off reproduces the paper's pipeline.
+    pub consolidate: bool,
+    /// 3D IoU of the raw axis-aligned boxes above which two same-label objects are one.
+    pub consolidate_iou: f64,
+    /// Centre distance under which two same-label objects are one, metres.
+    pub consolidate_distance_m: f64,
+    /// Objects with fewer observations are kept internally but left out of the map (filters
+    /// false positives and label confusions; 1 keeps everything).
+    pub min_observations: usize,
 }
 
 impl Default for PipelineConfig {
@@ -90,6 +102,10 @@ impl Default for PipelineConfig {
             param: ParamConfig::default(),
             lsd: LsdConfig::default(),
             segment_box_margin_px: 4.0,
+            consolidate: true,
+            consolidate_iou: 0.2,
+            consolidate_distance_m: 0.03,
+            min_observations: 3,
         }
     }
 }
@@ -205,23 +221,15 @@ impl ObjectPipeline {
                         out.observed.entry(id).or_default().extend_from_slice(&local.points_in_world);
                     }
                 }
-                for id in out.assigned.iter_mut().flatten() {
-                    let mut r = *id;
-                    let mut guard = 0;
-                    while let Some(next) = self.merged_into.get(&r) {
-                        r = *next;
-                        guard += 1;
-                        if guard > 10_000 {
-                            break;
-                        }
-                    }
-                    *id = r;
-                }
-                let observed = std::mem::take(&mut out.observed);
-                for (id, pts) in observed {
-                    out.observed.entry(self.resolve_id(id)).or_default().extend(pts);
-                }
             }
+        }
+        // Report surviving ids (association merges and pipeline folds).
+        for id in out.assigned.iter_mut().flatten() {
+            *id = self.resolve_id(*id);
+        }
+        let observed = std::mem::take(&mut out.observed);
+        for (id, pts) in observed {
+            out.observed.entry(self.resolve_id(id)).or_default().extend(pts);
         }
         if self.config.parameterize {
             let segments = grey.and_then(|g| detect_segments(g, &self.config.lsd).ok());
@@ -248,6 +256,9 @@ impl ObjectPipeline {
 
     /// Re-estimate the objects observed since the last refresh (no-op without parameterization).
     pub fn refresh_estimates(&mut self) {
+        if self.config.consolidate {
+            self.consolidate();
+        }
         if !self.config.parameterize {
             return;
         }
@@ -262,15 +273,89 @@ impl ObjectPipeline {
         }
     }
 
+    /// Fold overlapping same-label objects into the older one (see `PipelineConfig::consolidate`).
+    fn consolidate(&mut self) {
+        loop {
+            let map = self.raw_map();
+            let mut fold: Option<(u32, u32)> = None;
+            'pairs: for (i, a) in map.objects.iter().enumerate() {
+                for b in &map.objects[i + 1..] {
+                    if a.label != b.label {
+                        continue;
+                    }
+                    let (ga, gb) = (a.geometry(), b.geometry());
+                    let close = (ga.center - gb.center).norm() <= self.config.consolidate_distance_m;
+                    if close || crate::geometry::iou3d(&ga, &gb) >= self.config.consolidate_iou {
+                        fold = Some((a.id.max(b.id), a.id.min(b.id)));
+                        break 'pairs;
+                    }
+                }
+            }
+            let Some((young, old)) = fold else { break };
+            self.merged_into.insert(young, old);
+            self.estimators.remove(&young);
+            self.estimates.remove(&young);
+            self.dirty.remove(&young);
+            self.dirty.insert(old);
+        }
+    }
+
+    /// The association's objects with pipeline-level folds applied (extent = trimmed AABB of the
+    /// union of the folded clouds, label = majority over observations), no observation filter.
     fn raw_map(&self) -> ObjectMap {
-        match &self.mapper {
+        let base = match &self.mapper {
             Mapper::Naive(m) => m.map().clone(),
             Mapper::Ensemble(a) => {
                 let objects: Vec<MapObject> = a.objects().map(GlobalObject::to_map_object_raw).collect();
                 let next_id = objects.iter().map(|o| o.id + 1).max().unwrap_or(0);
                 ObjectMap { objects, next_id }
             }
+        };
+        if self.merged_into.is_empty() {
+            return base;
         }
+        let present: BTreeSet<u32> = base.objects.iter().map(|o| o.id).collect();
+        let mut groups: BTreeMap<u32, Vec<MapObject>> = BTreeMap::new();
+        for o in base.objects {
+            let mut root = self.resolve_id(o.id);
+            if !present.contains(&root) {
+                root = o.id;
+            }
+            groups.entry(root).or_default().push(o);
+        }
+        let mut objects = Vec::with_capacity(groups.len());
+        for (root, mut members) in groups {
+            if members.len() == 1 {
+                objects.extend(members);
+                continue;
+            }
+            members.sort_by_key(|m| if m.id == root { 0 } else { 1 });
+            let mut votes: BTreeMap<crate::map::Label, usize> = BTreeMap::new();
+            for m in &members {
+                *votes.entry(m.label).or_default() += m.observations.len().max(1);
+            }
+            let mut merged = members[0].clone();
+            for m in &members[1..] {
+                merged.observations.extend_from_slice(&m.observations);
+                merged.points_in_world.extend_from_slice(&m.points_in_world);
+            }
+            merged.observations.sort_by_key(|o| o.frame);
+            if let Some((label, _)) = votes.iter().max_by_key(|(l, n)| (**n, std::cmp::Reverse(**l))) {
+                merged.label = *label;
+            }
+            if let Some((lo, hi)) = crate::naive::trimmed_extent(&merged.points_in_world, self.config.naive.trim_fraction) {
+                merged.world_from_object = se3_from_yaw((lo + hi) / 2.0, 0.0);
+                merged.half_extents = (hi - lo) / 2.0;
+            }
+            objects.push(merged);
+        }
+        let next_id = base.next_id;
+        ObjectMap { objects, next_id }
+    }
+
+    fn confirmed(&self, map: &mut ObjectMap) {
+        let min = self.config.min_observations.max(1);
+        map.objects.retain(|o| o.observations.len() >= min);
     }
 
     fn with_geometry(obj: &mut MapObject, g: &ObjectGeometry, stage: EstimateStage) {
@@ -282,6 +367,7 @@ impl ObjectPipeline {
     /// The map with the latest estimates (raw for objects not estimated yet).
     pub fn map(&self) -> ObjectMap {
         let mut map = self.raw_map();
+        self.confirmed(&mut map);
         for obj in &mut map.objects {
             if let Some(e) = self.estimates.get(&obj.id) {
                 Self::with_geometry(obj, &e.geometry, e.stage);
@@ -295,6 +381,7 @@ impl ObjectPipeline {
     /// parameterization is off).
     pub fn stage_map(&self, stage: EstimateStage) -> ObjectMap {
         let mut map = self.raw_map();
+        self.confirmed(&mut map);
         let order = [EstimateStage::Raw, EstimateStage::Iforest, EstimateStage::Lines, EstimateStage::Refined];
         let upto = order.iter().position(|s| *s == stage).unwrap_or(0);
         for obj in &mut map.objects {
