@@ -12,6 +12,7 @@
 //! - [`naive`]: the foundation's baseline estimator (the `naive` association ablation).
 //! - [`eval`]: matching to ground truth, 3D/2D IoU, CDE, YAE, counts.
 //! - `record` (feature `rerun`): one Rerun recording per run.
+//! - [`slam`]: RGB-D visual tracking (ORB features, PnP + RANSAC, local BA), pose sources, ATE/RPE.
 
 pub mod eval;
 pub mod frame;
@@ -20,3 +21,4 @@ pub mod map;
 pub mod naive;
 #[cfg(feature = "rerun")]
 pub mod record;
+pub mod slam;

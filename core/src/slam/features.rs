@@ -1,0 +1,526 @@
+//! ORB-style features: pyramid, FAST-9 with grid distribution, intensity-centroid orientation,
+//! steered 256-bit BRIEF descriptors (Rublee et al. 2011, as used by ORB-SLAM2).
+
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+
+use super::SlamError;
+use crate::frame::GreyImage;
+
+/// A 256-bit binary descriptor.
+pub type Descriptor = [u64; 4];
+
+/// Hamming distance between two descriptors (0..=256).
+#[inline]
+pub fn hamming(a: &Descriptor, b: &Descriptor) -> u32 {
+    (a[0] ^ b[0]).count_ones() + (a[1] ^ b[1]).count_ones() + (a[2] ^ b[2]).count_ones() + (a[3] ^ b[3]).count_ones()
+}
+
+/// Radius of the orientation patch (intensity centroid), pixels of the level (ORB: 15).
+pub const HALF_PATCH_PX: usize = 15;
+/// Keypoints are kept this far from the border of their level, pixels (patch + box smoothing).
+pub const EDGE_PX: usize = 16;
+/// Descriptor sampling points lie within this radius of the keypoint (so that any rotation of the
+/// pattern plus the 5x5 smoothing box stays inside [`EDGE_PX`]).
+pub const PATTERN_RADIUS_PX: f64 = 13.0;
+/// Number of binary tests of a descriptor.
+pub const DESCRIPTOR_BITS: usize = 256;
+
+/// Configuration of the ORB extractor.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct OrbConfig {
+    /// Features wanted per image over all levels (ORB-SLAM2: 1000 at 640x480).
+    pub n_features: usize,
+    /// Pyramid levels (ORB-SLAM2: 8).
+    pub n_levels: usize,
+    /// Scale ratio between consecutive levels (ORB-SLAM2: 1.2). Must be > 1.
+    pub scale_factor: f64,
+    /// FAST threshold, grey levels (ORB-SLAM2 `iniThFAST`: 20).
+    pub fast_threshold: u8,
+    /// Lower FAST threshold used only in grid cells with no corner at `fast_threshold`
+    /// (ORB-SLAM2 `minThFAST`: 7).
+    pub fast_min_threshold: u8,
+    /// Side of the grid cells used to spread features, pixels of each level (ORB-SLAM2: 30).
+    /// Features are taken round-robin over cells (best of each cell first), by FAST score.
+    pub cell_size_px: usize,
+    /// Seed of the descriptor's sampling pattern (Gaussian, σ = 31/5 px, clipped to 13 px).
+    /// Descriptors are only comparable between extractors with the same seed.
+    pub pattern_seed: u64,
+}
+
+impl Default for OrbConfig {
+    fn default() -> Self {
+        Self {
+            n_features: 1000,
+            n_levels: 8,
+            scale_factor: 1.2,
+            fast_threshold: 20,
+            fast_min_threshold: 7,
+            cell_size_px: 30,
+            pattern_seed: 0x0_5eed_0e0b,
+        }
+    }
+}
+
+/// A keypoint in level-0 pixel coordinates.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Keypoint {
+    /// Column, level-0 pixels.
+    pub x: f32,
+    /// Row, level-0 pixels.
+    pub y: f32,
+    /// Pyramid level it was detected at.
+    pub level: u8,
+    /// Scale of its level relative to level 0 (`scale_factor^level`).
+    pub scale: f32,
+    /// Orientation (intensity centroid), radians, image axes (x right, y down).
+    pub angle_rad: f32,
+    /// FAST score (largest threshold at which it is still a corner).
+    pub score: u16,
+}
+
+/// Keypoints and their descriptors (same length, same order).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Features {
+    /// Keypoints.
+    pub keypoints: Vec<Keypoint>,
+    /// Descriptors, `descriptors[i]` belongs to `keypoints[i]`.
+    pub descriptors: Vec<Descriptor>,
+}
+
+#[derive(Debug, Clone, Default)]
+struct Level {
+    width: usize,
+    height: usize,
+    scale: f32,
+    image: Vec<u8>,
+    blurred: Vec<u8>,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Corner {
+    x: u32,
+    y: u32,
+    score: u16,
+    key: u32,
+}
+
+/// The 16 pixels of the radius-3 Bresenham circle, clockwise from the top.
+const CIRCLE: [(isize, isize); 16] = [
+    (0, -3),
+    (1, -3),
+    (2, -2),
+    (3, -1),
+    (3, 0),
+    (3, 1),
+    (2, 2),
+    (1, 3),
+    (0, 3),
+    (-1, 3),
+    (-2, 2),
+    (-3, 1),
+    (-3, 0),
+    (-3, -1),
+    (-2, -2),
+    (-1, -3),
+];
+
+/// ORB extractor with reusable buffers: build once, call [`OrbExtractor::extract`] per frame.
+#[derive(Debug, Clone)]
+pub struct OrbExtractor {
+    config: OrbConfig,
+    levels: Vec<Level>,
+    pattern: Vec<[f32; 4]>,
+    umax: [usize; HALF_PATCH_PX + 1],
+    score_buf: Vec<u16>,
+    corners: Vec<Corner>,
+    col_sums: Vec<u16>,
+    cand: Vec<u8>,
+    features_per_level: Vec<usize>,
+}
+
+impl OrbExtractor {
+    /// Check the configuration and draw the sampling pattern.
+    pub fn new(config: OrbConfig) -> Result<Self, SlamError> {
+        if !(config.scale_factor.is_finite() && config.scale_factor > 1.0) {
+            return Err(SlamError::Config { field: "orb.scale_factor", reason: format!("{} must be > 1", config.scale_factor) });
+        }
+        if config.n_levels == 0 || config.n_levels > 32 {
+            return Err(SlamError::Config { field: "orb.n_levels", reason: format!("{} not in 1..=32", config.n_levels) });
+        }
+        if config.cell_size_px < 4 {
+            return Err(SlamError::Config { field: "orb.cell_size_px", reason: "must be ≥ 4".into() });
+        }
+        if config.fast_min_threshold == 0 || config.fast_min_threshold > config.fast_threshold {
+            return Err(SlamError::Config {
+                field: "orb.fast_min_threshold",
+                reason: "must be in 1..=fast_threshold".into(),
+            });
+        }
+        let mut rng = ChaCha8Rng::seed_from_u64(config.pattern_seed);
+        let sigma = 31.0 / 5.0;
+        let draw = |rng: &mut ChaCha8Rng| loop {
+            // Box-Muller pair, rejected outside the pattern radius, rounded to whole pixels.
+            let u1: f64 = rng.random::<f64>().max(1e-12);
+            let u2: f64 = rng.random();
+            let r = sigma * (-2.0 * u1.ln()).sqrt();
+            let (x, y) = ((r * (std::f64::consts::TAU * u2).cos()).round(), (r * (std::f64::consts::TAU * u2).sin()).round());
+            if x * x + y * y <= PATTERN_RADIUS_PX * PATTERN_RADIUS_PX {
+                return (x as f32, y as f32);
+            }
+        };
+        let mut pattern = Vec::with_capacity(DESCRIPTOR_BITS);
+        while pattern.len() < DESCRIPTOR_BITS {
+            let (a, b) = (draw(&mut rng), draw(&mut rng));
+            if a != b {
+                pattern.push([a.0, a.1, b.0, b.1]);
+            }
+        }
+        let mut umax = [0usize; HALF_PATCH_PX + 1];
+        for (v, u) in umax.iter_mut().enumerate() {
+            let r2 = (HALF_PATCH_PX * HALF_PATCH_PX - v * v) as f64;
+            *u = r2.sqrt().round() as usize;
+        }
+        // Features per level: geometric in the level's area ratio (ORB-SLAM2).
+        let inv = 1.0 / config.scale_factor;
+        let n = config.n_levels;
+        let first = config.n_features as f64 * (1.0 - inv) / (1.0 - inv.powi(n as i32));
+        let mut features_per_level = Vec::with_capacity(n);
+        let mut total = 0usize;
+        for l in 0..n {
+            let k = if l + 1 == n {
+                config.n_features.saturating_sub(total)
+            } else {
+                (first * inv.powi(l as i32)).round() as usize
+            };
+            total += k;
+            features_per_level.push(k);
+        }
+        Ok(Self {
+            config,
+            levels: Vec::new(),
+            pattern,
+            umax,
+            score_buf: Vec::new(),
+            corners: Vec::new(),
+            col_sums: Vec::new(),
+            cand: Vec::new(),
+            features_per_level,
+        })
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &OrbConfig {
+        &self.config
+    }
+
+    /// Detect and describe up to `n_features` keypoints. An image smaller than the patch gives an
+    /// empty set (not an error); a buffer of the wrong length is an error.
+    pub fn extract(&mut self, image: &GreyImage) -> Result<Features, SlamError> {
+        let (w, h) = (image.width as usize, image.height as usize);
+        if image.data.len() != w * h {
+            return Err(SlamError::BufferLength { field: "grey", expected: w * h, actual: image.data.len() });
+        }
+        self.build_pyramid(image);
+        let mut out = Features::default();
+        for l in 0..self.levels.len() {
+            let want = self.features_per_level.get(l).copied().unwrap_or(0);
+            if want == 0 {
+                continue;
+            }
+            self.detect_level(l, want);
+            self.describe_level(l, &mut out);
+        }
+        Ok(out)
+    }
+
+    fn build_pyramid(&mut self, image: &GreyImage) {
+        let (w0, h0) = (image.width as usize, image.height as usize);
+        let n = self.config.n_levels;
+        let same = self.levels.len() == n && self.levels.first().is_some_and(|l| l.width == w0 && l.height == h0);
+        if !same {
+            self.levels = (0..n)
+                .map(|l| {
+                    let s = self.config.scale_factor.powi(l as i32);
+                    let (w, h) = (((w0 as f64) / s).round() as usize, ((h0 as f64) / s).round() as usize);
+                    Level { width: w, height: h, scale: s as f32, image: vec![0; w * h], blurred: vec![0; w * h] }
+                })
+                .collect();
+            self.score_buf = vec![0; w0 * h0];
+            self.col_sums = vec![0; w0];
+        }
+        if let Some(l0) = self.levels.first_mut() {
+            l0.image.copy_from_slice(&image.data);
+        }
+        for l in 1..n {
+            let (prev, rest) = self.levels.split_at_mut(l);
+            if let (Some(src), Some(dst)) = (prev.last(), rest.first_mut()) {
+                resize_bilinear(src, dst);
+            }
+        }
+        for level in &mut self.levels {
+            box_blur5(level, &mut self.col_sums);
+        }
+    }
+
+    fn detect_level(&mut self, l: usize, want: usize) {
+        self.corners.clear();
+        let Some(level) = self.levels.get(l) else { return };
+        let (w, h) = (level.width, level.height);
+        if w <= 2 * EDGE_PX || h <= 2 * EDGE_PX {
+            return;
+        }
+        let img = &level.image;
+        let t_min = i16::from(self.config.fast_min_threshold);
+        let offsets: [isize; 16] = CIRCLE.map(|(dx, dy)| dy * w as isize + dx);
+        let cell = self.config.cell_size_px;
+        let ncx = (w - 2 * EDGE_PX).div_ceil(cell);
+        let n = w - 2 * EDGE_PX;
+        let t8 = self.config.fast_min_threshold;
+        let mut cand = std::mem::take(&mut self.cand);
+        cand.resize(n.next_multiple_of(8), 0);
+        for y in EDGE_PX..h - EDGE_PX {
+            let row = y * w;
+            // Vectorisable pre-test: two adjacent compass pixels (of 0, 4, 8, 12) both brighter
+            // or both darker, which every 9-arc implies.
+            {
+                let c = &img[row + EDGE_PX..row + EDGE_PX + n];
+                let up = &img[row - 3 * w + EDGE_PX..row - 3 * w + EDGE_PX + n];
+                let dn = &img[row + 3 * w + EDGE_PX..row + 3 * w + EDGE_PX + n];
+                let rt = &img[row + EDGE_PX + 3..row + EDGE_PX + 3 + n];
+                let lt = &img[row + EDGE_PX - 3..row + EDGE_PX - 3 + n];
+                for i in 0..n {
+                    let cv = c[i];
+                    let (hi, lo) = (cv.saturating_add(t8), cv.saturating_sub(t8));
+                    let (b0, b1, b2, b3) = (up[i] > hi, rt[i] > hi, dn[i] > hi, lt[i] > hi);
+                    let (d0, d1, d2, d3) = (up[i] < lo, rt[i] < lo, dn[i] < lo, lt[i] < lo);
+                    let any = (b0 & b1) | (b1 & b2) | (b2 & b3) | (b3 & b0) | (d0 & d1) | (d1 & d2) | (d2 & d3) | (d3 & d0);
+                    cand[i] = u8::from(any);
+                }
+            }
+            for (chunk_i, chunk) in cand[..n.next_multiple_of(8)].chunks_exact(8).enumerate() {
+                let bits = u64::from_le_bytes([chunk[0], chunk[1], chunk[2], chunk[3], chunk[4], chunk[5], chunk[6], chunk[7]]);
+                if bits == 0 {
+                    continue;
+                }
+                for (j, &flag) in chunk.iter().enumerate() {
+                    let xi = chunk_i * 8 + j;
+                    if flag == 0 || xi >= n {
+                        continue;
+                    }
+                    let x = xi + EDGE_PX;
+                    let i = (row + x) as isize;
+                    let c = i16::from(img[row + x]);
+                    let mut diff = [0i16; 16];
+                    let (mut mb, mut md) = (0u32, 0u32);
+                    for (k, o) in offsets.iter().enumerate() {
+                        let d = i16::from(img[(i + o) as usize]) - c;
+                        diff[k] = d;
+                        mb |= u32::from(d > t_min) << k;
+                        md |= u32::from(d < -t_min) << k;
+                    }
+                    let (rb, rd) = (has_run9(mb), has_run9(md));
+                    if !(rb || rd) {
+                        continue;
+                    }
+                    let score = if rb { arc_score(&diff) } else { arc_score(&diff.map(|v| -v)) };
+                    let cid = ((y - EDGE_PX) / cell) * ncx + (x - EDGE_PX) / cell;
+                    self.corners.push(Corner { x: x as u32, y: y as u32, score: score as u16, key: cid as u32 });
+                    self.score_buf[row + x] = score as u16;
+                }
+            }
+        }
+        self.cand = cand;
+        // 3x3 non-maximum suppression (ties: the first in raster order wins).
+        let buf = &self.score_buf;
+        let strong = u16::from(self.config.fast_threshold);
+        let mut n_cells = 0usize;
+        self.corners.retain(|c| {
+            let i = c.y as usize * w + c.x as usize;
+            let s = c.score;
+            let before = [i - w - 1, i - w, i - w + 1, i - 1];
+            let after = [i + 1, i + w - 1, i + w, i + w + 1];
+            n_cells = n_cells.max(c.key as usize + 1);
+            before.iter().all(|&j| buf[j] < s) && after.iter().all(|&j| buf[j] <= s)
+        });
+        // Clear the score map for the next level.
+        for y in EDGE_PX..h - EDGE_PX {
+            for v in &mut self.score_buf[y * w + EDGE_PX..y * w + w - EDGE_PX] {
+                *v = 0;
+            }
+        }
+        // Weak corners only in cells without a strong one.
+        let mut has_strong = vec![false; n_cells];
+        for c in &self.corners {
+            if c.score >= strong {
+                if let Some(f) = has_strong.get_mut(c.key as usize) {
+                    *f = true;
+                }
+            }
+        }
+        self.corners.retain(|c| c.score >= strong || !has_strong.get(c.key as usize).copied().unwrap_or(false));
+        if self.corners.len() > want {
+            // Round-robin over cells: rank within the cell first, then score.
+            self.corners.sort_unstable_by_key(|c| (c.key, u16::MAX - c.score));
+            let mut rank = 0u32;
+            let mut prev = u32::MAX;
+            for c in &mut self.corners {
+                rank = if c.key == prev { rank + 1 } else { 0 };
+                prev = c.key;
+                c.key = rank;
+            }
+            self.corners.select_nth_unstable_by_key(want, |c| (c.key, u16::MAX - c.score, c.y, c.x));
+            self.corners.truncate(want);
+        }
+        // Deterministic output order.
+        self.corners.sort_unstable_by_key(|c| (c.y, c.x));
+    }
+
+    fn describe_level(&self, l: usize, out: &mut Features) {
+        let Some(level) = self.levels.get(l) else { return };
+        let w = level.width;
+        for c in &self.corners {
+            let (x, y) = (c.x as usize, c.y as usize);
+            // Intensity centroid over the radius-15 disc.
+            let center = y * w + x;
+            let img = &level.image;
+            let mut m10: i32 = 0;
+            let mut m01: i32 = 0;
+            for u in -(HALF_PATCH_PX as isize)..=HALF_PATCH_PX as isize {
+                m10 += u as i32 * i32::from(img[(center as isize + u) as usize]);
+            }
+            for v in 1..=HALF_PATCH_PX {
+                let d = self.umax[v] as isize;
+                let mut v_sum: i32 = 0;
+                let (lo_row, hi_row) = (center - v * w, center + v * w);
+                for u in -d..=d {
+                    let plus = i32::from(img[(hi_row as isize + u) as usize]);
+                    let minus = i32::from(img[(lo_row as isize + u) as usize]);
+                    v_sum += plus - minus;
+                    m10 += u as i32 * (plus + minus);
+                }
+                m01 += v as i32 * v_sum;
+            }
+            let angle = (m01 as f32).atan2(m10 as f32);
+            let (s, co) = angle.sin_cos();
+            let blur = &level.blurred;
+            let mut desc = [0u64; 4];
+            for (k, p) in self.pattern.iter().enumerate() {
+                let u1 = round_i(p[0] * co - p[1] * s);
+                let v1 = round_i(p[0] * s + p[1] * co);
+                let u2 = round_i(p[2] * co - p[3] * s);
+                let v2 = round_i(p[2] * s + p[3] * co);
+                let a = blur[(center as isize + v1 * w as isize + u1) as usize];
+                let b = blur[(center as isize + v2 * w as isize + u2) as usize];
+                if a < b {
+                    desc[k / 64] |= 1 << (k % 64);
+                }
+            }
+            out.keypoints.push(Keypoint {
+                x: c.x as f32 * level.scale,
+                y: c.y as f32 * level.scale,
+                level: l as u8,
+                scale: level.scale,
+                angle_rad: angle,
+                score: c.score,
+            });
+            out.descriptors.push(desc);
+        }
+    }
+}
+
+/// Whether a 16-bit circular mask holds 9 contiguous set bits.
+#[inline]
+fn has_run9(m: u32) -> bool {
+    let x = m | (m << 16);
+    let a = x & (x >> 1);
+    let b = a & (a >> 2);
+    let c = b & (b >> 4);
+    (c & (x >> 8)) != 0
+}
+
+/// Round half away from zero without a libm call.
+#[inline]
+fn round_i(v: f32) -> isize {
+    (v + 0.5f32.copysign(v)) as isize
+}
+
+/// Largest threshold at which `diff` (circle minus centre) has 9 contiguous values above it,
+/// minus one (i.e. the FAST score for the "brighter" arc; negate `diff` for the darker one).
+#[inline]
+fn arc_score(diff: &[i16; 16]) -> i16 {
+    let mut m2 = [0i16; 16];
+    for k in 0..16 {
+        m2[k] = diff[k].min(diff[(k + 1) & 15]);
+    }
+    let mut m4 = [0i16; 16];
+    for k in 0..16 {
+        m4[k] = m2[k].min(m2[(k + 2) & 15]);
+    }
+    let mut best = i16::MIN;
+    for k in 0..16 {
+        let m8 = m4[k].min(m4[(k + 4) & 15]);
+        best = best.max(m8.min(diff[(k + 8) & 15]));
+    }
+    best - 1
+}
+
+/// Bilinear downscale of `src` into `dst` (sizes already set), fixed point (8-bit weights).
+fn resize_bilinear(src: &Level, dst: &mut Level) {
+    let (sw, sh, dw, dh) = (src.width, src.height, dst.width, dst.height);
+    if sw == 0 || sh == 0 || dw == 0 || dh == 0 {
+        return;
+    }
+    let (rx, ry) = (sw as f32 / dw as f32, sh as f32 / dh as f32);
+    let cols: Vec<(usize, u32)> = (0..dw)
+        .map(|x| {
+            let fx = ((x as f32 + 0.5) * rx - 0.5).clamp(0.0, (sw - 1) as f32);
+            let x0 = (fx as usize).min(sw.saturating_sub(2));
+            (x0, ((fx - x0 as f32) * 256.0).round().min(256.0) as u32)
+        })
+        .collect();
+    for y in 0..dh {
+        let fy = ((y as f32 + 0.5) * ry - 0.5).clamp(0.0, (sh - 1) as f32);
+        let y0 = (fy as usize).min(sh.saturating_sub(2));
+        let wy = ((fy - y0 as f32) * 256.0).round().min(256.0) as u32;
+        let y1 = (y0 + 1).min(sh - 1);
+        let (r0, r1) = (&src.image[y0 * sw..y0 * sw + sw], &src.image[y1 * sw..y1 * sw + sw]);
+        let out = &mut dst.image[y * dw..y * dw + dw];
+        for (o, &(x0, wx)) in out.iter_mut().zip(&cols) {
+            let x1 = (x0 + 1).min(sw - 1);
+            let top = u32::from(r0[x0]) * (256 - wx) + u32::from(r0[x1]) * wx;
+            let bottom = u32::from(r1[x0]) * (256 - wx) + u32::from(r1[x1]) * wx;
+            *o = ((top * (256 - wy) + bottom * wy + 32768) >> 16) as u8;
+        }
+    }
+}
+
+/// 5x5 box smoothing of a level into its `blurred` buffer (borders of 2 px copied unsmoothed).
+fn box_blur5(level: &mut Level, col_sums: &mut Vec<u16>) {
+    let (w, h) = (level.width, level.height);
+    level.blurred.copy_from_slice(&level.image);
+    if w < 5 || h < 5 {
+        return;
+    }
+    col_sums.resize(w, 0);
+    let img = &level.image;
+    for y in 2..h - 2 {
+        let rows: [&[u8]; 5] = [
+            &img[(y - 2) * w..(y - 1) * w],
+            &img[(y - 1) * w..y * w],
+            &img[y * w..(y + 1) * w],
+            &img[(y + 1) * w..(y + 2) * w],
+            &img[(y + 2) * w..(y + 3) * w],
+        ];
+        for (x, s) in col_sums[..w].iter_mut().enumerate() {
+            *s = u16::from(rows[0][x]) + u16::from(rows[1][x]) + u16::from(rows[2][x]) + u16::from(rows[3][x]) + u16::from(rows[4][x]);
+        }
+        let out = &mut level.blurred[y * w + 2..y * w + w - 2];
+        for (o, win) in out.iter_mut().zip(col_sums[..w].windows(5)) {
+            let sum = u32::from(win[0]) + u32::from(win[1]) + u32::from(win[2]) + u32::from(win[3]) + u32::from(win[4]);
+            *o = ((sum * 2621 + 32768) >> 16) as u8;
+        }
+    }
+}
