@@ -39,7 +39,7 @@
 //! 1. ORB features ([`OrbConfig`]: 8 levels, factor 1.2, FAST-9 at threshold 20 with a fall-back
 //!    to 7 in grid cells without a corner, 1000 features spread round-robin over 30-px cells,
 //!    orientation by intensity centroid (radius 15), 256-bit steered BRIEF on a 5x5
-//!    box-smoothed level with a seeded Gaussian pattern). Depth is read at each keypoint's pixel.
+//!    box-smoothed level with a seeded pattern uniform over a 16-px disc). Depth is read at each keypoint's pixel.
 //! 2. Empty map: the frame initialises it (map points from every keypoint with depth) at the
 //!    prior; it needs [`TrackerConfig::min_init_points`] keypoints with depth.
 //! 3. Seed: the last pose times the prior's motion since the last frame (exact within a view,
