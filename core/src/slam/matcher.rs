@@ -80,7 +80,7 @@ pub fn match_brute_force(
 }
 
 /// Which matches fall in the three most populated bins of the orientation-change histogram
-/// (second and third bins only if they hold ≥ 10 % of the first, as in ORB-SLAM2).
+/// (second and third bins only if they hold more than 10 % of the first, as in ORB-SLAM2).
 pub fn orientation_consistent(matches: &[FeatureMatch], query: &[Keypoint], train: &[Keypoint], bins: usize) -> Vec<bool> {
     let bins = bins.max(1);
     let bin_of: Vec<Option<usize>> = matches
@@ -98,7 +98,7 @@ pub fn orientation_consistent(matches: &[FeatureMatch], query: &[Keypoint], trai
     let mut order: Vec<usize> = (0..bins).collect();
     order.sort_by_key(|&b| (std::cmp::Reverse(hist[b]), b));
     let top = hist[order[0]];
-    let kept: Vec<usize> = order.iter().take(3).copied().filter(|&b| hist[b] > 0 && hist[b] * 10 >= top).collect();
+    let kept: Vec<usize> = order.iter().take(3).copied().filter(|&b| hist[b] > 0 && hist[b] * 10 > top).collect();
     bin_of.iter().map(|b| b.is_some_and(|b| kept.contains(&b))).collect()
 }
 
@@ -149,5 +149,57 @@ impl KeypointGrid {
                 }
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn kp(x: f32, y: f32, angle_rad: f32) -> Keypoint {
+        Keypoint { x, y, level: 0, scale: 1.0, angle_rad, score: 10 }
+    }
+
+    #[test]
+    fn grid_radius_search_equals_brute_force() {
+        let kps: Vec<Keypoint> = (0..400).map(|i| kp((i * 37 % 640) as f32 + 0.5, (i * 53 % 480) as f32 + 0.25, 0.0)).collect();
+        let grid = KeypointGrid::new(&kps, 640, 480, 16.0);
+        let mut out = Vec::new();
+        for (u, v, r) in [(100.0, 100.0, 30.0), (0.0, 0.0, 50.0), (639.0, 479.0, 12.0), (-40.0, 10.0, 45.0), (320.0, 240.0, 1000.0)] {
+            grid.within(&kps, u, v, r, &mut out);
+            let mut got: Vec<u32> = out.clone();
+            got.sort_unstable();
+            let want: Vec<u32> = (0..kps.len() as u32).filter(|&i| (kps[i as usize].x - u).hypot(kps[i as usize].y - v) <= r).collect();
+            assert_eq!(got, want, "query ({u}, {v}, {r})");
+        }
+        grid.within(&kps, f32::NAN, 3.0, 10.0, &mut out);
+        assert!(out.is_empty());
+    }
+
+    #[test]
+    fn orientation_check_drops_the_odd_rotation() {
+        // Ten matches rotate by ~30°, one by 180°: the latter is dropped.
+        let q: Vec<Keypoint> = (0..11).map(|i| kp(i as f32, 0.0, 0.1)).collect();
+        let mut t: Vec<Keypoint> = (0..11).map(|i| kp(i as f32, 0.0, 0.1 + 30f32.to_radians())).collect();
+        t[10].angle_rad = 0.1 + std::f32::consts::PI;
+        let m: Vec<FeatureMatch> = (0..11).map(|i| FeatureMatch { query_index: i, train_index: i, distance: 0 }).collect();
+        let keep = orientation_consistent(&m, &q, &t, 30);
+        assert_eq!(keep.iter().filter(|&&k| k).count(), 10);
+        assert!(!keep[10]);
+    }
+
+    #[test]
+    fn brute_force_applies_ratio_and_uniqueness() {
+        let d = |b: u64| [b, 0, 0, 0];
+        let query = vec![d(0b1111), d(0xFFFF_0000), d(0b1111)];
+        let train = vec![d(0b1111), d(0xFFFF_0001)];
+        let kq = vec![kp(0.0, 0.0, 0.0); 3];
+        let kt = vec![kp(0.0, 0.0, 0.0); 2];
+        let cfg = MatchConfig { check_orientation: false, ..MatchConfig::default() };
+        let m = match_brute_force(&query, &kq, &train, &kt, &cfg);
+        // Query 0 and 2 both want train 0 at distance 0: only the first is kept; query 1 → train 1.
+        assert_eq!(m.len(), 2);
+        assert_eq!((m[0].query_index, m[0].train_index, m[0].distance), (0, 0, 0));
+        assert_eq!((m[1].query_index, m[1].train_index, m[1].distance), (1, 1, 1));
     }
 }
