@@ -314,7 +314,8 @@ impl OrbExtractor {
                     for (k, o) in offsets.iter().enumerate() {
                         diff[k] = i16::from(img[(i + o) as usize]) - c;
                     }
-                    let score = arc_score(&diff).max(arc_score(&diff.map(|v| -v)));
+                    // Flag bit 0: bright arc, bit 1: dark arc (never both for 9 of 16).
+                    let score = if f & 1 != 0 { arc_score(&diff) } else { arc_score(&diff.map(|v| -v)) };
                     if score < t_min {
                         continue;
                     }
@@ -384,18 +385,23 @@ impl OrbExtractor {
             let img = &level.image;
             let mut m10: i32 = 0;
             let mut m01: i32 = 0;
-            for u in -(HALF_PATCH_PX as isize)..=HALF_PATCH_PX as isize {
-                m10 += u as i32 * i32::from(img[(center as isize + u) as usize]);
+            let hp = HALF_PATCH_PX;
+            if let Some(mid) = img.get(center - hp..=center + hp) {
+                for (u, &p) in (-(hp as i32)..=hp as i32).zip(mid) {
+                    m10 += u * i32::from(p);
+                }
             }
-            for v in 1..=HALF_PATCH_PX {
-                let d = self.umax[v] as isize;
-                let mut v_sum: i32 = 0;
+            for v in 1..=hp {
+                let d = self.umax[v];
                 let (lo_row, hi_row) = (center - v * w, center + v * w);
-                for u in -d..=d {
-                    let plus = i32::from(img[(hi_row as isize + u) as usize]);
-                    let minus = i32::from(img[(lo_row as isize + u) as usize]);
+                let (Some(up), Some(dn)) = (img.get(lo_row - d..=lo_row + d), img.get(hi_row - d..=hi_row + d)) else {
+                    continue;
+                };
+                let mut v_sum: i32 = 0;
+                for ((u, &minus), &plus) in (-(d as i32)..=d as i32).zip(up).zip(dn) {
+                    let (plus, minus) = (i32::from(plus), i32::from(minus));
                     v_sum += plus - minus;
-                    m10 += u as i32 * (plus + minus);
+                    m10 += u * (plus + minus);
                 }
                 m01 += v as i32 * v_sum;
             }
@@ -405,13 +411,20 @@ impl OrbExtractor {
             let blur = &level.blurred;
             let wi = w as isize;
             let mut desc = [0u64; 4];
-            if let Some(rot) = self.rotated.get(bin * DESCRIPTOR_BITS..(bin + 1) * DESCRIPTOR_BITS) {
-                for (k, p) in rot.iter().enumerate() {
-                    let i1 = center as isize + isize::from(p[1]) * wi + isize::from(p[0]);
-                    let i2 = center as isize + isize::from(p[3]) * wi + isize::from(p[2]);
-                    if blur[i1 as usize] < blur[i2 as usize] {
-                        desc[k / 64] |= 1 << (k % 64);
+            // The patch (radius PATTERN_RADIUS_PX ≤ EDGE_PX) lies inside the level.
+            let r = PATTERN_RADIUS_PX as usize;
+            let (p0, p1) = (center - r * w - r, center + r * w + r + 1);
+            if let (Some(rot), Some(patch)) = (self.rotated.get(bin * DESCRIPTOR_BITS..(bin + 1) * DESCRIPTOR_BITS), blur.get(p0..p1)) {
+                let base = (r * w + r) as isize;
+                for (word, tests) in desc.iter_mut().zip(rot.chunks_exact(64)) {
+                    let mut bits = 0u64;
+                    for (b, p) in tests.iter().enumerate() {
+                        let i1 = (base + isize::from(p[1]) * wi + isize::from(p[0])) as usize;
+                        let i2 = (base + isize::from(p[3]) * wi + isize::from(p[2])) as usize;
+                        let (a, c) = (patch.get(i1).copied().unwrap_or(0), patch.get(i2).copied().unwrap_or(0));
+                        bits |= u64::from(a < c) << b;
                     }
+                    *word = bits;
                 }
             }
             out.keypoints.push(Keypoint {
@@ -430,8 +443,8 @@ impl OrbExtractor {
 /// Pixels processed together by [`segment_test_lanes`].
 const LANES: usize = 16;
 
-/// FAST-9 segment test for the `LANES` pixels starting at `start` (flag 1 = corner at threshold
-/// `t`). Written on fixed-size u8 arrays so that it compiles to SIMD.
+/// FAST-9 segment test for the `LANES` pixels starting at `start` at threshold `t` (flag bit 0:
+/// brighter arc, bit 1: darker arc, 0: no corner). Written on fixed-size u8 arrays so that it compiles to SIMD.
 #[inline]
 fn segment_test_lanes(img: &[u8], start: usize, offsets25: &[isize; 25], t: u8) -> [u8; LANES] {
     let mut c = [0u8; LANES];
@@ -484,7 +497,7 @@ fn segment_test_lanes(img: &[u8], start: usize, offsets25: &[isize; 25], t: u8) 
     }
     let mut out = [0u8; LANES];
     for j in 0..LANES {
-        out[j] = u8::from(mb[j].max(md[j]) >= 9);
+        out[j] = u8::from(mb[j] >= 9) | (u8::from(md[j] >= 9) << 1);
     }
     out
 }
