@@ -337,10 +337,13 @@ impl OrbExtractor {
         self.corners.retain(|c| {
             let i = c.y as usize * w + c.x as usize;
             let s = c.score;
-            let before = [i - w - 1, i - w, i - w + 1, i - 1];
-            let after = [i + 1, i + w - 1, i + w, i + w + 1];
             n_cells = n_cells.max(c.key as usize + 1);
-            before.iter().all(|&j| buf[j] < s) && after.iter().all(|&j| buf[j] <= s)
+            match (buf.get(i - w - 1..i - w + 2), buf.get(i - 1..i + 2), buf.get(i + w - 1..i + w + 2)) {
+                (Some(a), Some(m), Some(b)) => {
+                    a[0] < s && a[1] < s && a[2] < s && m[0] < s && m[2] <= s && b[0] <= s && b[1] <= s && b[2] <= s
+                }
+                _ => false,
+            }
         });
         // Clear the score map for the next level.
         for y in EDGE_PX..h - EDGE_PX {

@@ -50,8 +50,8 @@ pub struct TrackerConfig {
     /// See `min_depth_m` (ORB-SLAM2 RGB-D "close point" threshold is 40 baselines ≈ 3.2 m).
     pub max_depth_m: f64,
     /// Search radius of the first (coarse) projection search around the seed pose, level-0
-    /// pixels, multiplied by the point's level scale. Must cover the prior's error (1° ≈ 10 px at
-    /// fx = 600, 1 cm at 0.5 m ≈ 12 px).
+    /// pixels (not scaled by level: it covers pose error, not keypoint noise). Must cover the
+    /// prior's error (1° ≈ 10 px at fx = 600, 1 cm at 0.5 m ≈ 12 px).
     pub coarse_radius_px: f64,
     /// Search radius of the second projection search around the RANSAC pose, pixels × scale.
     pub fine_radius_px: f64,
@@ -523,7 +523,7 @@ impl Tracker {
     /// Known pose: just associate to the map (no pose estimation). Returns map ← camera.
     fn step_known_pose(&self, frame: &FrameData, camera: &PinholeCamera, world_from_camera: Se3) -> (Se3, Vec<PointMatch>, usize) {
         let map_from_camera = world_from_camera; // map frame = world for non-slam sources
-        let matches = self.search_by_projection(frame, camera, &map_from_camera.inverse(), 2.0 * self.config.fine_radius_px);
+        let matches = self.search_by_projection(frame, camera, &map_from_camera.inverse(), 2.0 * self.config.fine_radius_px, true);
         let n = matches.len();
         (map_from_camera, matches, n)
     }
@@ -554,12 +554,12 @@ impl Tracker {
 
     /// Coarse projection search + RANSAC, then fine search + robust refinement. `Err(inliers)`.
     fn estimate_from_seed(&self, frame: &FrameData, camera: &PinholeCamera, seed: &Se3) -> Result<(Se3, Vec<PointMatch>, usize), usize> {
-        let coarse = self.search_by_projection(frame, camera, &seed.inverse(), self.config.coarse_radius_px);
+        let coarse = self.search_by_projection(frame, camera, &seed.inverse(), self.config.coarse_radius_px, false);
         let corr = self.correspondences(frame, &coarse);
         let mut ransac = self.config.ransac;
         ransac.seed ^= self.frame_index.wrapping_mul(0x9E37_79B9_7F4A_7C15);
         let est = solve_pnp_ransac(&corr, camera, seed, &ransac, &self.config.refine).map_err(|_| 0usize)?;
-        let fine = self.search_by_projection(frame, camera, &est.world_from_camera.inverse(), self.config.fine_radius_px);
+        let fine = self.search_by_projection(frame, camera, &est.world_from_camera.inverse(), self.config.fine_radius_px, true);
         let corr = self.correspondences(frame, &fine);
         let refined = refine_pose(&corr, camera, &est.world_from_camera, &self.config.refine).map_err(|_| est.n_inliers)?;
         if refined.n_inliers < self.config.min_tracked_inliers {
@@ -587,7 +587,14 @@ impl Tracker {
 
     /// Project every map point with `camera_from_map` and match it to the best keypoint within
     /// `radius_px × scale` (ratio test; each keypoint keeps its closest point).
-    fn search_by_projection(&self, frame: &FrameData, camera: &PinholeCamera, camera_from_map: &Se3, radius_px: f64) -> Vec<PointMatch> {
+    fn search_by_projection(
+        &self,
+        frame: &FrameData,
+        camera: &PinholeCamera,
+        camera_from_map: &Se3,
+        radius_px: f64,
+        scale_radius: bool,
+    ) -> Vec<PointMatch> {
         let kps = &frame.features.keypoints;
         let mut best_for_kp: Vec<Option<(u32, u64)>> = vec![None; kps.len()];
         let mut cand = Vec::new();
@@ -601,7 +608,7 @@ impl Tracker {
             if !camera.contains(uv) {
                 continue;
             }
-            let r = radius_px * scale_factor.powi(i32::from(p.level));
+            let r = if scale_radius { radius_px * scale_factor.powi(i32::from(p.level)) } else { radius_px };
             frame.grid.within(kps, uv[0] as f32, uv[1] as f32, r as f32, &mut cand);
             let (mut best, mut second, mut best_i) = (u32::MAX, u32::MAX, usize::MAX);
             for &i in &cand {
