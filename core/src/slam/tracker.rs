@@ -218,7 +218,11 @@ impl TrackOutput {
     /// The "local object" point cloud of the paper (Sec. III-B): the observed map points whose
     /// pixel lies inside `bbox`.
     pub fn points_in_box(&self, bbox: &Box2) -> Vec<ObservedPoint> {
-        self.observed.iter().filter(|p| bbox.contains(p.pixel[0], p.pixel[1])).copied().collect()
+        self.observed
+            .iter()
+            .filter(|p| bbox.contains(p.pixel[0], p.pixel[1]))
+            .copied()
+            .collect()
     }
 
     /// Whether the frame was tracked.
@@ -270,7 +274,12 @@ struct Anchor {
 
 impl Anchor {
     fn new() -> Self {
-        Self { rotation_sum: Matrix3::zeros(), prior_center_sum: Vector3::zeros(), map_center_sum: Vector3::zeros(), n: 0.0 }
+        Self {
+            rotation_sum: Matrix3::zeros(),
+            prior_center_sum: Vector3::zeros(),
+            map_center_sum: Vector3::zeros(),
+            n: 0.0,
+        }
     }
 
     fn add(&mut self, world_from_camera_prior: &Se3, map_from_camera: &Se3) {
@@ -286,7 +295,9 @@ impl Anchor {
             return Se3::identity();
         }
         let svd = self.rotation_sum.svd(true, true);
-        let (Some(u), Some(v_t)) = (svd.u, svd.v_t) else { return Se3::identity() };
+        let (Some(u), Some(v_t)) = (svd.u, svd.v_t) else {
+            return Se3::identity();
+        };
         let mut fix = Matrix3::identity();
         fix[(2, 2)] = (u * v_t).determinant().signum();
         let r = u * fix * v_t;
@@ -339,14 +350,24 @@ impl Tracker {
         ];
         for (field, v) in positive {
             if !(v.is_finite() && v > 0.0) {
-                return Err(SlamError::Config { field, reason: format!("{v} must be finite and > 0") });
+                return Err(SlamError::Config {
+                    field,
+                    reason: format!("{v} must be finite and > 0"),
+                });
             }
         }
-        if !(config.max_depth_m > config.min_depth_m) {
-            return Err(SlamError::Config { field: "max_depth_m", reason: "must exceed min_depth_m".into() });
+        if config.max_depth_m.partial_cmp(&config.min_depth_m) != Some(std::cmp::Ordering::Greater)
+        {
+            return Err(SlamError::Config {
+                field: "max_depth_m",
+                reason: "must exceed min_depth_m".into(),
+            });
         }
         if config.local_keyframes == 0 {
-            return Err(SlamError::Config { field: "local_keyframes", reason: "must be ≥ 1".into() });
+            return Err(SlamError::Config {
+                field: "local_keyframes",
+                reason: "must be ≥ 1".into(),
+            });
         }
         let orb = OrbExtractor::new(config.orb)?;
         Ok(Self {
@@ -399,7 +420,10 @@ impl Tracker {
     /// All map points in the world frame, by id.
     pub fn map_points_in_world(&self) -> Vec<(u64, Point3<f64>)> {
         let w = self.world_from_map();
-        self.points.iter().map(|(id, p)| (*id, w * p.p_in_map)).collect()
+        self.points
+            .iter()
+            .map(|(id, p)| (*id, w * p.p_in_map))
+            .collect()
     }
 
     /// The trajectory so far, one pose per tracked call, re-expressed with the latest world ← map
@@ -429,18 +453,35 @@ impl Tracker {
         }
         let frame_index = self.frame_index;
         self.frame_index += 1;
-        let prior = self.config.kinematic_noise.perturb(&input.world_from_camera_fk, input.view_index, frame_index);
+        let prior = self.config.kinematic_noise.perturb(
+            &input.world_from_camera_fk,
+            input.view_index,
+            frame_index,
+        );
         let features = self.orb.extract(input.grey)?;
         let depth_m: Vec<Option<f64>> = features
             .keypoints
             .iter()
             .map(|k| {
                 let (u, v) = (k.x.round() as u32, k.y.round() as u32);
-                input.depth.at(u, v).map(f64::from).filter(|d| (self.config.min_depth_m..=self.config.max_depth_m).contains(d))
+                input
+                    .depth
+                    .at(u, v)
+                    .map(f64::from)
+                    .filter(|d| (self.config.min_depth_m..=self.config.max_depth_m).contains(d))
             })
             .collect();
-        let grid = KeypointGrid::new(&features.keypoints, input.camera.width, input.camera.height, 16.0);
-        let frame = FrameData { features, depth_m, grid };
+        let grid = KeypointGrid::new(
+            &features.keypoints,
+            input.camera.width,
+            input.camera.height,
+            16.0,
+        );
+        let frame = FrameData {
+            features,
+            depth_m,
+            grid,
+        };
         let camera = input.camera;
         let mut out = TrackOutput {
             frame_index,
@@ -458,9 +499,15 @@ impl Tracker {
             PoseSource::Kinematics => Some(prior),
             PoseSource::GroundTruth => input.world_from_camera_gt,
         };
-        let min_features = self.config.min_tracked_inliers.max(self.config.ransac.min_inliers);
+        let min_features = self
+            .config
+            .min_tracked_inliers
+            .max(self.config.ransac.min_inliers);
         let result = if frame.features.keypoints.len() < min_features {
-            Err(LostReason::TooFewFeatures { found: frame.features.keypoints.len(), required: min_features })
+            Err(LostReason::TooFewFeatures {
+                found: frame.features.keypoints.len(),
+                required: min_features,
+            })
         } else if let Some(pose) = known {
             Ok(self.step_known_pose(&frame, camera, pose))
         } else {
@@ -472,7 +519,8 @@ impl Tracker {
                 if self.config.pose_source == PoseSource::Slam {
                     self.anchor.add(&prior, &map_from_camera);
                 }
-                let (map_from_camera, observed_ids, kf) = self.after_tracking(&frame, camera, map_from_camera, &matches);
+                let (map_from_camera, observed_ids, kf) =
+                    self.after_tracking(&frame, camera, map_from_camera, &matches);
                 let world_from_map = self.world_from_map();
                 out.world_from_camera = world_from_map * map_from_camera;
                 out.n_inliers = n_inliers;
@@ -501,10 +549,16 @@ impl Tracker {
                 self.lost_streak += 1;
                 out.state = TrackingState::Lost { reason };
                 out.world_from_camera = known.unwrap_or(prior);
-                if self.lost_streak >= self.config.reset_after_lost.max(1) && self.config.pose_source == PoseSource::Slam {
+                if self.lost_streak >= self.config.reset_after_lost.max(1)
+                    && self.config.pose_source == PoseSource::Slam
+                {
                     self.reset_map();
                 }
-                self.records.push(FrameRecord { epoch: self.epoch, map_from_camera: None, world_from_camera: out.world_from_camera });
+                self.records.push(FrameRecord {
+                    epoch: self.epoch,
+                    map_from_camera: None,
+                    world_from_camera: out.world_from_camera,
+                });
             }
         }
         out.n_map_points = self.points.len();
@@ -521,19 +575,38 @@ impl Tracker {
     }
 
     /// Known pose: just associate to the map (no pose estimation). Returns map ← camera.
-    fn step_known_pose(&self, frame: &FrameData, camera: &PinholeCamera, world_from_camera: Se3) -> (Se3, Vec<PointMatch>, usize) {
+    fn step_known_pose(
+        &self,
+        frame: &FrameData,
+        camera: &PinholeCamera,
+        world_from_camera: Se3,
+    ) -> (Se3, Vec<PointMatch>, usize) {
         let map_from_camera = world_from_camera; // map frame = world for non-slam sources
-        let matches = self.search_by_projection(frame, camera, &map_from_camera.inverse(), 2.0 * self.config.fine_radius_px, true);
+        let matches = self.search_by_projection(
+            frame,
+            camera,
+            &map_from_camera.inverse(),
+            2.0 * self.config.fine_radius_px,
+            true,
+        );
         let n = matches.len();
         (map_from_camera, matches, n)
     }
 
-    fn step_slam(&self, frame: &FrameData, camera: &PinholeCamera, prior: &Se3) -> Result<(Se3, Vec<PointMatch>, usize), LostReason> {
+    fn step_slam(
+        &self,
+        frame: &FrameData,
+        camera: &PinholeCamera,
+        prior: &Se3,
+    ) -> Result<(Se3, Vec<PointMatch>, usize), LostReason> {
         let anchored = self.world_from_map().inverse() * prior;
         if self.points.is_empty() {
             let valid = frame.depth_m.iter().flatten().count();
             if valid < self.config.min_init_points {
-                return Err(LostReason::NoDepth { valid, required: self.config.min_init_points });
+                return Err(LostReason::NoDepth {
+                    valid,
+                    required: self.config.min_init_points,
+                });
             }
             return Ok((anchored, Vec::new(), 0));
         }
@@ -549,23 +622,49 @@ impl Tracker {
                 Err(n) => best_inliers = best_inliers.max(n),
             }
         }
-        Err(LostReason::TooFewInliers { inliers: best_inliers, required: self.config.min_tracked_inliers })
+        Err(LostReason::TooFewInliers {
+            inliers: best_inliers,
+            required: self.config.min_tracked_inliers,
+        })
     }
 
     /// Coarse projection search + RANSAC, then fine search + robust refinement. `Err(inliers)`.
-    fn estimate_from_seed(&self, frame: &FrameData, camera: &PinholeCamera, seed: &Se3) -> Result<(Se3, Vec<PointMatch>, usize), usize> {
-        let coarse = self.search_by_projection(frame, camera, &seed.inverse(), self.config.coarse_radius_px, false);
+    fn estimate_from_seed(
+        &self,
+        frame: &FrameData,
+        camera: &PinholeCamera,
+        seed: &Se3,
+    ) -> Result<(Se3, Vec<PointMatch>, usize), usize> {
+        let coarse = self.search_by_projection(
+            frame,
+            camera,
+            &seed.inverse(),
+            self.config.coarse_radius_px,
+            false,
+        );
         let corr = self.correspondences(frame, &coarse);
         let mut ransac = self.config.ransac;
         ransac.seed ^= self.frame_index.wrapping_mul(0x9E37_79B9_7F4A_7C15);
-        let est = solve_pnp_ransac(&corr, camera, seed, &ransac, &self.config.refine).map_err(|_| 0usize)?;
-        let fine = self.search_by_projection(frame, camera, &est.world_from_camera.inverse(), self.config.fine_radius_px, true);
+        let est = solve_pnp_ransac(&corr, camera, seed, &ransac, &self.config.refine)
+            .map_err(|_| 0usize)?;
+        let fine = self.search_by_projection(
+            frame,
+            camera,
+            &est.world_from_camera.inverse(),
+            self.config.fine_radius_px,
+            true,
+        );
         let corr = self.correspondences(frame, &fine);
-        let refined = refine_pose(&corr, camera, &est.world_from_camera, &self.config.refine).map_err(|_| est.n_inliers)?;
+        let refined = refine_pose(&corr, camera, &est.world_from_camera, &self.config.refine)
+            .map_err(|_| est.n_inliers)?;
         if refined.n_inliers < self.config.min_tracked_inliers {
             return Err(refined.n_inliers);
         }
-        let inlier_matches: Vec<PointMatch> = fine.iter().zip(&refined.inliers).filter_map(|(m, &k)| k.then_some(*m)).collect();
+        let inlier_matches: Vec<PointMatch> = fine
+            .iter()
+            .zip(&refined.inliers)
+            .filter_map(|(m, &k)| k.then_some(*m))
+            .collect();
         Ok((refined.world_from_camera, inlier_matches, refined.n_inliers))
     }
 
@@ -604,16 +703,26 @@ impl Tracker {
             if x.z < self.config.min_depth_m {
                 continue;
             }
-            let Some(uv) = camera.project(&x) else { continue };
+            let Some(uv) = camera.project(&x) else {
+                continue;
+            };
             if !camera.contains(uv) {
                 continue;
             }
-            let r = if scale_radius { radius_px * scale_factor.powi(i32::from(p.level)) } else { radius_px };
-            frame.grid.within(kps, uv[0] as f32, uv[1] as f32, r as f32, &mut cand);
+            let r = if scale_radius {
+                radius_px * scale_factor.powi(i32::from(p.level))
+            } else {
+                radius_px
+            };
+            frame
+                .grid
+                .within(kps, uv[0] as f32, uv[1] as f32, r as f32, &mut cand);
             let (mut best, mut second, mut best_i) = (u32::MAX, u32::MAX, usize::MAX);
             for &i in &cand {
                 let i = i as usize;
-                let (Some(k), Some(d)) = (kps.get(i), frame.features.descriptors.get(i)) else { continue };
+                let (Some(k), Some(d)) = (kps.get(i), frame.features.descriptors.get(i)) else {
+                    continue;
+                };
                 if k.level.abs_diff(p.level) > self.config.max_level_difference {
                     continue;
                 }
@@ -626,7 +735,9 @@ impl Tracker {
                     second = dist;
                 }
             }
-            if best > self.config.match_max_distance || (second != u32::MAX && best as f32 >= self.config.match_ratio * second as f32) {
+            if best > self.config.match_max_distance
+                || (second != u32::MAX && best as f32 >= self.config.match_ratio * second as f32)
+            {
                 continue;
             }
             if let Some(slot) = best_for_kp.get_mut(best_i) {
@@ -638,14 +749,25 @@ impl Tracker {
         best_for_kp
             .iter()
             .enumerate()
-            .filter_map(|(i, s)| s.map(|(_, id)| PointMatch { point_id: id, keypoint: i }))
+            .filter_map(|(i, s)| {
+                s.map(|(_, id)| PointMatch {
+                    point_id: id,
+                    keypoint: i,
+                })
+            })
             .collect()
     }
 
     /// Bookkeeping after a successful pose: visibility counts, keyframe insertion (new points,
     /// local BA, culling). Returns the (possibly BA-refined) pose, the observed points and whether
     /// a keyframe was inserted.
-    fn after_tracking(&mut self, frame: &FrameData, camera: &PinholeCamera, map_from_camera: Se3, matches: &[PointMatch]) -> (Se3, Vec<PointMatch>, bool) {
+    fn after_tracking(
+        &mut self,
+        frame: &FrameData,
+        camera: &PinholeCamera,
+        map_from_camera: Se3,
+        matches: &[PointMatch],
+    ) -> (Se3, Vec<PointMatch>, bool) {
         let camera_from_map = map_from_camera.inverse();
         for p in self.points.values_mut() {
             let x = camera_from_map * p.p_in_map;
@@ -661,7 +783,8 @@ impl Tracker {
         self.frames_since_keyframe += 1;
         let need_kf = self.keyframes.is_empty()
             || self.frames_since_keyframe >= self.config.keyframe_max_interval
-            || (matches.len() as f64) < self.config.keyframe_inlier_ratio * self.last_keyframe_tracked as f64;
+            || (matches.len() as f64)
+                < self.config.keyframe_inlier_ratio * self.last_keyframe_tracked as f64;
         if !need_kf {
             return (map_from_camera, matches.to_vec(), false);
         }
@@ -669,14 +792,22 @@ impl Tracker {
         (pose, observed, true)
     }
 
-    fn insert_keyframe(&mut self, frame: &FrameData, camera: &PinholeCamera, map_from_camera: Se3, matches: &[PointMatch]) -> (Se3, Vec<PointMatch>) {
+    fn insert_keyframe(
+        &mut self,
+        frame: &FrameData,
+        camera: &PinholeCamera,
+        map_from_camera: Se3,
+        matches: &[PointMatch],
+    ) -> (Se3, Vec<PointMatch>) {
         let kf_index = self.keyframes.len();
         let kps = &frame.features.keypoints;
         let mut observations = Vec::with_capacity(matches.len() + self.config.max_new_points);
         let mut observed = matches.to_vec();
         let mut used = vec![false; kps.len()];
         for m in matches {
-            let Some(k) = kps.get(m.keypoint) else { continue };
+            let Some(k) = kps.get(m.keypoint) else {
+                continue;
+            };
             if let Some(u) = used.get_mut(m.keypoint) {
                 *u = true;
             }
@@ -697,7 +828,9 @@ impl Tracker {
             .collect();
         fresh.sort_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));
         for &(i, d) in fresh.iter().take(self.config.max_new_points) {
-            let (Some(k), Some(desc)) = (kps.get(i), frame.features.descriptors.get(i)) else { continue };
+            let (Some(k), Some(desc)) = (kps.get(i), frame.features.descriptors.get(i)) else {
+                continue;
+            };
             let p_in_camera = camera.unproject(f64::from(k.x), f64::from(k.y), d);
             let id = self.next_point_id;
             self.next_point_id += 1;
@@ -713,18 +846,37 @@ impl Tracker {
                     n_found: 1,
                 },
             );
-            observations.push(KfObservation { point_id: id, pixel: [f64::from(k.x), f64::from(k.y)], depth_m: Some(d), sigma_px: f64::from(k.scale) });
-            observed.push(PointMatch { point_id: id, keypoint: i });
+            observations.push(KfObservation {
+                point_id: id,
+                pixel: [f64::from(k.x), f64::from(k.y)],
+                depth_m: Some(d),
+                sigma_px: f64::from(k.scale),
+            });
+            observed.push(PointMatch {
+                point_id: id,
+                keypoint: i,
+            });
         }
-        self.keyframes.push(KeyFrame { map_from_camera, observations });
+        self.keyframes.push(KeyFrame {
+            map_from_camera,
+            observations,
+        });
         self.frames_since_keyframe = 0;
-        self.last_keyframe_tracked = matches.len().max(self.keyframes.last().map_or(0, |k| k.observations.len()).min(matches.len() + self.config.max_new_points));
+        self.last_keyframe_tracked = matches.len().max(
+            self.keyframes
+                .last()
+                .map_or(0, |k| k.observations.len())
+                .min(matches.len() + self.config.max_new_points),
+        );
         if self.config.pose_source == PoseSource::Slam && self.keyframes.len() > 1 {
             self.local_bundle_adjustment(camera);
         }
         self.cull();
         observed.retain(|m| self.points.contains_key(&m.point_id));
-        let pose = self.keyframes.last().map_or(map_from_camera, |k| k.map_from_camera);
+        let pose = self
+            .keyframes
+            .last()
+            .map_or(map_from_camera, |k| k.map_from_camera);
         (pose, observed)
     }
 
@@ -743,7 +895,7 @@ impl Tracker {
         }
         // Keyframes involved: the window plus fixed ones observing its points.
         let mut kf_set: BTreeMap<usize, usize> = BTreeMap::new();
-        for (id, _) in &point_index {
+        for id in point_index.keys() {
             if let Some(p) = self.points.get(id) {
                 for &k in &p.keyframes {
                     let n = kf_set.len();
@@ -769,10 +921,18 @@ impl Tracker {
         let mut observations = Vec::new();
         let mut obs_src = Vec::new();
         for (pi, &k) in kf_list.iter().enumerate() {
-            let Some(kf) = self.keyframes.get(k) else { continue };
+            let Some(kf) = self.keyframes.get(k) else {
+                continue;
+            };
             for (oi, o) in kf.observations.iter().enumerate() {
                 if let Some(&pt) = point_index.get(&o.point_id) {
-                    observations.push(BundleObservation { pose: pi, point: pt, pixel: o.pixel, depth_m: o.depth_m, sigma_px: o.sigma_px });
+                    observations.push(BundleObservation {
+                        pose: pi,
+                        point: pt,
+                        pixel: o.pixel,
+                        depth_m: o.depth_m,
+                        sigma_px: o.sigma_px,
+                    });
                     obs_src.push((k, oi));
                 }
             }
@@ -784,7 +944,10 @@ impl Tracker {
             }
         }
         let mut problem = BundleProblem {
-            camera_from_world: kf_list.iter().filter_map(|&k| self.keyframes.get(k).map(|kf| kf.map_from_camera.inverse())).collect(),
+            camera_from_world: kf_list
+                .iter()
+                .filter_map(|&k| self.keyframes.get(k).map(|kf| kf.map_from_camera.inverse()))
+                .collect(),
             fixed,
             points,
             observations,
@@ -795,7 +958,9 @@ impl Tracker {
         problem.optimize(camera, &self.config.bundle);
         for (pi, &k) in kf_list.iter().enumerate() {
             if !problem.fixed[pi] {
-                if let (Some(kf), Some(p)) = (self.keyframes.get_mut(k), problem.camera_from_world.get(pi)) {
+                if let (Some(kf), Some(p)) =
+                    (self.keyframes.get_mut(k), problem.camera_from_world.get(pi))
+                {
                     kf.map_from_camera = p.inverse();
                 }
             }
@@ -814,7 +979,9 @@ impl Tracker {
             }
         }
         for (k, list) in drop {
-            let Some(kf) = self.keyframes.get_mut(k) else { continue };
+            let Some(kf) = self.keyframes.get_mut(k) else {
+                continue;
+            };
             for &oi in list.iter().rev() {
                 if oi < kf.observations.len() {
                     let o = kf.observations.remove(oi);
@@ -833,10 +1000,14 @@ impl Tracker {
             if p.keyframes.is_empty() {
                 return false;
             }
-            if p.n_visible >= c.cull_min_visible && f64::from(p.n_found) < c.cull_found_ratio * f64::from(p.n_visible) {
+            if p.n_visible >= c.cull_min_visible
+                && f64::from(p.n_found) < c.cull_found_ratio * f64::from(p.n_visible)
+            {
                 return false;
             }
-            !(c.cull_after_keyframes > 0 && n_kf >= p.created_kf + 1 + c.cull_after_keyframes && p.keyframes.len() < 2)
+            !(c.cull_after_keyframes > 0
+                && n_kf >= p.created_kf + 1 + c.cull_after_keyframes
+                && p.keyframes.len() < 2)
         });
     }
 }
@@ -847,7 +1018,10 @@ fn check_pose(pose: &Se3, field: &'static str) -> Result<(), SlamError> {
     }
     let qn = pose.rotation.quaternion().norm();
     if (qn - 1.0).abs() > 1e-6 {
-        return Err(SlamError::NotRigid { field, reason: format!("rotation quaternion has norm {qn}") });
+        return Err(SlamError::NotRigid {
+            field,
+            reason: format!("rotation quaternion has norm {qn}"),
+        });
     }
     Ok(())
 }
@@ -856,15 +1030,35 @@ fn validate(input: &TrackInput<'_>) -> Result<(), SlamError> {
     input.camera.validate()?;
     let (w, h) = (input.camera.width, input.camera.height);
     for (field, iw, ih, len) in [
-        ("grey", input.grey.width, input.grey.height, input.grey.data.len()),
-        ("depth", input.depth.width, input.depth.height, input.depth.data.len()),
+        (
+            "grey",
+            input.grey.width,
+            input.grey.height,
+            input.grey.data.len(),
+        ),
+        (
+            "depth",
+            input.depth.width,
+            input.depth.height,
+            input.depth.data.len(),
+        ),
     ] {
         if iw != w || ih != h {
-            return Err(SlamError::ImageSize { field, width: w, height: h, actual_width: iw, actual_height: ih });
+            return Err(SlamError::ImageSize {
+                field,
+                width: w,
+                height: h,
+                actual_width: iw,
+                actual_height: ih,
+            });
         }
         let expected = w as usize * h as usize;
         if len != expected {
-            return Err(SlamError::BufferLength { field, expected, actual: len });
+            return Err(SlamError::BufferLength {
+                field,
+                expected,
+                actual: len,
+            });
         }
     }
     check_pose(&input.world_from_camera_fk, "world_from_camera_fk")
