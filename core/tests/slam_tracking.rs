@@ -303,3 +303,71 @@ fn bad_input_is_a_typed_error_or_a_lost_frame() {
         out.state
     );
 }
+
+#[test]
+fn garbage_frames_never_panic() {
+    // Seeded noise images and depths (including NaN, inf, negative and huge values), at several
+    // sizes, in every pose source: each call returns Ok (possibly lost) and never panics.
+    let mut state = 17u64;
+    let mut next = move || objslam_core::slam::synthetic::splitmix64(&mut state);
+    for (w, h) in [(640u32, 480u32), (64, 48), (37, 41), (8, 8)] {
+        let cam = PinholeCamera::from_fovy(w, h, 1.0).unwrap_or_else(|e| panic!("{e}"));
+        for source in [
+            PoseSource::Slam,
+            PoseSource::Kinematics,
+            PoseSource::GroundTruth,
+        ] {
+            let mut tracker = Tracker::new(TrackerConfig {
+                pose_source: source,
+                ..TrackerConfig::default()
+            })
+            .unwrap_or_else(|e| panic!("{e}"));
+            for f in 0..3 {
+                let n = (w * h) as usize;
+                let grey = GreyImage {
+                    width: w,
+                    height: h,
+                    data: (0..n).map(|_| (next() % 256) as u8).collect(),
+                };
+                let specials = [f32::NAN, f32::INFINITY, -1.0, 1e30, 0.0];
+                let depth = DepthImage {
+                    width: w,
+                    height: h,
+                    data: (0..n)
+                        .map(|_| {
+                            let r = next();
+                            if r % 7 == 0 {
+                                specials[(r / 7 % 5) as usize]
+                            } else {
+                                (r % 3000) as f32 / 1000.0
+                            }
+                        })
+                        .collect(),
+                };
+                let pose = gt_pose(f);
+                let input = TrackInput {
+                    grey: &grey,
+                    depth: &depth,
+                    camera: &cam,
+                    world_from_camera_fk: pose,
+                    view_index: f as u64,
+                    world_from_camera_gt: Some(pose),
+                };
+                let out = tracker
+                    .track(&input)
+                    .unwrap_or_else(|e| panic!("{w}x{h} {source:?} frame {f}: {e}"));
+                assert!(out
+                    .world_from_camera
+                    .translation
+                    .vector
+                    .iter()
+                    .all(|v| v.is_finite()));
+                assert!(out.observed.iter().all(|p| p
+                    .p_in_world
+                    .coords
+                    .iter()
+                    .all(|v| v.is_finite())));
+            }
+        }
+    }
+}

@@ -363,6 +363,22 @@ impl Tracker {
                 reason: "must exceed min_depth_m".into(),
             });
         }
+        let n = config.kinematic_noise;
+        for (field, v) in [
+            ("kinematic_noise.bias_trans_m", n.bias_trans_m),
+            ("kinematic_noise.bias_rot_deg", n.bias_rot_deg),
+            ("kinematic_noise.jitter_trans_m", n.jitter_trans_m),
+            ("kinematic_noise.jitter_rot_deg", n.jitter_rot_deg),
+            ("refine.depth_baseline_m", config.refine.depth_baseline_m),
+            ("bundle.depth_baseline_m", config.bundle.depth_baseline_m),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(SlamError::Config {
+                    field,
+                    reason: format!("{v} must be finite and ≥ 0"),
+                });
+            }
+        }
         if config.local_keyframes == 0 {
             return Err(SlamError::Config {
                 field: "local_keyframes",
