@@ -36,16 +36,21 @@
 //! only `slam` estimates the pose (and runs bundle adjustment).
 //!
 //! # Per-frame algorithm (`slam`)
-//! 1. ORB features ([`OrbConfig`]: 8 levels, factor 1.2, FAST-9 at threshold 20 with a fall-back
-//!    to 7 in grid cells without a corner, 1000 features spread round-robin over 30-px cells,
-//!    orientation by intensity centroid (radius 15), 256-bit steered BRIEF on a 5x5
-//!    box-smoothed level with a seeded pattern uniform over a 16-px disc). Depth is read at each keypoint's pixel.
+//! 1. ORB features ([`OrbConfig`]): 8 levels, factor 1.2 (bilinear); FAST-9 (16 pixels at a
+//!    time, OpenCV-style segment test) at the low threshold 7, scored by the largest passing
+//!    threshold, 3x3 non-maximum suppression; corners below the threshold 20 are kept only in
+//!    30-px grid cells with no corner ≥ 20 (the selection ORB-SLAM2's 20 / 7 two-pass detection
+//!    makes); 1000 features split over levels geometrically and taken round-robin over cells
+//!    (best of every cell first); orientation by intensity centroid (radius 15); 256-bit steered
+//!    BRIEF on a 5x5 box-smoothed level with a seeded pattern uniform over a 16-px disc,
+//!    pre-rotated to 256 angles. Depth is read at each keypoint's (rounded) pixel.
 //! 2. Empty map: the frame initialises it (map points from every keypoint with depth) at the
 //!    prior; it needs [`TrackerConfig::min_init_points`] keypoints with depth.
 //! 3. Seed: the last pose times the prior's motion since the last frame (exact within a view,
 //!    where the bias is constant); if that fails, the prior expressed in the map frame.
-//! 4. Coarse projection search around the seed ([`TrackerConfig::coarse_radius_px`], ratio test
-//!    0.9, Hamming ≤ 80), RANSAC over prior-seeded 3-point minimal sets ([`pnp`] explains the
+//! 4. Coarse projection search of every map point around the seed
+//!    ([`TrackerConfig::coarse_radius_px`] = 40 px, ratio test 0.9, Hamming ≤ 80, level within
+//!    ±2, each keypoint keeps its closest point), RANSAC over prior-seeded 3-point minimal sets ([`pnp`] explains the
 //!    choice: Gauss-Newton from the prior on 3 correspondences instead of P3P, since the prior is
 //!    always within a few cm / degrees), fine search around that pose
 //!    ([`TrackerConfig::fine_radius_px`]), then ORB-SLAM2-style motion-only refinement: 4 rounds of
@@ -72,6 +77,15 @@
 //! (most recent keyframes instead of the covisibility graph), the anchor, the depth residual
 //! weight, and no loop closing / relocalisation (a lost streak of
 //! [`TrackerConfig::reset_after_lost`] frames re-initialises the map at the prior instead).
+//!
+//! # Evaluation
+//! [`metrics`] computes ATE RMSE (no alignment: estimate and truth share the world frame) and
+//! RPE between consecutive frames. Two trajectories are available: the online poses (each
+//! [`TrackOutput::world_from_camera`], what the object map used at that time) and
+//! [`Tracker::trajectory`] (each frame's map-frame pose as estimated when it was tracked,
+//! re-expressed with the latest world ← map anchor; lost frames keep their prior).
+//! On the test sequence (`core/tests/slam_tracking.rs`: 40 frames, 20 views, 1 cm / 1° bias)
+//! the online ATE is 3.1 mm, the trajectory ATE 1.3 mm, the prior's 9.9 mm.
 //!
 //! Frames and units: `world_from_camera` in OpenCV camera axes, metres, pixels of level 0.
 //! Determinism: every random choice is seeded ([`RansacConfig::seed`] mixed with the frame index,
