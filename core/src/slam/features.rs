@@ -375,14 +375,31 @@ impl OrbExtractor {
                 }
             }
         }
+        // Weak corners (score below the FAST threshold) only count in cells without a strong one
+        // (decided before suppression, which is then skipped for the dropped ones).
+        let strong = u16::from(self.config.fast_threshold);
+        let n_cells = self
+            .corners
+            .iter()
+            .map(|c| c.key as usize + 1)
+            .max()
+            .unwrap_or(0);
+        let mut has_strong = vec![false; n_cells];
+        for c in &self.corners {
+            if c.score >= strong {
+                if let Some(f) = has_strong.get_mut(c.key as usize) {
+                    *f = true;
+                }
+            }
+        }
         // 3x3 non-maximum suppression (ties: the first in raster order wins).
         let buf = &self.score_buf;
-        let strong = u16::from(self.config.fast_threshold);
-        let mut n_cells = 0usize;
         self.corners.retain(|c| {
+            if c.score < strong && has_strong.get(c.key as usize).copied().unwrap_or(false) {
+                return false;
+            }
             let i = c.y as usize * w + c.x as usize;
             let s = c.score;
-            n_cells = n_cells.max(c.key as usize + 1);
             match (
                 buf.get(i - w - 1..i - w + 2),
                 buf.get(i - 1..i + 2),
@@ -407,18 +424,6 @@ impl OrbExtractor {
                 *v = 0;
             }
         }
-        // Weak corners only in cells without a strong one.
-        let mut has_strong = vec![false; n_cells];
-        for c in &self.corners {
-            if c.score >= strong {
-                if let Some(f) = has_strong.get_mut(c.key as usize) {
-                    *f = true;
-                }
-            }
-        }
-        self.corners.retain(|c| {
-            c.score >= strong || !has_strong.get(c.key as usize).copied().unwrap_or(false)
-        });
         if self.corners.len() > want {
             // Round-robin over cells: rank within the cell first, then the FAST score.
             self.corners
@@ -685,7 +690,7 @@ fn box_blur(level: &mut Level, col_sums: &mut Vec<u16>) {
             for k in 0..N {
                 sum += u32::from(cs[i + k]);
             }
-            *o = ((sum * INV + 32768) >> 16).min(255) as u8;
+            *o = ((sum * INV + 32768) >> 16) as u8;
         }
     }
 }
