@@ -371,3 +371,35 @@ fn garbage_frames_never_panic() {
         }
     }
 }
+
+#[test]
+fn tracking_is_deterministic_and_the_tracker_is_send() {
+    fn assert_send<T: Send>() {}
+    assert_send::<Tracker>();
+    let scene = TabletopScene::tabletop(5);
+    let cam = camera();
+    let frames: Vec<_> = (0..6)
+        .map(|i| (gt_pose(3 * i), scene.render(&cam, &gt_pose(3 * i))))
+        .collect();
+    let run = || {
+        let mut tracker = Tracker::new(TrackerConfig::default()).unwrap_or_else(|e| panic!("{e}"));
+        frames
+            .iter()
+            .enumerate()
+            .map(|(i, (pose, (grey, depth)))| {
+                let input = TrackInput {
+                    grey,
+                    depth,
+                    camera: &cam,
+                    world_from_camera_fk: *pose,
+                    view_index: i as u64,
+                    world_from_camera_gt: None,
+                };
+                tracker.track(&input).unwrap_or_else(|e| panic!("{e}"))
+            })
+            .collect::<Vec<_>>()
+    };
+    let (a, b) = (run(), run());
+    assert!(a.iter().all(|o| o.is_ok()));
+    assert_eq!(a, b);
+}
