@@ -73,15 +73,18 @@ fi
 
 # 5. The native package, built by maturin in release mode, installed into the venv.
 step "5/5 native package objslam (maturin, release)"
-src_hash="$(cat Cargo.toml Cargo.lock pyproject.toml 2>/dev/null | sha256sum | cut -c1-8)$(find core bindings -type f \( -name '*.rs' -o -name 'Cargo.toml' \) -newer "$STAMP_DIR/native" 2>/dev/null | head -1)"
+native_hash() {
+  { find core/src bindings/src -name '*.rs' | sort; echo Cargo.toml Cargo.lock pyproject.toml core/Cargo.toml bindings/Cargo.toml; } \
+    | xargs cat 2>/dev/null | sha256sum | cut -c1-16
+}
+src_hash="$(native_hash)"
 if [ -f "$STAMP_DIR/native" ] && [ "$(cat "$STAMP_DIR/native")" = "$src_hash" ] \
    && "$PY" -c "import objslam._native" 2>/dev/null; then
   step "    ok: up to date"
 else
   step "    building (a clean build of the dependency tree takes 10-15 min on 2 cores)"
-  "$VENV/bin/maturin" develop --release -q || fail "maturin develop --release"
-  src_hash="$(cat Cargo.toml Cargo.lock pyproject.toml 2>/dev/null | sha256sum | cut -c1-8)"
-  echo "$src_hash" > "$STAMP_DIR/native"
+  VIRTUAL_ENV="$VENV" "$VENV/bin/maturin" develop --release -q || fail "maturin develop --release"
+  native_hash > "$STAMP_DIR/native"
   "$PY" -c "import objslam._native" || fail "import objslam._native after build"
   step "    built"
 fi

@@ -10,15 +10,20 @@
 //! - [`frame`]: sensor frames and detections, validated at the boundary.
 //! - [`map`]: the object map, labels, versioned save/load.
 //! - [`naive`]: the foundation's baseline estimator (the `naive` association ablation).
+//! - [`explore`]: surface occupancy grids, ray-cast visibility, the next-best-view utility,
+//!   candidate views and exploration baselines.
 //! - [`eval`]: matching to ground truth, 3D/2D IoU, CDE, YAE, counts.
+//! - [`plan`]: Panda kinematics, collision checking, RRT-Connect, Ruckig trajectories, grasps.
 //! - `record` (feature `rerun`): one Rerun recording per run.
 //! - [`slam`]: RGB-D visual tracking (ORB features, PnP + RANSAC, local BA), pose sources, ATE/RPE.
 
 pub mod eval;
+pub mod explore;
 pub mod frame;
 pub mod geometry;
 pub mod map;
 pub mod naive;
+pub mod plan;
 #[cfg(feature = "rerun")]
 pub mod record;
 pub mod slam;

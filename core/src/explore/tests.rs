@@ -1,0 +1,851 @@
+//! Unit tests of the explore module on synthetic maps (closed forms and geometric facts).
+
+use nalgebra::{Point3, Vector3};
+
+use super::*;
+use crate::geometry::{se3_from_yaw, ObjectGeometry, Shape};
+use crate::map::{EstimateStage, Label, MapObject};
+
+fn object(label: Label, center: [f64; 3], yaw: f64, half: [f64; 3]) -> MapObject {
+    MapObject {
+        id: 0,
+        label,
+        world_from_object: se3_from_yaw(Vector3::from(center), yaw),
+        half_extents: Vector3::from(half),
+        observations: Vec::new(),
+        points_in_world: Vec::new(),
+        stage: EstimateStage::Raw,
+    }
+}
+
+fn map_of(objects: Vec<MapObject>) -> ObjectMap {
+    let mut m = ObjectMap::new();
+    for o in objects {
+        m.insert(o);
+    }
+    m
+}
+
+fn camera() -> PinholeCamera {
+    PinholeCamera::from_fovy(640, 480, 1.0).unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// Eye at `dist` from `center`, azimuth `az_deg` about z, elevation `el_deg`.
+fn eye_around(center: [f64; 3], az_deg: f64, el_deg: f64, dist: f64) -> Point3<f64> {
+    let (az, el) = (az_deg.to_radians(), el_deg.to_radians());
+    Point3::from(
+        Vector3::from(center)
+            + Vector3::new(el.cos() * az.cos(), el.cos() * az.sin(), el.sin()) * dist,
+    )
+}
+
+fn view(eye: Point3<f64>, target: [f64; 3]) -> Se3 {
+    look_at(&eye, &Point3::from(Vector3::from(target))).unwrap_or_else(|e| panic!("{e}"))
+}
+
+fn face_index(f: Face) -> usize {
+    Face::ALL.iter().position(|x| *x == f).unwrap_or(usize::MAX)
+}
+
+#[test]
+fn all_unknown_grid_has_maximal_entropy() {
+    let o = object(Label::Block, [0.5, 0.0, 0.02], 0.3, [0.05, 0.03, 0.02]);
+    let g = SurfaceGrid::new(&o, &GridConfig::default()).unwrap_or_else(|e| panic!("{e}"));
+    let s = g.stats();
+    // ±x: 6×4, ±y: 10×4, top: 10×6 cells of 1 cm.
+    assert_eq!(s.cells(), 2 * 24 + 2 * 40 + 60);
+    assert_eq!(s.unknown, s.cells());
+    assert!(
+        (s.entropy_bits - s.cells() as f64).abs() < 1e-9,
+        "H_obj = {}",
+        s.entropy_bits
+    );
+    assert!((s.normalized_entropy() - 1.0).abs() < 1e-12);
+    assert_eq!(s.occupied_ratio(), 0.0);
+    // H(p) ≤ H(0.5) = 1 bit for every p.
+    for p in [0.01, 0.2, 0.49, 0.51, 0.9] {
+        assert!(binary_entropy_bits(p) < 1.0);
+    }
+    assert!((binary_entropy_bits(0.5) - 1.0).abs() < 1e-15);
+    // A cylinder: four quarter arcs plus the masked top disc, all unknown, H̄ = 1.
+    let c = object(Label::Can, [0.4, 0.1, 0.06], 0.0, [0.03, 0.03, 0.06]);
+    let gc = SurfaceGrid::new(&c, &GridConfig::default()).unwrap_or_else(|e| panic!("{e}"));
+    let sc = gc.stats();
+    let top = gc.face_stats(face_index(Face::Top)).cells();
+    // Disc of radius 3 cm on 1 cm cells: between π(r − √2/2 cm)² and π(r + √2/2 cm)² cells.
+    assert!(top > 15 && top < 45, "top cells {top}");
+    // Each quarter arc: ceil(π·3/2 cm) = 5 cells around, 12 up.
+    assert_eq!(sc.cells() - top, 4 * 5 * 12);
+    assert!((sc.normalized_entropy() - 1.0).abs() < 1e-12);
+}
+
+#[test]
+fn every_cell_centre_maps_back_to_its_cell() {
+    let cfg = GridConfig::default();
+    for o in [
+        object(Label::Book, [0.5, 0.0, 0.02], 0.7, [0.1, 0.07, 0.02]),
+        object(Label::Bottle, [0.3, -0.2, 0.1], 0.0, [0.035, 0.035, 0.1]),
+    ] {
+        let g = SurfaceGrid::new(&o, &cfg).unwrap_or_else(|e| panic!("{e}"));
+        for c in g.cells() {
+            let pose = g
+                .cell_pose(c)
+                .unwrap_or_else(|| panic!("no pose for {c:?}"));
+            assert!((pose.normal_in_object.norm() - 1.0).abs() < 1e-12);
+            // Slightly outside the surface along the normal still lands on the same cell.
+            let p = pose.p_in_object + pose.normal_in_object * 0.001;
+            assert_eq!(
+                g.cell_of_point(&p, 0.03),
+                Some(c),
+                "{:?} cell {c:?}",
+                o.label
+            );
+        }
+        // A point below the object (nearest face: bottom) and a far point are not projected.
+        let h = o.half_extents;
+        assert_eq!(
+            g.cell_of_point(&Point3::new(0.0, 0.0, -h.z - 0.001), 0.03),
+            None
+        );
+        assert_eq!(
+            g.cell_of_point(&Point3::new(0.0, 0.0, h.z + 0.2), 0.03),
+            None
+        );
+    }
+}
+
+fn top_points(o: &MapObject, spacing_m: f64) -> Vec<Point3<f64>> {
+    let h = o.half_extents;
+    let mut pts = Vec::new();
+    let (nx, ny) = (
+        (2.0 * h.x / spacing_m) as usize,
+        (2.0 * h.y / spacing_m) as usize,
+    );
+    for i in 0..nx {
+        for j in 0..ny {
+            let p = Point3::new(
+                -h.x + (i as f64 + 0.5) * spacing_m,
+                -h.y + (j as f64 + 0.5) * spacing_m,
+                h.z,
+            );
+            pts.push(o.world_from_object * p);
+        }
+    }
+    pts
+}
+
+#[test]
+fn observing_a_face_lowers_normalized_entropy() {
+    let cfg = GridConfig::default();
+    let map = map_of(vec![object(
+        Label::Block,
+        [0.5, 0.0, 0.05],
+        0.4,
+        [0.05, 0.05, 0.05],
+    )]);
+    let o = &map.objects[0];
+    let mut grids = ExplorationGrids::new();
+    grids.sync(&map, &cfg).unwrap_or_else(|e| panic!("{e}"));
+    let before = grids.get(o.id).map(|g| g.stats()).unwrap_or_default();
+    // Straight down from 0.4 m above the top: only the top faces the camera within 80°.
+    let pose = view(Point3::new(0.5, 0.0, 0.5), [0.5, 0.0, 0.05]);
+    let obs = [ObservedPoints {
+        object_id: o.id,
+        points_in_world: top_points(o, 0.005),
+    }];
+    let up = grids
+        .integrate_frame(&map, &camera(), &pose, &obs, None, &cfg)
+        .unwrap_or_else(|e| panic!("{e}"));
+    let g = grids.get(o.id).unwrap_or_else(|| panic!("no grid"));
+    let after = g.stats();
+    assert!(
+        after.normalized_entropy() < before.normalized_entropy() - 0.03,
+        "{} → {}",
+        before.normalized_entropy(),
+        after.normalized_entropy()
+    );
+    let top = g.face_stats(face_index(Face::Top));
+    assert_eq!(top.occupied, 100);
+    assert_eq!(up.objects[0].hits, 100);
+    assert_eq!(up.objects[0].points_dropped, 0);
+    for f in [Face::PosX, Face::NegX, Face::PosY, Face::NegY] {
+        assert_eq!(g.face_stats(face_index(f)).unknown, 100, "{f:?}");
+    }
+    // Expected value: 100 cells at p_hit, 400 unknown.
+    let expected = (100.0 * binary_entropy_bits(cfg.p_hit) + 400.0) / 500.0;
+    assert!((after.normalized_entropy() - expected).abs() < 1e-6);
+
+    // A side view with no points and no depth: the facing side and the top become free, the far
+    // side stays unknown.
+    let mut grids2 = ExplorationGrids::new();
+    let side = view(
+        eye_around([0.5, 0.0, 0.05], 0.0, 30.0, 0.5),
+        [0.5, 0.0, 0.05],
+    );
+    let map0 = map_of(vec![object(
+        Label::Block,
+        [0.5, 0.0, 0.05],
+        0.0,
+        [0.05, 0.05, 0.05],
+    )]);
+    grids2
+        .integrate_frame(&map0, &camera(), &side, &[], None, &cfg)
+        .unwrap_or_else(|e| panic!("{e}"));
+    let g2 = grids2.get(0).unwrap_or_else(|| panic!("no grid"));
+    assert_eq!(g2.face_stats(face_index(Face::PosX)).free, 100);
+    assert_eq!(g2.face_stats(face_index(Face::Top)).free, 100);
+    assert_eq!(g2.face_stats(face_index(Face::NegX)).unknown, 100);
+    assert!(g2.stats().normalized_entropy() < 1.0);
+    let m = grids2.mean_normalized_entropy().unwrap_or(f64::NAN);
+    assert!((m - g2.stats().normalized_entropy()).abs() < 1e-12);
+    assert_eq!(ExplorationGrids::new().mean_normalized_entropy(), None);
+}
+
+#[test]
+fn occluded_cells_stay_unknown() {
+    let cfg = GridConfig::default();
+    let wall = object(Label::Book, [0.4, 0.0, 0.1], 0.0, [0.03, 0.1, 0.1]);
+    let target = object(Label::Block, [0.55, 0.0, 0.04], 0.0, [0.04, 0.04, 0.04]);
+    let eye = Point3::new(0.05, 0.0, 0.08);
+    let pose = view(eye, [0.55, 0.0, 0.04]);
+    let map = map_of(vec![wall.clone(), target.clone()]);
+    let mut grids = ExplorationGrids::new();
+    grids
+        .integrate_frame(&map, &camera(), &pose, &[], None, &cfg)
+        .unwrap_or_else(|e| panic!("{e}"));
+    let g_target = grids.get(1).unwrap_or_else(|| panic!("no grid"));
+    let s = g_target.stats();
+    assert_eq!(
+        s.unknown,
+        s.cells(),
+        "target behind the wall must stay unknown: {s:?}"
+    );
+    let g_wall = grids.get(0).unwrap_or_else(|| panic!("no grid"));
+    assert_eq!(
+        g_wall.face_stats(face_index(Face::NegX)).free,
+        g_wall.face_stats(face_index(Face::NegX)).cells()
+    );
+    // The same cell is reported occluded by the visibility query.
+    let occ = Occluders::from_map(&map, &cfg);
+    let c = g_target
+        .cell_pose(CellRef {
+            face: face_index(Face::NegX),
+            cell: 0,
+        })
+        .unwrap_or_else(|| panic!("cell"));
+    let p_w = target.world_from_object * c.p_in_object;
+    let vis = point_visibility(
+        &p_w,
+        &c.normal_in_object,
+        1,
+        &Viewpoint::new(&camera(), &pose),
+        &occ,
+        &cfg,
+    );
+    assert_eq!(vis, CellVisibility::Occluded);
+    // Control: without the wall the facing side is seen (free).
+    let map_alone = map_of(vec![target]);
+    let mut grids2 = ExplorationGrids::new();
+    grids2
+        .integrate_frame(&map_alone, &camera(), &pose, &[], None, &cfg)
+        .unwrap_or_else(|e| panic!("{e}"));
+    let g2 = grids2.get(0).unwrap_or_else(|| panic!("no grid"));
+    assert_eq!(g2.face_stats(face_index(Face::NegX)).free, 64);
+    // The table plane blocks a camera below it.
+    assert!(occ.segment_blocked(
+        &Point3::new(0.5, 0.5, -0.1),
+        &Point3::new(0.5, 0.0, 0.1),
+        None
+    ));
+}
+
+#[test]
+fn depth_in_front_of_a_cell_leaves_it_unknown_and_matching_depth_makes_it_occupied() {
+    let cfg = GridConfig::default();
+    let map = map_of(vec![object(
+        Label::Block,
+        [0.5, 0.0, 0.05],
+        0.0,
+        [0.05, 0.05, 0.05],
+    )]);
+    let cam = PinholeCamera::from_fovy(64, 48, 1.0).unwrap_or_else(|e| panic!("{e}"));
+    let pose = view(Point3::new(0.5, 0.0, 0.5), [0.5, 0.0, 0.05]);
+    // Everything at 0.2 m: an unmodelled occluder in front of the top (at 0.4 m).
+    let near = DepthImage::new(64, 48, vec![0.2; 64 * 48]).unwrap_or_else(|e| panic!("{e}"));
+    let mut grids = ExplorationGrids::new();
+    let up = grids
+        .integrate_frame(&map, &cam, &pose, &[], Some(&near), &cfg)
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(grids.get(0).map(|g| g.stats().unknown), Some(500));
+    assert_eq!(up.objects[0].depth_rejected, 100);
+    // Depth exactly at the top (0.45 m − 0.05 m − 0.05 m... the top is at z = 0.1, camera at 0.5).
+    let at_top = DepthImage::new(64, 48, vec![0.4; 64 * 48]).unwrap_or_else(|e| panic!("{e}"));
+    grids
+        .integrate_frame(&map, &cam, &pose, &[], Some(&at_top), &cfg)
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(
+        grids
+            .get(0)
+            .map(|g| g.face_stats(face_index(Face::Top)).occupied),
+        Some(100)
+    );
+    // Depth behind the top (the estimate is too tall): free.
+    let far = DepthImage::new(64, 48, vec![0.6; 64 * 48]).unwrap_or_else(|e| panic!("{e}"));
+    let mut grids2 = ExplorationGrids::new();
+    grids2
+        .integrate_frame(&map, &cam, &pose, &[], Some(&far), &cfg)
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(
+        grids2
+            .get(0)
+            .map(|g| g.face_stats(face_index(Face::Top)).free),
+        Some(100)
+    );
+}
+
+fn observe_all_but(grids: &mut ExplorationGrids, id: u32, skip: Face, cfg: &GridConfig) {
+    let g = grids
+        .grids
+        .get_mut(&id)
+        .unwrap_or_else(|| panic!("no grid"));
+    let cells: Vec<CellRef> = g.cells().filter(|c| Face::ALL[c.face] != skip).collect();
+    for c in cells {
+        for _ in 0..6 {
+            g.update_cell(c, c.cell % 3 == 0, cfg);
+        }
+    }
+}
+
+#[test]
+fn utility_prefers_the_view_facing_the_unobserved_face() {
+    let cfg = ExploreConfig::default();
+    let center = [0.5, 0.0, 0.05];
+    let map = map_of(vec![object(Label::Block, center, 0.0, [0.05, 0.05, 0.05])]);
+    let mut grids = ExplorationGrids::new();
+    grids
+        .sync(&map, &cfg.grid)
+        .unwrap_or_else(|e| panic!("{e}"));
+    observe_all_but(&mut grids, 0, Face::NegX, &cfg.grid);
+    let ctx = UtilityContext::new(&map, &grids, &HistoryBook::default(), &camera(), &cfg)
+        .unwrap_or_else(|e| panic!("{e}"));
+    let facing_seen = view(eye_around(center, 0.0, 30.0, 0.45), center);
+    let facing_unseen = view(eye_around(center, 180.0, 30.0, 0.45), center);
+    let side = view(eye_around(center, 90.0, 30.0, 0.45), center);
+    for strategy in [Strategy::ObjectDriven, Strategy::ExpectedGain] {
+        let s = ctx
+            .score_all(&[facing_seen, side, facing_unseen], strategy, None)
+            .unwrap_or_else(|e| panic!("{e}"));
+        assert!(
+            s[2].utility > s[0].utility && s[2].utility > s[1].utility,
+            "{strategy:?}: {:?}",
+            s.iter().map(|x| x.utility).collect::<Vec<_>>()
+        );
+        assert_eq!(next_best_view(&s), Some(2));
+        assert_eq!(s[2].objects.len(), 1);
+        assert!(s[2].objects[0].visible_cells >= 50);
+    }
+    // Motion cost: a far view loses exactly μ·(distance + ρ·angle).
+    let cur = facing_seen;
+    let a = ctx
+        .score(&facing_unseen, Strategy::ExpectedGain, None)
+        .unwrap_or_else(|e| panic!("{e}"));
+    let b = ctx
+        .score(&facing_unseen, Strategy::ExpectedGain, Some(&cur))
+        .unwrap_or_else(|e| panic!("{e}"));
+    let d = (cur.translation.vector - facing_unseen.translation.vector).norm();
+    let ang = cur.rotation.angle_to(&facing_unseen.rotation);
+    let expected = cfg.motion_cost_bits_per_m * (d + cfg.motion_cost_m_per_rad * ang);
+    assert!((a.utility - b.utility - expected).abs() < 1e-9);
+}
+
+#[test]
+fn occlusion_term_follows_the_paper_formula() {
+    let cfg = ExploreConfig::default();
+    let a = object(Label::Block, [0.5, 0.0, 0.05], 0.0, [0.05, 0.05, 0.05]);
+    let b = object(Label::Block, [0.62, 0.0, 0.05], 0.0, [0.05, 0.05, 0.05]);
+    let map = map_of(vec![a, b]);
+    let mut grids = ExplorationGrids::new();
+    grids
+        .sync(&map, &cfg.grid)
+        .unwrap_or_else(|e| panic!("{e}"));
+    let ctx = UtilityContext::new(&map, &grids, &HistoryBook::default(), &camera(), &cfg)
+        .unwrap_or_else(|e| panic!("{e}"));
+    // Looking along +x, the two blocks overlap in the image.
+    let s = ctx
+        .score(
+            &view(
+                eye_around([0.56, 0.0, 0.05], 180.0, 20.0, 0.5),
+                [0.56, 0.0, 0.05],
+            ),
+            Strategy::ObjectDriven,
+            None,
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(s.objects.len(), 2);
+    for t in &s.objects {
+        assert!(t.r_iou > 0.1, "{t:?}");
+        assert!((t.h_iou - plogp_bits(t.r_iou / 2.0)).abs() < 1e-12);
+        // No history: p(V̄) = 0 → H_V = 0; s = 1.
+        assert_eq!(t.h_v, 0.0);
+        assert_eq!(t.s, 1.0);
+        assert!((t.total - (t.entropy_term + 0.2 * t.h_iou)).abs() < 1e-9);
+    }
+    // Looking along y they do not overlap.
+    let s2 = ctx
+        .score(
+            &view(
+                eye_around([0.56, 0.0, 0.05], 90.0, 20.0, 0.5),
+                [0.56, 0.0, 0.05],
+            ),
+            Strategy::ObjectDriven,
+            None,
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert!(s2.objects.iter().all(|t| t.r_iou == 0.0));
+}
+
+#[test]
+fn volume_convergence_and_s_rule() {
+    let g = |s: f64| ObjectGeometry {
+        shape: Shape::Cuboid,
+        center: Vector3::new(0.5, 0.0, 0.05),
+        yaw_rad: 0.0,
+        half_extents: Vector3::new(0.05 * s, 0.05, 0.05),
+    };
+    let steady = ObjectHistory {
+        estimates: vec![g(1.0), g(1.0), g(1.0)],
+    };
+    assert!((steady.volume_convergence(2, 0.05) - 1.0).abs() < 1e-12);
+    assert_eq!(steady.consecutive_iou(), Some(1.0));
+    let jump = ObjectHistory {
+        estimates: vec![g(1.0), g(1.0), g(1.0), g(2.0)],
+    };
+    // Normalised volumes 0.8, 0.8, 0.8, 1.6: σ = √0.12, z = 0.6/√0.12 → p = exp(−1.5).
+    assert!((jump.volume_convergence(2, 0.05) - (-1.5f64).exp()).abs() < 1e-9);
+    assert_eq!(
+        ObjectHistory {
+            estimates: vec![g(1.0)]
+        }
+        .volume_convergence(2, 0.05),
+        0.0
+    );
+    let cfg = ExploreConfig::default();
+    assert!(!needs_exploring(0.4, 0.1, 0.9, &cfg));
+    assert!(!needs_exploring(0.9, 0.6, 0.9, &cfg));
+    assert!(needs_exploring(0.4, 0.1, 0.7, &cfg));
+    assert!(needs_exploring(0.6, 0.4, 0.95, &cfg));
+
+    // Stopping: a fully observed, steady object is done; the budget stops anyway.
+    let map = map_of(vec![object(
+        Label::Block,
+        [0.5, 0.0, 0.05],
+        0.0,
+        [0.05, 0.05, 0.05],
+    )]);
+    let mut grids = ExplorationGrids::new();
+    grids
+        .sync(&map, &cfg.grid)
+        .unwrap_or_else(|e| panic!("{e}"));
+    let mut hist = HistoryBook::default();
+    let f0 = object_features(&map, &grids, &hist, &cfg);
+    assert_eq!(stop_reason(&f0, 3, &cfg), None);
+    assert_eq!(stop_reason(&f0, 10, &cfg), Some(StopReason::MaxViews));
+    observe_all_but(&mut grids, 0, Face::Top, &cfg.grid);
+    {
+        let g = grids.grids.get_mut(&0).unwrap_or_else(|| panic!("no grid"));
+        let cells: Vec<CellRef> = g
+            .cells()
+            .filter(|c| Face::ALL[c.face] == Face::Top)
+            .collect();
+        for c in cells {
+            for _ in 0..6 {
+                g.update_cell(c, false, &cfg.grid);
+            }
+        }
+    }
+    hist.record(&map);
+    hist.record(&map);
+    let f1 = object_features(&map, &grids, &hist, &cfg);
+    assert!(
+        f1[0].normalized_entropy < 0.5 && f1[0].volume_probability > 0.99,
+        "{:?}",
+        f1[0]
+    );
+    assert_eq!(stop_reason(&f1, 3, &cfg), Some(StopReason::AllExplored));
+    assert_eq!(stop_reason(&[], 3, &cfg), None);
+}
+
+#[test]
+fn grids_follow_the_object_when_its_estimate_changes() {
+    let cfg = GridConfig::default();
+    let mut map = map_of(vec![object(
+        Label::Block,
+        [0.5, 0.0, 0.05],
+        0.0,
+        [0.05, 0.05, 0.05],
+    )]);
+    let mut grids = ExplorationGrids::new();
+    grids.sync(&map, &cfg).unwrap_or_else(|e| panic!("{e}"));
+    observe_all_but(&mut grids, 0, Face::NegX, &cfg);
+    let before = grids
+        .get(0)
+        .map(|g| g.face_stats(face_index(Face::PosX)))
+        .unwrap_or_default();
+    // Move and rotate: nothing to resample, states unchanged.
+    map.objects[0].world_from_object = se3_from_yaw(Vector3::new(0.45, 0.1, 0.05), 1.0);
+    assert!(grids
+        .sync(&map, &cfg)
+        .unwrap_or_else(|e| panic!("{e}"))
+        .is_empty());
+    assert_eq!(
+        grids.get(0).map(|g| g.face_stats(face_index(Face::PosX))),
+        Some(before)
+    );
+    // Grow by 1.5 along y: +x face (y × z) gets 15 × 10 cells, all still observed; −x unknown.
+    map.objects[0].half_extents = Vector3::new(0.05, 0.075, 0.05);
+    assert_eq!(
+        grids.sync(&map, &cfg).unwrap_or_else(|e| panic!("{e}")),
+        vec![0]
+    );
+    let g = grids.get(0).unwrap_or_else(|| panic!("no grid"));
+    let px = g.face_stats(face_index(Face::PosX));
+    assert_eq!(px.cells(), 150);
+    assert_eq!(px.unknown, 0);
+    assert_eq!(g.face_stats(face_index(Face::NegX)).unknown, 150);
+    // Removed (merged) objects lose their grid.
+    map.objects.clear();
+    grids.sync(&map, &cfg).unwrap_or_else(|e| panic!("{e}"));
+    assert!(grids.grids.is_empty());
+}
+
+fn three_object_map() -> ObjectMap {
+    map_of(vec![
+        object(Label::Block, [0.45, 0.1, 0.04], 0.3, [0.04, 0.03, 0.04]),
+        object(Label::Cup, [0.6, -0.15, 0.05], 0.0, [0.04, 0.04, 0.05]),
+        object(Label::Book, [0.5, -0.3, 0.02], -0.5, [0.1, 0.07, 0.02]),
+    ])
+}
+
+#[test]
+fn same_seed_gives_same_candidates_and_utilities() {
+    let map = three_object_map();
+    let cc = CandidateConfig::default();
+    let cfg = ExploreConfig::default();
+    let a = sample_candidates(&map, &cc, &cfg.grid, &AlwaysReachable, 7)
+        .unwrap_or_else(|e| panic!("{e}"));
+    let b = sample_candidates(&map, &cc, &cfg.grid, &AlwaysReachable, 7)
+        .unwrap_or_else(|e| panic!("{e}"));
+    let c = sample_candidates(&map, &cc, &cfg.grid, &AlwaysReachable, 8)
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(a, b);
+    assert_ne!(a, c);
+    assert!(a.len() >= 30, "{} candidates", a.len());
+    let occ = Occluders::from_map(&map, &cfg.grid);
+    for v in &a {
+        let eye = Point3::from(v.world_from_camera.translation.vector);
+        assert!(camera_position_free(&eye, &occ, &cc));
+        let target = map
+            .get(v.target_object.unwrap_or(u32::MAX))
+            .unwrap_or_else(|| panic!("target"));
+        let d = (target.world_from_object.translation.vector - eye.coords).norm();
+        assert!((0.35 - 1e-9..=0.6 + 1e-9).contains(&d));
+        // The optical axis points at the target.
+        let z = v.world_from_camera.rotation * Vector3::z();
+        assert!(
+            (z.dot(&(target.world_from_object.translation.vector - eye.coords)) / d - 1.0).abs()
+                < 1e-9
+        );
+    }
+    let grids = {
+        let mut g = ExplorationGrids::new();
+        g.integrate_frame(
+            &map,
+            &camera(),
+            &a[0].world_from_camera,
+            &[],
+            None,
+            &cfg.grid,
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        g
+    };
+    let views: Vec<Se3> = a.iter().map(|v| v.world_from_camera).collect();
+    let ctx = UtilityContext::new(&map, &grids, &HistoryBook::default(), &camera(), &cfg)
+        .unwrap_or_else(|e| panic!("{e}"));
+    for strategy in [Strategy::ObjectDriven, Strategy::ExpectedGain] {
+        let s1 = ctx
+            .score_all(&views, strategy, Some(&views[0]))
+            .unwrap_or_else(|e| panic!("{e}"));
+        let s2 = ctx
+            .score_all(&views, strategy, Some(&views[0]))
+            .unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(s1, s2);
+        assert!(next_best_view(&s1).is_some());
+    }
+    // Restricting to one object samples only around it.
+    let one = sample_candidates_around(&map, Some(&[1]), &cc, &cfg.grid, &AlwaysReachable, 7)
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert!(!one.is_empty() && one.iter().all(|v| v.target_object == Some(1)));
+    // A reachability callback filters.
+    let only_positive_y = |p: &Se3| p.translation.vector.y > 0.0;
+    let f = sample_candidates(&map, &cc, &cfg.grid, &only_positive_y, 7)
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert!(!f.is_empty() && f.len() < a.len());
+    assert!(f
+        .iter()
+        .all(|v| v.world_from_camera.translation.vector.y > 0.0));
+}
+
+#[test]
+fn look_at_points_z_at_target_with_image_up_along_world_z() {
+    let eye = Point3::new(0.2, 0.1, 0.4);
+    let target = Point3::new(0.5, 0.0, 0.0);
+    let t = look_at(&eye, &target).unwrap_or_else(|e| panic!("{e}"));
+    let r = t.rotation;
+    let z = r * Vector3::z();
+    assert!((z - (target - eye).normalize()).norm() < 1e-12);
+    let up = r * -Vector3::y();
+    assert!(up.z > 0.0);
+    // The target projects to the principal point.
+    let cam = camera();
+    let uv = cam
+        .project(&(t.inverse() * target))
+        .unwrap_or([f64::NAN; 2]);
+    assert!((uv[0] - cam.cx).abs() < 1e-9 && (uv[1] - cam.cy).abs() < 1e-9);
+    // Straight down: image up points away from the robot base (radially).
+    let down = look_at(&Point3::new(0.5, 0.0, 0.45), &Point3::new(0.5, 0.0, 0.0))
+        .unwrap_or_else(|e| panic!("{e}"));
+    let up_down = down.rotation * -Vector3::y();
+    assert!((up_down - Vector3::x()).norm() < 1e-9, "{up_down:?}");
+    assert!(look_at(&eye, &eye).is_err());
+    assert!(look_at(&Point3::new(f64::NAN, 0.0, 0.0), &target).is_err());
+}
+
+#[test]
+fn baseline_generators() {
+    let table = TableRect {
+        center_m: [0.5, 0.0],
+        size_m: [0.8, 1.2],
+        height_m: 0.0,
+    };
+    let cc = CandidateConfig::default();
+    let init = init_views(&table, &cc).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(init.len(), 4);
+    for v in &init {
+        let z = v.rotation * Vector3::z();
+        assert!((z + Vector3::z()).norm() < 1e-9, "top view");
+        let t = v.translation.vector;
+        assert!((t.z - 0.45).abs() < 1e-12);
+        assert!(((t.x - 0.5).abs() - 0.25).abs() < 1e-12 && (t.y.abs() - 0.45).abs() < 1e-12);
+    }
+    let cam = camera();
+    let cov = coverage_views(&table, &cam, &cc).unwrap_or_else(|e| panic!("{e}"));
+    assert!(cov.len() >= 4);
+    // Boustrophedon: consecutive waypoints move along y within a lane, then one step in x.
+    let first = cov[0].rotation;
+    for v in &cov {
+        assert!(
+            v.rotation.angle_to(&first) < 1e-9,
+            "coverage views share one orientation"
+        );
+        assert!((v.rotation * -Vector3::y() - Vector3::x()).norm() < 1e-9);
+    }
+    for w in cov.windows(2) {
+        let (a, b) = (w[0].translation.vector, w[1].translation.vector);
+        assert!((a.x - b.x).abs() < 1e-12 || (a.y - b.y).abs() < 1e-12);
+    }
+    let map = three_object_map();
+    let r1 = random_views(
+        &table,
+        &map,
+        &cc,
+        &GridConfig::default(),
+        &AlwaysReachable,
+        10,
+        3,
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    let r2 = random_views(
+        &table,
+        &map,
+        &cc,
+        &GridConfig::default(),
+        &AlwaysReachable,
+        10,
+        3,
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(r1.len(), 10);
+    assert_eq!(r1, r2);
+    let never = |_: &Se3| false;
+    assert!(
+        random_views(&table, &map, &cc, &GridConfig::default(), &never, 10, 3)
+            .unwrap_or_default()
+            .is_empty()
+    );
+    assert!(init_views(
+        &TableRect {
+            size_m: [0.0, 1.0],
+            ..table
+        },
+        &cc
+    )
+    .is_err());
+}
+
+#[test]
+fn bad_inputs_give_typed_errors() {
+    let cfg = GridConfig::default();
+    let map = three_object_map();
+    let mut grids = ExplorationGrids::new();
+    let pose = view(Point3::new(0.5, 0.0, 0.5), [0.5, 0.0, 0.0]);
+    let ghost = [ObservedPoints {
+        object_id: 99,
+        points_in_world: vec![Point3::origin()],
+    }];
+    assert_eq!(
+        grids.integrate_frame(&map, &camera(), &pose, &ghost, None, &cfg),
+        Err(ExploreError::UnknownObject { object_id: 99 })
+    );
+    let mut bad_pose = pose;
+    bad_pose.translation.vector.x = f64::NAN;
+    assert!(matches!(
+        grids.integrate_frame(&map, &camera(), &bad_pose, &[], None, &cfg),
+        Err(ExploreError::NonFinite { .. })
+    ));
+    let small = DepthImage::new(4, 4, vec![0.5; 16]).unwrap_or_else(|e| panic!("{e}"));
+    assert!(matches!(
+        grids.integrate_frame(&map, &camera(), &pose, &[], Some(&small), &cfg),
+        Err(ExploreError::Degenerate { .. })
+    ));
+    let bad_cfg = GridConfig {
+        p_miss: 0.7,
+        ..GridConfig::default()
+    };
+    assert!(matches!(
+        grids.integrate_frame(&map, &camera(), &pose, &[], None, &bad_cfg),
+        Err(ExploreError::InvalidConfig {
+            field: "p_miss",
+            ..
+        })
+    ));
+    // NaN points are dropped, not panics.
+    let nan_pts = [ObservedPoints {
+        object_id: 0,
+        points_in_world: vec![Point3::new(f64::NAN, 0.0, 0.0)],
+    }];
+    let up = grids
+        .integrate_frame(&map, &camera(), &pose, &nan_pts, None, &cfg)
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(up.objects[0].points_dropped, 1);
+    // A non-finite size is an error; a zero size is raised to the minimum and still has cells.
+    let mut nan_map = map.clone();
+    nan_map.objects[0].half_extents.x = f64::NAN;
+    assert!(ExplorationGrids::new().sync(&nan_map, &cfg).is_err());
+    let flat = object(Label::Book, [0.5, 0.0, 0.0], 0.0, [0.1, 0.1, 0.0]);
+    assert!(
+        SurfaceGrid::new(&flat, &cfg)
+            .map(|g| g.stats().cells())
+            .unwrap_or(0)
+            > 0
+    );
+    // Empty map: no candidates, no NBV, utility 0.
+    let empty = ObjectMap::new();
+    let ec = ExploreConfig::default();
+    assert!(sample_candidates(
+        &empty,
+        &CandidateConfig::default(),
+        &cfg,
+        &AlwaysReachable,
+        1
+    )
+    .unwrap_or_default()
+    .is_empty());
+    assert_eq!(next_best_view(&[]), None);
+    let ctx = UtilityContext::new(
+        &empty,
+        &ExplorationGrids::new(),
+        &HistoryBook::default(),
+        &camera(),
+        &ec,
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(
+        ctx.score(&pose, Strategy::ObjectDriven, None)
+            .map(|s| s.utility),
+        Ok(0.0)
+    );
+    assert!(ctx.score(&bad_pose, Strategy::ObjectDriven, None).is_err());
+    assert_eq!(Strategy::parse("expected-gain"), Ok(Strategy::ExpectedGain));
+    assert!(Strategy::parse("greedy").is_err());
+}
+
+#[test]
+fn expected_entropy_reduction_is_largest_for_unknown_cells() {
+    let cfg = ExploreConfig::default();
+    let g0 = expected_entropy_reduction(0.0, &cfg);
+    assert!(g0 > 0.1 && g0 < 1.0, "{g0}");
+    let lmax = log_odds(cfg.grid.p_max);
+    let gsat = expected_entropy_reduction(lmax, &cfg);
+    assert!(gsat < g0 * 0.5, "{gsat} vs {g0}");
+    assert!(gsat >= 0.0);
+}
+
+#[test]
+fn utility_matches_closed_form_for_one_unknown_cube() {
+    // A 10 cm cube, all 500 cells unknown (1 bit each), no history (H_V = 0), alone (R_IoU = 0).
+    let cfg = ExploreConfig::default();
+    let center = [0.5, 0.0, 0.05];
+    let map = map_of(vec![object(Label::Block, center, 0.0, [0.05, 0.05, 0.05])]);
+    let mut grids = ExplorationGrids::new();
+    grids
+        .sync(&map, &cfg.grid)
+        .unwrap_or_else(|e| panic!("{e}"));
+    let ctx = UtilityContext::new(&map, &grids, &HistoryBook::default(), &camera(), &cfg)
+        .unwrap_or_else(|e| panic!("{e}"));
+    // Level with the centre, facing +x: only the +x face (100 cells) faces the camera within 80°.
+    let level = ctx
+        .score(
+            &view(eye_around(center, 0.0, 0.0, 0.5), center),
+            Strategy::ObjectDriven,
+            None,
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert!((level.utility - 100.0).abs() < 1e-9, "{level:?}");
+    assert_eq!(level.objects[0].visible_cells, 100);
+    // 45° above +x: the +x face and the top (incidence 45°) are seen: 200 bits.
+    let high = ctx
+        .score(
+            &view(eye_around(center, 0.0, 45.0, 0.5), center),
+            Strategy::ObjectDriven,
+            None,
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert!((high.utility - 200.0).abs() < 1e-9, "{high:?}");
+    // Whole-object scope: H_obj = 500 bits from any view that sees the object.
+    let whole = ExploreConfig {
+        entropy_scope: EntropyScope::Object,
+        ..ExploreConfig::default()
+    };
+    let ctx2 = UtilityContext::new(&map, &grids, &HistoryBook::default(), &camera(), &whole)
+        .unwrap_or_else(|e| panic!("{e}"));
+    let s2 = ctx2
+        .score(
+            &view(eye_around(center, 0.0, 0.0, 0.5), center),
+            Strategy::ObjectDriven,
+            None,
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert!((s2.utility - 500.0).abs() < 1e-9);
+    // Looking away: the object is not in the view, f = 0.
+    let away = look_at(
+        &eye_around(center, 0.0, 0.0, 0.5),
+        &Point3::new(2.0, 0.0, 0.05),
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    let s3 = ctx
+        .score(&away, Strategy::ObjectDriven, None)
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(s3.utility, 0.0);
+    assert!(s3.objects.is_empty());
+}

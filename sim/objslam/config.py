@@ -1,0 +1,262 @@
+"""Run configuration: typed dataclasses composed from TOML layers.
+
+A run's configuration is ``experiments/configs/default.toml``, then the strategy's file
+``experiments/configs/strategies/<strategy>.toml``, then any ``--config`` overlays, then
+``--set key.sub=value`` overrides (N scenes + M methods = O(N + M) files). The resolved result is
+written to the run folder as ``config.toml`` and can be re-run as is. Unknown keys are errors that
+name the key.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import tomllib
+from dataclasses import dataclass, field, fields, is_dataclass
+from pathlib import Path
+from typing import Any, get_type_hints
+
+from .camera import CameraConfig, DepthNoiseConfig
+from .detector import DetectorConfig
+
+REPO_ROOT = Path(__file__).resolve().parents[2]
+CONFIG_DIR = REPO_ROOT / "experiments" / "configs"
+
+
+class ConfigError(ValueError):
+    """A configuration value or key is invalid; the message names the key."""
+
+
+@dataclass(frozen=True)
+class InitConfig:
+    """The paper's initialisation: the camera over the four corners of the table's object area,
+    looking down and slightly inward."""
+
+    center: tuple[float, float] = (0.51, 0.0)
+    """Centre of the object area (x, y), metres."""
+    half_span: tuple[float, float] = (0.16, 0.26)
+    """Corner offsets from the centre (x, y), metres."""
+    height_m: float = 0.5
+    """Camera height above the table, metres."""
+    inward: float = 0.6
+    """0 = look straight down, 1 = look at the centre of the area."""
+
+
+@dataclass(frozen=True)
+class NaiveMapperConfig:
+    """Configuration of the naive mapper (mirrors ``objslam_core::naive::NaiveConfig``)."""
+
+    pixel_stride: int = 4
+    iou_threshold: float = 0.3
+    voxel_m: float = 0.005
+    trim_fraction: float = 0.02
+    min_points: int = 20
+    max_depth_m: float = 3.0
+
+
+@dataclass(frozen=True)
+class EvalConfig:
+    """Evaluation (mirrors ``objslam_core::eval::EvalConfig``)."""
+
+    max_match_distance_m: float = 0.10
+    square_tolerance: float = 0.05
+
+
+@dataclass(frozen=True)
+class RecordConfig:
+    """What goes into ``run.rrd``."""
+
+    enabled: bool = True
+    rgb: bool = True
+    depth: bool = True
+    every_n_frames: int = 1
+    """Log images every n-th frame (poses, detections and the map are logged every frame)."""
+
+
+@dataclass(frozen=True)
+class RunConfig:
+    """One episode."""
+
+    scene: str = "scenes/scene01.toml"
+    """Scene file (relative to the repository root or absolute)."""
+    strategy: str = "init"
+    """View-selection strategy."""
+    seed: int = 0
+    """Seeds sensor noise, the detector and random strategies."""
+    runs_dir: str = "runs"
+    """Where run folders are created."""
+    frame_rate_hz: float = 4.0
+    """Frames rendered per simulated second while the arm moves."""
+    max_joint_speed: float = 1.0
+    """Peak joint speed of camera moves, rad/s."""
+    mapper: str = "naive"
+    """Estimator: ``naive`` (the foundation baseline)."""
+    camera: CameraConfig = field(default_factory=CameraConfig)
+    detector: DetectorConfig = field(default_factory=DetectorConfig)
+    naive: NaiveMapperConfig = field(default_factory=NaiveMapperConfig)
+    eval: EvalConfig = field(default_factory=EvalConfig)
+    init: InitConfig = field(default_factory=InitConfig)
+    record: RecordConfig = field(default_factory=RecordConfig)
+
+    def validate(self) -> None:
+        """Raise :class:`ConfigError` naming the key if a value is out of range."""
+        if self.strategy not in STRATEGIES:
+            raise ConfigError(f"strategy: unknown {self.strategy!r}; known: {', '.join(STRATEGIES)}")
+        if self.mapper not in ("naive",):
+            raise ConfigError(f"mapper: unknown {self.mapper!r}; known: naive")
+        if self.seed < 0:
+            raise ConfigError("seed: must be ≥ 0")
+        if not (0 < self.frame_rate_hz <= 60):
+            raise ConfigError("frame_rate_hz: must be in (0, 60]")
+        if not (0 < self.max_joint_speed <= 2.5):
+            raise ConfigError("max_joint_speed: must be in (0, 2.5] rad/s")
+        if self.record.every_n_frames < 1:
+            raise ConfigError("record.every_n_frames: must be ≥ 1")
+        try:
+            self.camera.validate()
+            self.detector.validate()
+        except ValueError as e:
+            raise ConfigError(str(e)) from e
+
+
+STRATEGIES = ("init",)
+
+
+def _build(cls: type, data: dict[str, Any], prefix: str) -> Any:
+    if not isinstance(data, dict):
+        raise ConfigError(f"{prefix or '<root>'}: expected a table")
+    hints = get_type_hints(cls)
+    names = {f.name for f in fields(cls)}
+    unknown = set(data) - names
+    if unknown:
+        raise ConfigError(f"{prefix}{sorted(unknown)[0]}: unknown key (known: {', '.join(sorted(names))})")
+    kwargs: dict[str, Any] = {}
+    for f in fields(cls):
+        if f.name not in data:
+            continue
+        v = data[f.name]
+        t = hints[f.name]
+        key = f"{prefix}{f.name}"
+        if is_dataclass(t):
+            kwargs[f.name] = _build(t, v, key + ".")  # type: ignore[arg-type]
+            continue
+        kwargs[f.name] = _coerce(key, t, v)
+    return cls(**kwargs)
+
+
+def _coerce(key: str, t: Any, v: Any) -> Any:
+    origin = getattr(t, "__origin__", None)
+    if t is bool:
+        if not isinstance(v, bool):
+            raise ConfigError(f"{key}: expected true/false, got {v!r}")
+        return v
+    if t is int:
+        if isinstance(v, bool) or not isinstance(v, int):
+            raise ConfigError(f"{key}: expected an integer, got {v!r}")
+        return v
+    if t is float:
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            raise ConfigError(f"{key}: expected a number, got {v!r}")
+        return float(v)
+    if t is str:
+        if not isinstance(v, str):
+            raise ConfigError(f"{key}: expected a string, got {v!r}")
+        return v
+    if origin is tuple:
+        args = t.__args__
+        if not isinstance(v, list) or len(v) != len(args):
+            raise ConfigError(f"{key}: expected a list of {len(args)} values, got {v!r}")
+        return tuple(_coerce(f"{key}[{i}]", a, x) for i, (a, x) in enumerate(zip(args, v)))
+    return v
+
+
+def _merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
+    out = dict(base)
+    for k, v in over.items():
+        out[k] = _merge(out[k], v) if isinstance(v, dict) and isinstance(out.get(k), dict) else v
+    return out
+
+
+def _parse_value(text: str) -> Any:
+    try:
+        return tomllib.loads(f"v = {text}")["v"]
+    except tomllib.TOMLDecodeError:
+        return text
+
+
+def parse_override(item: str) -> dict[str, Any]:
+    """``"camera.width=320"`` → ``{"camera": {"width": 320}}`` (values parsed as TOML, else strings)."""
+    if "=" not in item:
+        raise ConfigError(f"--set {item!r}: expected key=value")
+    key, value = item.split("=", 1)
+    parts = key.strip().split(".")
+    d: dict[str, Any] = {parts[-1]: _parse_value(value.strip())}
+    for p in reversed(parts[:-1]):
+        d = {p: d}
+    return d
+
+
+def _read(path: Path) -> dict[str, Any]:
+    try:
+        return tomllib.loads(path.read_text())
+    except OSError as e:
+        raise ConfigError(f"{path}: cannot read ({e.strerror})") from e
+    except tomllib.TOMLDecodeError as e:
+        raise ConfigError(f"{path}: {e}") from e
+
+
+def load_run_config(
+    *, overlays: list[str | Path] = (), overrides: list[str] = (), strategy: str | None = None
+) -> RunConfig:
+    """Compose default.toml ← strategy file ← overlays ← overrides, validate, return."""
+    data = _read(CONFIG_DIR / "default.toml")
+    layers = [parse_override(o) for o in overrides]
+    chosen = strategy
+    for layer in [*(_read(Path(p)) for p in overlays), *layers]:
+        chosen = layer.get("strategy", chosen)
+    chosen = chosen or data.get("strategy", "init")
+    strategy_file = CONFIG_DIR / "strategies" / f"{chosen}.toml"
+    if strategy_file.exists():
+        data = _merge(data, _read(strategy_file))
+    for p in overlays:
+        data = _merge(data, _read(Path(p)))
+    for layer in layers:
+        data = _merge(data, layer)
+    if strategy is not None:
+        data["strategy"] = strategy
+    cfg = _build(RunConfig, data, "")
+    cfg.validate()
+    return cfg
+
+
+def to_dict(cfg: Any) -> dict[str, Any]:
+    """A dataclass as plain TOML-able data."""
+
+    def conv(v: Any) -> Any:
+        if is_dataclass(v):
+            return {f.name: conv(getattr(v, f.name)) for f in fields(v)}
+        if isinstance(v, tuple):
+            return [conv(x) for x in v]
+        return v
+
+    return conv(cfg)
+
+
+def replace(cfg: RunConfig, **changes: Any) -> RunConfig:
+    """A copy with top-level fields changed."""
+    return dataclasses.replace(cfg, **changes)
+
+
+__all__ = [
+    "CameraConfig",
+    "ConfigError",
+    "DepthNoiseConfig",
+    "DetectorConfig",
+    "EvalConfig",
+    "InitConfig",
+    "NaiveMapperConfig",
+    "RecordConfig",
+    "RunConfig",
+    "load_run_config",
+    "parse_override",
+    "to_dict",
+]

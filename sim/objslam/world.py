@@ -1,0 +1,380 @@
+"""The SAPIEN tabletop: table, textured objects, the Franka Panda with a hand camera, lights.
+
+Entry point: :class:`SimWorld` (build from a :class:`~objslam.scene.SceneSpec`), then
+:meth:`SimWorld.render` → :class:`SensorFrame` (what the robot senses) and
+:meth:`SimWorld.ground_truth` (what only evaluation sees), and :meth:`SimWorld.move_camera_to`,
+which solves IK for a camera pose and executes a smooth joint trajectory with the PD drives while
+emitting frames at a fixed rate (a video stream, as SLAM needs).
+
+Rendering is CPU-only (Mesa lavapipe ≥ 24.3; see ECOSYSTEM.md). Physics runs at 240 Hz with the
+solver settings ManiSkill uses for reliable grasps.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import math
+import os
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import sapien
+
+from .camera import SAPIEN_FROM_CV, CameraConfig
+from .scene import SceneSpec
+from .textures import object_texture, table_texture
+
+#: Physics rate, Hz.
+PHYSICS_HZ = 240
+#: Panda arm joint stiffness / damping / force limit of the PD drives (ECOSYSTEM.md).
+ARM_STIFFNESS, ARM_DAMPING, ARM_FORCE_LIMIT = 1000.0, 100.0, 100.0
+#: Gripper finger drive.
+GRIPPER_STIFFNESS, GRIPPER_DAMPING, GRIPPER_FORCE_LIMIT = 1000.0, 100.0, 100.0
+GRIPPER_OPEN_M = 0.04
+#: The camera path length is sampled every this many physics steps (30 Hz).
+PATH_SAMPLE_STEPS = PHYSICS_HZ // 30
+#: A comfortable start configuration (camera looking down over the table).
+READY_QPOS = np.array([0.0, -0.6, 0.0, -2.4, 0.0, 1.8, math.pi / 4, GRIPPER_OPEN_M, GRIPPER_OPEN_M])
+
+
+class UnreachablePoseError(RuntimeError):
+    """IK found no joint configuration for a requested camera pose."""
+
+    def __init__(self, what: str, position: np.ndarray, error: float) -> None:
+        super().__init__(
+            f"{what}: camera pose at {np.round(position, 3).tolist()} is unreachable (IK residual {error:.3g})"
+        )
+        self.position = position
+        self.residual = error
+
+
+class MotionError(RuntimeError):
+    """The arm did not reach its joint target (blocked or diverged)."""
+
+
+def panda_urdf_path() -> Path:
+    """The Panda URDF shipped in the mani-skill wheel (installed with ``--no-deps``; never imported)."""
+    env = os.environ.get("OBJSLAM_PANDA_URDF")
+    if env:
+        return Path(env)
+    spec = importlib.util.find_spec("mani_skill")
+    if spec is None or not spec.submodule_search_locations:
+        raise FileNotFoundError("mani_skill is not installed: run `make setup` (it installs mani-skill --no-deps)")
+    path = Path(spec.submodule_search_locations[0]) / "assets/robots/panda/panda_v2.urdf"
+    if not path.exists():
+        raise FileNotFoundError(f"Panda URDF not found at {path}")
+    return path
+
+
+@dataclass
+class SensorFrame:
+    """What the robot senses in one frame (plus segmentation, used only by the simulated detector)."""
+
+    index: int
+    """Frame index in the run."""
+    sim_time_s: float
+    """Simulated time, seconds."""
+    rgb: np.ndarray
+    """(H, W, 3) uint8."""
+    depth_m: np.ndarray
+    """(H, W) float32 metres, 0 = no return (noise applied)."""
+    segmentation: np.ndarray
+    """(H, W) uint32 actor ids (detector input only)."""
+    intrinsics: np.ndarray
+    """(3, 3) float64."""
+    world_from_camera_fk: np.ndarray
+    """(4, 4) camera pose from forward kinematics of the measured joints, OpenCV axes."""
+    world_from_camera_gt: np.ndarray
+    """(4, 4) true camera pose from the renderer (evaluation only)."""
+    qpos: np.ndarray
+    """Measured joint positions (9,)."""
+
+
+def pose_to_matrix(p: sapien.Pose) -> np.ndarray:
+    """4x4 homogeneous matrix of a SAPIEN pose."""
+    return np.asarray(p.to_transformation_matrix(), dtype=np.float64)
+
+
+def matrix_to_pose(m: np.ndarray) -> sapien.Pose:
+    """SAPIEN pose of a 4x4 rigid matrix."""
+    return sapien.Pose(m)
+
+
+def look_at(eye: np.ndarray, target: np.ndarray, up_hint: np.ndarray | None = None) -> np.ndarray:
+    """``world_from_camera`` (OpenCV axes) at ``eye`` looking at ``target``. The image's "up"
+    (−y) is aligned with ``up_hint`` projected onto the image plane (default: world +z, or world +x
+    when looking straight down — the image top then points away from the robot)."""
+    eye, target = np.asarray(eye, float), np.asarray(target, float)
+    z = target - eye
+    n = np.linalg.norm(z)
+    if not np.isfinite(n) or n < 1e-9:
+        raise ValueError("look_at: eye and target coincide")
+    z /= n
+    up = np.array([0.0, 0.0, 1.0]) if up_hint is None else np.asarray(up_hint, float)
+    if abs(float(np.dot(up, z))) > 0.95:
+        up = np.array([1.0, 0.0, 0.0])
+    y = -(up - np.dot(up, z) * z)
+    y /= np.linalg.norm(y)
+    x = np.cross(y, z)
+    m = np.eye(4)
+    m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = x, y, z, eye
+    return m
+
+
+class SimWorld:
+    """A built scene with the robot and its hand camera."""
+
+    def __init__(self, spec: SceneSpec, camera: CameraConfig, rng: np.random.Generator) -> None:
+        camera.validate()
+        self.spec = spec
+        self.camera_config = camera
+        self.rng = rng
+        self.frame_index = 0
+        self.sim_time_s = 0.0
+        self.camera_path_length_m = 0.0
+        """Length of the camera's path so far, metres (forward kinematics sampled at 30 Hz)."""
+        self._steps = 0
+        self._last_camera_xyz: np.ndarray | None = None
+
+        scene = sapien.Scene()
+        scene.set_timestep(1.0 / PHYSICS_HZ)
+        self.scene = scene
+        scene.set_ambient_light([0.45, 0.45, 0.45])
+        scene.add_directional_light([0.3, 0.2, -1.0], [0.75, 0.75, 0.75], shadow=False)
+        scene.add_point_light([0.5, -0.6, 1.2], [0.6, 0.6, 0.6], shadow=False)
+        scene.add_point_light([0.5, 0.6, 1.2], [0.6, 0.6, 0.6], shadow=False)
+        self._build_table()
+        self.object_actors: dict[int, sapien.Entity] = {}
+        self._build_objects()
+        self._build_robot()
+        mount = sapien.Pose(list(camera.mount_xyz), list(camera.mount_wxyz))
+        self.hand_from_sapien_camera = pose_to_matrix(mount)
+        self.camera = scene.add_mounted_camera(
+            "hand_camera", self.hand.entity, mount, camera.width, camera.height,
+            math.radians(camera.fovy_deg), camera.near_m, camera.far_m,
+        )
+        self.intrinsics = camera.intrinsics()
+        k = np.asarray(self.camera.get_intrinsic_matrix(), dtype=np.float64)
+        if not np.allclose(k, self.intrinsics, atol=1e-2):
+            raise RuntimeError(f"camera intrinsics disagree with the config: {k} vs {self.intrinsics}")
+        self.actor_to_object = {a.per_scene_id: (oid, spec.objects[oid].cls) for oid, a in self.object_actors.items()}
+        self.robot_actor_ids = {link.entity.per_scene_id for link in self.robot.get_links()}
+        # Let objects settle on the table.
+        for _ in range(PHYSICS_HZ // 4):
+            self._step()
+
+    # ----- building -------------------------------------------------------------------------------
+    def _build_table(self) -> None:
+        t = self.spec.table
+        mat = sapien.render.RenderMaterial()
+        mat.base_color_texture = sapien.render.RenderTexture2D(table_texture(self.spec.seed), "R8G8B8A8Unorm")
+        b = self.scene.create_actor_builder()
+        half = [t.size[0] / 2, t.size[1] / 2, 0.025]
+        b.add_box_collision(half_size=half)
+        b.add_box_visual(half_size=half, material=mat)
+        table = b.build_static(name="table")
+        table.set_pose(sapien.Pose([t.center[0], t.center[1], -0.025]))
+        self.table = table
+        # A floor far below, so depth beyond the table edge has a return like a real room.
+        fb = self.scene.create_actor_builder()
+        fb.add_box_visual(half_size=[3, 3, 0.01], material=sapien.render.RenderMaterial(base_color=[0.35, 0.35, 0.38, 1]))
+        floor = fb.build_static(name="floor")
+        floor.set_pose(sapien.Pose([0, 0, -0.75]))
+
+    def _build_objects(self) -> None:
+        for o in self.spec.objects:
+            mat = sapien.render.RenderMaterial()
+            mat.base_color_texture = sapien.render.RenderTexture2D(object_texture(self.spec.seed, o.id), "R8G8B8A8Unorm")
+            mat.roughness = 0.8
+            b = self.scene.create_actor_builder()
+            phys = self.scene.create_physical_material(1.0, 1.0, 0.0)
+            if o.shape == "cuboid":
+                b.add_box_collision(half_size=list(o.half_extents), material=phys, density=300)
+                b.add_box_visual(half_size=list(o.half_extents), material=mat)
+            else:
+                # SAPIEN cylinders lie along x: rotate them upright.
+                upright = sapien.Pose(q=[math.cos(math.pi / 4), 0.0, math.sin(math.pi / 4), 0.0])
+                r, hz = o.half_extents[0], o.half_extents[2]
+                b.add_cylinder_collision(pose=upright, radius=r, half_length=hz, material=phys, density=300)
+                b.add_cylinder_visual(pose=upright, radius=r, half_length=hz, material=mat)
+            actor = b.build(name=f"obj{o.id}_{o.cls}")
+            cz = o.half_extents[2] + 1e-4
+            q = [math.cos(o.yaw_rad / 2), 0.0, 0.0, math.sin(o.yaw_rad / 2)]
+            actor.set_pose(sapien.Pose([o.position[0], o.position[1], cz], q))
+            self.object_actors[o.id] = actor
+
+    def _build_robot(self) -> None:
+        loader = self.scene.create_urdf_loader()
+        loader.fix_root_link = True
+        for finger in ("panda_leftfinger", "panda_rightfinger"):
+            loader.set_link_material(finger, 2.0, 2.0, 0.0)
+        robot = loader.load(str(panda_urdf_path()))
+        robot.set_root_pose(sapien.Pose([0, 0, 0]))
+        self.robot = robot
+        self.joints = robot.get_active_joints()
+        for j in self.joints[:7]:
+            j.set_drive_properties(stiffness=ARM_STIFFNESS, damping=ARM_DAMPING, force_limit=ARM_FORCE_LIMIT)
+        for j in self.joints[7:]:
+            j.set_drive_properties(stiffness=GRIPPER_STIFFNESS, damping=GRIPPER_DAMPING, force_limit=GRIPPER_FORCE_LIMIT)
+        links = robot.get_links()
+        self.hand = next(link for link in links if link.name == "panda_hand")
+        self.hand_index = links.index(self.hand)
+        self.pinocchio = robot.create_pinocchio_model()
+        self.qlimits = np.asarray(robot.get_qlimits(), dtype=np.float64)
+        self.set_qpos(READY_QPOS)
+
+    # ----- state ----------------------------------------------------------------------------------
+    def set_qpos(self, q: np.ndarray) -> None:
+        """Teleport the arm (used once at start) and hold it there."""
+        self.robot.set_qpos(q)
+        self.robot.set_qvel(np.zeros_like(q))
+        self._set_targets(q)
+
+    def _set_targets(self, q: np.ndarray) -> None:
+        for j, t in zip(self.joints, q):
+            j.set_drive_target(float(t))
+
+    def qpos(self) -> np.ndarray:
+        """Measured joint positions."""
+        return np.asarray(self.robot.get_qpos(), dtype=np.float64)
+
+    def _step(self) -> None:
+        self.robot.set_qf(self.robot.compute_passive_force(gravity=True, coriolis_and_centrifugal=True))
+        self.scene.step()
+        self.sim_time_s += 1.0 / PHYSICS_HZ
+        self._steps += 1
+        if self._steps % PATH_SAMPLE_STEPS == 0:
+            xyz = self.world_from_camera_fk(self.qpos())[:3, 3]
+            if self._last_camera_xyz is not None:
+                self.camera_path_length_m += float(np.linalg.norm(xyz - self._last_camera_xyz))
+            self._last_camera_xyz = xyz
+
+    # ----- kinematics -----------------------------------------------------------------------------
+    def hand_from_camera_cv(self) -> np.ndarray:
+        """``panda_hand_from_camera`` in OpenCV camera axes."""
+        m = self.hand_from_sapien_camera.copy()
+        m[:3, :3] = m[:3, :3] @ SAPIEN_FROM_CV
+        return m
+
+    def world_from_camera_fk(self, q: np.ndarray) -> np.ndarray:
+        """Camera pose (OpenCV axes) from forward kinematics of joint positions ``q``."""
+        self.pinocchio.compute_forward_kinematics(q)
+        world_from_hand = pose_to_matrix(self.pinocchio.get_link_pose(self.hand_index))
+        return world_from_hand @ self.hand_from_camera_cv()
+
+    def world_from_camera_gt(self) -> np.ndarray:
+        """True camera pose from the renderer (OpenCV axes)."""
+        world_from_gl = np.asarray(self.camera.get_model_matrix(), dtype=np.float64)
+        return world_from_gl @ np.diag([1.0, -1.0, -1.0, 1.0])
+
+    def solve_ik(self, world_from_camera: np.ndarray, what: str = "view") -> np.ndarray:
+        """Joint positions placing the camera at ``world_from_camera`` (OpenCV axes); tries the current
+        configuration then a few deterministic seeds. Raises :class:`UnreachablePoseError`."""
+        world_from_hand = world_from_camera @ np.linalg.inv(self.hand_from_camera_cv())
+        target = matrix_to_pose(world_from_hand)
+        mask = np.array([1] * 7 + [0, 0], dtype=np.int32)
+        seeds = [self.qpos(), READY_QPOS.copy()]
+        for k in range(4):
+            s = READY_QPOS.copy()
+            s[0] = [-0.8, 0.8, -0.4, 0.4][k]
+            seeds.append(s)
+        best_err = math.inf
+        for seed in seeds:
+            q, ok, err = self.pinocchio.compute_inverse_kinematics(
+                self.hand_index, target, initial_qpos=seed, active_qmask=mask, max_iterations=300
+            )
+            q = np.asarray(q, dtype=np.float64)
+            e = float(np.linalg.norm(err))
+            within = np.all(q[:7] >= self.qlimits[:7, 0] - 1e-4) and np.all(q[:7] <= self.qlimits[:7, 1] + 1e-4)
+            if ok and within:
+                q[7:] = GRIPPER_OPEN_M
+                return q
+            best_err = min(best_err, e)
+        raise UnreachablePoseError(what, world_from_camera[:3, 3], best_err)
+
+    # ----- sensing --------------------------------------------------------------------------------
+    def render(self) -> SensorFrame:
+        """Render the hand camera now."""
+        self.scene.update_render()
+        self.camera.take_picture()
+        rgba = self.camera.get_picture("Color")
+        pos = self.camera.get_picture("Position")
+        seg = self.camera.get_picture("Segmentation")[..., 1].astype(np.uint32)
+        rgb = (np.clip(rgba[..., :3], 0, 1) * 255 + 0.5).astype(np.uint8)
+        depth = np.where(pos[..., 3] < 1, -pos[..., 2], 0.0).astype(np.float32)
+        depth[depth > self.camera_config.far_m] = 0.0
+        if self.camera_config.mask_robot_depth:
+            depth[np.isin(seg, list(self.robot_actor_ids))] = 0.0
+        depth = self.camera_config.depth_noise.apply(depth, self.rng)
+        q = self.qpos()
+        frame = SensorFrame(
+            index=self.frame_index,
+            sim_time_s=self.sim_time_s,
+            rgb=rgb,
+            depth_m=depth,
+            segmentation=seg,
+            intrinsics=self.intrinsics,
+            world_from_camera_fk=self.world_from_camera_fk(q),
+            world_from_camera_gt=self.world_from_camera_gt(),
+            qpos=q,
+        )
+        self.frame_index += 1
+        return frame
+
+    def ground_truth(self) -> dict[int, tuple[np.ndarray, float]]:
+        """Current object poses: id → (centre (3,), yaw rad). Evaluation only."""
+        out = {}
+        for oid, actor in self.object_actors.items():
+            p = actor.entity_pose if hasattr(actor, "entity_pose") else actor.get_pose()
+            w, x, y, z = p.q
+            yaw = math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+            out[oid] = (np.asarray(p.p, dtype=np.float64), yaw)
+        return out
+
+    # ----- acting ---------------------------------------------------------------------------------
+    def move_camera_to(
+        self,
+        world_from_camera: np.ndarray,
+        *,
+        frame_rate_hz: float,
+        max_joint_speed: float = 1.0,
+        settle_s: float = 0.3,
+        what: str = "view",
+    ) -> Iterator[SensorFrame]:
+        """Move the camera to a pose: IK, then a minimum-jerk joint trajectory tracked by the PD
+        drives; yields a rendered frame every ``1 / frame_rate_hz`` simulated seconds and one after
+        settling. Raises :class:`UnreachablePoseError` before moving if IK fails."""
+        if frame_rate_hz <= 0:
+            raise ValueError("frame_rate_hz: must be > 0")
+        q_goal = self.solve_ik(world_from_camera, what)
+        yield from self.move_joints_to(q_goal, frame_rate_hz=frame_rate_hz, max_joint_speed=max_joint_speed, settle_s=settle_s)
+
+    def move_joints_to(
+        self, q_goal: np.ndarray, *, frame_rate_hz: float, max_joint_speed: float = 1.0, settle_s: float = 0.3
+    ) -> Iterator[SensorFrame]:
+        """Execute a minimum-jerk joint move (see :meth:`move_camera_to`)."""
+        q0 = self.qpos()
+        dq = q_goal - q0
+        # Minimum jerk peaks at 1.875x the mean speed.
+        duration = max(0.5, 1.875 * float(np.max(np.abs(dq[:7]))) / max_joint_speed)
+        n_steps = int(math.ceil(duration * PHYSICS_HZ))
+        steps_per_frame = max(1, int(round(PHYSICS_HZ / frame_rate_hz)))
+        for i in range(1, n_steps + 1):
+            s = i / n_steps
+            blend = 10 * s**3 - 15 * s**4 + 6 * s**5
+            self._set_targets(q0 + blend * dq)
+            self._step()
+            if i % steps_per_frame == 0 and i < n_steps:
+                yield self.render()
+        self._set_targets(q_goal)
+        for _ in range(int(settle_s * PHYSICS_HZ)):
+            self._step()
+        err = float(np.max(np.abs(self.qpos()[:7] - q_goal[:7])))
+        if err > 0.02:
+            raise MotionError(f"arm stopped {err:.3f} rad from its joint target")
+        yield self.render()
+
+
+FrameCallback = Callable[[SensorFrame], None]

@@ -1,0 +1,100 @@
+"""The native module: typed errors naming the argument, no panics, map round trip, evaluation."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import objslam
+from objslam.scene import gt_objects, load_scene
+
+K = np.array([[100.0, 0, 32], [0, 100.0, 24], [0, 0, 1]])
+POSE = np.eye(4)
+
+
+def _update(mapper, **kw):
+    args = dict(index=0, intrinsics=K, depth=np.full((48, 64), 0.5, np.float32), world_from_camera=POSE, detections=[])
+    args.update(kw)
+    return mapper.update(**args)
+
+
+@pytest.mark.parametrize(
+    ("kw", "exc", "needle"),
+    [
+        ({"depth": np.full((48, 64), 0.5, np.float64)}, TypeError, "depth: expected a float32"),
+        ({"depth": np.full((48, 64, 1), 0.5, np.float32)}, TypeError, "depth"),
+        ({"depth": np.full((48, 64), -1.0, np.float32)}, objslam.InputError, "depth: negative"),
+        ({"intrinsics": np.eye(4)}, objslam.InputError, "intrinsics: expected shape (3, 3)"),
+        ({"intrinsics": K * np.nan}, objslam.InputError, "intrinsics: non-finite"),
+        ({"world_from_camera": np.diag([1.0, 1.0, -1.0, 1.0])}, objslam.InputError, "world_from_camera: not a rigid"),
+        ({"world_from_camera": np.eye(4, dtype=np.float32)}, TypeError, "world_from_camera: expected a float64"),
+        ({"detections": [(0, 0, 10, 10, "chair", 0.9)]}, objslam.InputError, "detections[0].label"),
+        ({"detections": [(0, 0, 10, 10, "cup", 1.5)]}, objslam.InputError, "detections[0]: score"),
+        ({"detections": [(0, 0, float("nan"), 10, "cup", 0.5)]}, objslam.InputError, "detections[0]"),
+        ({"detections": "nope"}, TypeError, "detections"),
+    ],
+)
+def test_bad_input_raises_typed_error_naming_the_argument(kw, exc, needle) -> None:
+    m = objslam.NaiveMapper()
+    with pytest.raises(exc) as e:
+        _update(m, **kw)
+    assert needle in str(e.value)
+    assert len(m) == 0  # a rejected frame changes nothing
+
+
+def test_zero_and_nan_depth_are_no_return() -> None:
+    m = objslam.NaiveMapper()
+    depth = np.zeros((48, 64), np.float32)
+    depth[0, 0] = np.nan
+    assert _update(m, depth=depth, detections=[(0, 0, 64, 48, "cup", 0.9)]) == [None]
+
+
+def test_depth_box_gives_object_at_expected_place(tmp_path: Path) -> None:
+    # A fronto-parallel plate at 0.5 m seen by an identity camera: the box (20..40, 14..34) covers
+    # x ∈ [(20-32)/100·0.5, (40-32)/100·0.5) = [-0.06, 0.04) m.
+    m = objslam.NaiveMapper(json.dumps({"pixel_stride": 1, "trim_fraction": 0.0}))
+    ids = _update(m, detections=[(20, 14, 40, 34, "book", 0.9)])
+    assert ids == [0]
+    obj = json.loads(m.objects_json())[0]
+    g = obj["geometry"]
+    assert obj["label"] == "book" and g["shape"] == "cuboid"
+    assert math.isclose(g["center"][2], 0.5, abs_tol=1e-6)
+    assert math.isclose(g["center"][0], (-0.06 + 0.035) / 2, abs_tol=1e-6)  # last column u = 39
+    path = tmp_path / "map.json"
+    objslam.save_map(m.map_json(), str(path))
+    assert json.loads(objslam.load_map(str(path))) == json.loads(m.map_json())
+    bad = tmp_path / "bad.json"
+    bad.write_text(m.map_json().replace('"version": 1', '"version": 7'))
+    with pytest.raises(objslam.MapFileError, match="version 7"):
+        objslam.load_map(str(bad))
+    with pytest.raises(objslam.MapFileError):
+        objslam.load_map(str(tmp_path / "missing.json"))
+
+
+def test_evaluate_perfect_and_empty_maps(repo) -> None:
+    spec = load_scene(repo / "scenes" / "scene01.toml")
+    gt = gt_objects(spec)
+    empty = objslam.NaiveMapper().map_json()
+    ev = json.loads(objslam.evaluate_map(json.dumps(gt), empty))
+    assert ev["n_objects_est"] == 0 and ev["mean"]["iou3d"] == 0.0 and ev["mean"]["cde_cm"] is None
+    with pytest.raises(objslam.InputError, match="gt"):
+        objslam.evaluate_map("[{]", empty)
+
+
+def test_recorder_validates_and_writes(tmp_path: Path) -> None:
+    r = objslam.Recorder(str(tmp_path / "r.rrd"))
+    with pytest.raises(TypeError, match="rgb: expected a uint8"):
+        r.log_rgb(np.zeros((4, 4, 3), np.float32))
+    with pytest.raises(objslam.InputError, match="which"):
+        r.log_trajectory("sideways", np.zeros((2, 3)))
+    with pytest.raises(objslam.InputError, match="positions: non-finite"):
+        r.log_trajectory("estimated", np.array([[0.0, np.inf, 0.0]]))
+    r.log_rgb(np.zeros((4, 4, 3), np.uint8))
+    r.close()
+    with pytest.raises(objslam.RecordingError, match="closed"):
+        r.log_event("late")
+    assert (tmp_path / "r.rrd").stat().st_size > 0
