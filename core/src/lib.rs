@@ -22,6 +22,7 @@
 //! - [`plan`]: Panda kinematics, collision checking, RRT-Connect, Ruckig trajectories, grasps.
 //! - [`topo`]: semantic topological map, random-walk descriptors, scene matching, relocalisation.
 //! - `record` (feature `rerun`): one Rerun recording per run.
+//! - [`slam`]: RGB-D visual tracking (ORB features, PnP + RANSAC, local BA), pose sources, ATE/RPE.
 
 pub mod active;
 pub mod association;
@@ -36,4 +37,5 @@ pub mod pipeline;
 pub mod plan;
 #[cfg(feature = "rerun")]
 pub mod record;
+pub mod slam;
 pub mod topo;

@@ -1,0 +1,941 @@
+//! ORB-style features: pyramid, FAST-9 with grid distribution, intensity-centroid orientation,
+//! steered 256-bit BRIEF descriptors (Rublee et al. 2011, as used by ORB-SLAM2).
+
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+
+use super::SlamError;
+use crate::frame::GreyImage;
+
+/// A 256-bit binary descriptor.
+pub type Descriptor = [u64; 4];
+
+/// Hamming distance between two descriptors (0..=256).
+#[inline]
+pub fn hamming(a: &Descriptor, b: &Descriptor) -> u32 {
+    (a[0] ^ b[0]).count_ones()
+        + (a[1] ^ b[1]).count_ones()
+        + (a[2] ^ b[2]).count_ones()
+        + (a[3] ^ b[3]).count_ones()
+}
+
+/// Radius of the orientation patch (intensity centroid), pixels of the level (ORB: 15).
+pub const HALF_PATCH_PX: usize = 15;
+/// Keypoints are kept this far from the border of their level, pixels (patch + box smoothing).
+pub const EDGE_PX: usize = 19;
+/// Radius of the box filter smoothing each level before the binary tests (2 → 5x5, as the 5x5
+/// sub-window averages of the ORB paper; 3 → 7x7 did not improve matching on our tests).
+pub const BLUR_RADIUS_PX: usize = 2;
+/// Descriptor sampling points lie within this radius of the keypoint (so that any rotation of the
+/// pattern plus the smoothing box stays inside [`EDGE_PX`]); uniform over the disc.
+pub const PATTERN_RADIUS_PX: f64 = 16.0;
+/// Orientation bins of the pre-rotated descriptor pattern (1.4° each; the steering error at the
+/// 16-px pattern rim is ≤ 0.2 px; 128 bins cost ~3 points of recall on the warp tests).
+pub const ANGLE_BINS: usize = 256;
+/// Number of binary tests of a descriptor.
+pub const DESCRIPTOR_BITS: usize = 256;
+
+/// Configuration of the ORB extractor.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct OrbConfig {
+    /// Features wanted per image over all levels (ORB-SLAM2: 1000 at 640x480).
+    pub n_features: usize,
+    /// Pyramid levels (ORB-SLAM2: 8).
+    pub n_levels: usize,
+    /// Scale ratio between consecutive levels (ORB-SLAM2: 1.2). Must be > 1.
+    pub scale_factor: f64,
+    /// FAST threshold, grey levels (ORB-SLAM2 `iniThFAST`: 20).
+    pub fast_threshold: u8,
+    /// Lower FAST threshold used only in grid cells with no corner at `fast_threshold`
+    /// (ORB-SLAM2 `minThFAST`: 7).
+    pub fast_min_threshold: u8,
+    /// Side of the grid cells used to spread features, pixels of each level (ORB-SLAM2: 30).
+    /// Features are taken round-robin over cells (best of each cell first), by FAST score.
+    pub cell_size_px: usize,
+    /// Seed of the descriptor's sampling pattern (256 point pairs uniform over a 16-px disc).
+    /// Descriptors are only comparable between extractors with the same seed.
+    pub pattern_seed: u64,
+}
+
+impl Default for OrbConfig {
+    fn default() -> Self {
+        Self {
+            n_features: 1000,
+            n_levels: 8,
+            scale_factor: 1.2,
+            fast_threshold: 20,
+            fast_min_threshold: 7,
+            cell_size_px: 30,
+            pattern_seed: 0x0_5eed_0e0b,
+        }
+    }
+}
+
+/// A keypoint in level-0 pixel coordinates.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Keypoint {
+    /// Column, level-0 pixels.
+    pub x: f32,
+    /// Row, level-0 pixels.
+    pub y: f32,
+    /// Pyramid level it was detected at.
+    pub level: u8,
+    /// Scale of its level relative to level 0 (`scale_factor^level`).
+    pub scale: f32,
+    /// Orientation (intensity centroid), radians, image axes (x right, y down).
+    pub angle_rad: f32,
+    /// FAST score (largest threshold at which it is still a corner).
+    pub score: u16,
+}
+
+/// Keypoints and their descriptors (same length, same order).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Features {
+    /// Keypoints.
+    pub keypoints: Vec<Keypoint>,
+    /// Descriptors, `descriptors[i]` belongs to `keypoints[i]`.
+    pub descriptors: Vec<Descriptor>,
+}
+
+#[derive(Debug, Clone, Default)]
+struct Level {
+    width: usize,
+    height: usize,
+    scale: f32,
+    image: Vec<u8>,
+    blurred: Vec<u8>,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Corner {
+    x: u32,
+    y: u32,
+    score: u16,
+    key: u32,
+}
+
+/// The 16 pixels of the radius-3 Bresenham circle, clockwise from the top.
+const CIRCLE: [(isize, isize); 16] = [
+    (0, -3),
+    (1, -3),
+    (2, -2),
+    (3, -1),
+    (3, 0),
+    (3, 1),
+    (2, 2),
+    (1, 3),
+    (0, 3),
+    (-1, 3),
+    (-2, 2),
+    (-3, 1),
+    (-3, 0),
+    (-3, -1),
+    (-2, -2),
+    (-1, -3),
+];
+
+/// ORB extractor with reusable buffers: build once, call [`OrbExtractor::extract`] per frame.
+#[derive(Debug, Clone)]
+pub struct OrbExtractor {
+    config: OrbConfig,
+    levels: Vec<Level>,
+    /// The pattern rotated to each of `ANGLE_BINS` angles, rounded to pixels.
+    rotated: Vec<[i8; 4]>,
+    umax: [usize; HALF_PATCH_PX + 1],
+    score_buf: Vec<u16>,
+    corners: Vec<Corner>,
+    col_sums: Vec<u16>,
+    features_per_level: Vec<usize>,
+}
+
+impl OrbExtractor {
+    /// Check the configuration and draw the sampling pattern.
+    pub fn new(config: OrbConfig) -> Result<Self, SlamError> {
+        if !(config.scale_factor.is_finite() && config.scale_factor > 1.0) {
+            return Err(SlamError::Config {
+                field: "orb.scale_factor",
+                reason: format!("{} must be > 1", config.scale_factor),
+            });
+        }
+        if config.n_levels == 0 || config.n_levels > 32 {
+            return Err(SlamError::Config {
+                field: "orb.n_levels",
+                reason: format!("{} not in 1..=32", config.n_levels),
+            });
+        }
+        if config.cell_size_px < 4 {
+            return Err(SlamError::Config {
+                field: "orb.cell_size_px",
+                reason: "must be ≥ 4".into(),
+            });
+        }
+        if config.fast_min_threshold == 0 || config.fast_min_threshold > config.fast_threshold {
+            return Err(SlamError::Config {
+                field: "orb.fast_min_threshold",
+                reason: "must be in 1..=fast_threshold".into(),
+            });
+        }
+        let mut rng = ChaCha8Rng::seed_from_u64(config.pattern_seed);
+        let draw = |rng: &mut ChaCha8Rng| loop {
+            // Uniform over the disc of radius PATTERN_RADIUS_PX, rounded to whole pixels.
+            let x = rng
+                .random_range(-PATTERN_RADIUS_PX..=PATTERN_RADIUS_PX)
+                .round();
+            let y = rng
+                .random_range(-PATTERN_RADIUS_PX..=PATTERN_RADIUS_PX)
+                .round();
+            if x * x + y * y <= PATTERN_RADIUS_PX * PATTERN_RADIUS_PX {
+                return (x as f32, y as f32);
+            }
+        };
+        let mut pattern = Vec::with_capacity(DESCRIPTOR_BITS);
+        while pattern.len() < DESCRIPTOR_BITS {
+            let (a, b) = (draw(&mut rng), draw(&mut rng));
+            if a != b {
+                pattern.push([a.0, a.1, b.0, b.1]);
+            }
+        }
+        let mut umax = [0usize; HALF_PATCH_PX + 1];
+        for (v, u) in umax.iter_mut().enumerate() {
+            let r2 = (HALF_PATCH_PX * HALF_PATCH_PX - v * v) as f64;
+            *u = r2.sqrt().round() as usize;
+        }
+        // Features per level: geometric in the level's area ratio (ORB-SLAM2).
+        let inv = 1.0 / config.scale_factor;
+        let n = config.n_levels;
+        let first = config.n_features as f64 * (1.0 - inv) / (1.0 - inv.powi(n as i32));
+        let mut features_per_level = Vec::with_capacity(n);
+        let mut total = 0usize;
+        for l in 0..n {
+            let k = if l + 1 == n {
+                config.n_features.saturating_sub(total)
+            } else {
+                (first * inv.powi(l as i32)).round() as usize
+            };
+            total += k;
+            features_per_level.push(k);
+        }
+        let mut rotated = Vec::with_capacity(ANGLE_BINS * DESCRIPTOR_BITS);
+        for bin in 0..ANGLE_BINS {
+            let (s, c) = (std::f32::consts::TAU * bin as f32 / ANGLE_BINS as f32).sin_cos();
+            for p in &pattern {
+                let r =
+                    |x: f32, y: f32| [round_i(x * c - y * s) as i8, round_i(x * s + y * c) as i8];
+                let (a, b) = (r(p[0], p[1]), r(p[2], p[3]));
+                rotated.push([a[0], a[1], b[0], b[1]]);
+            }
+        }
+        Ok(Self {
+            config,
+            levels: Vec::new(),
+            rotated,
+            umax,
+            score_buf: Vec::new(),
+            corners: Vec::new(),
+            col_sums: Vec::new(),
+            features_per_level,
+        })
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &OrbConfig {
+        &self.config
+    }
+
+    /// Detect and describe up to `n_features` keypoints. An image smaller than the patch gives an
+    /// empty set (not an error); a buffer of the wrong length is an error.
+    pub fn extract(&mut self, image: &GreyImage) -> Result<Features, SlamError> {
+        let (w, h) = (image.width as usize, image.height as usize);
+        if image.data.len() != w * h {
+            return Err(SlamError::BufferLength {
+                field: "grey",
+                expected: w * h,
+                actual: image.data.len(),
+            });
+        }
+        self.build_pyramid(image);
+        let mut out = Features::default();
+        for l in 0..self.levels.len() {
+            let want = self.features_per_level.get(l).copied().unwrap_or(0);
+            if want == 0 {
+                continue;
+            }
+            self.detect_level(l, want);
+            self.describe_level(l, &mut out);
+        }
+        Ok(out)
+    }
+
+    fn build_pyramid(&mut self, image: &GreyImage) {
+        let (w0, h0) = (image.width as usize, image.height as usize);
+        let n = self.config.n_levels;
+        let same = self.levels.len() == n
+            && self
+                .levels
+                .first()
+                .is_some_and(|l| l.width == w0 && l.height == h0);
+        if !same {
+            self.levels = (0..n)
+                .map(|l| {
+                    let s = self.config.scale_factor.powi(l as i32);
+                    let (w, h) = (
+                        ((w0 as f64) / s).round() as usize,
+                        ((h0 as f64) / s).round() as usize,
+                    );
+                    Level {
+                        width: w,
+                        height: h,
+                        scale: s as f32,
+                        image: vec![0; w * h],
+                        blurred: vec![0; w * h],
+                    }
+                })
+                .collect();
+            self.score_buf = vec![0; w0 * h0];
+            self.col_sums = vec![0; w0];
+        }
+        if let Some(l0) = self.levels.first_mut() {
+            l0.image.copy_from_slice(&image.data);
+        }
+        for l in 1..n {
+            let (prev, rest) = self.levels.split_at_mut(l);
+            if let (Some(src), Some(dst)) = (prev.last(), rest.first_mut()) {
+                resize_bilinear(src, dst);
+            }
+        }
+        for level in &mut self.levels {
+            box_blur(level, &mut self.col_sums);
+        }
+    }
+
+    fn detect_level(&mut self, l: usize, want: usize) {
+        self.corners.clear();
+        let Some(level) = self.levels.get(l) else {
+            return;
+        };
+        let (w, h) = (level.width, level.height);
+        if w <= 2 * EDGE_PX || h <= 2 * EDGE_PX {
+            return;
+        }
+        let img = &level.image;
+        let t_min = i16::from(self.config.fast_min_threshold);
+        let offsets: [isize; 16] = CIRCLE.map(|(dx, dy)| dy * w as isize + dx);
+        let cell = self.config.cell_size_px;
+        let ncx = (w - 2 * EDGE_PX).div_ceil(cell);
+        let n = w - 2 * EDGE_PX;
+        let t8 = self.config.fast_min_threshold;
+        let offsets25: [isize; 25] = std::array::from_fn(|k| offsets[k % 16]);
+        for y in EDGE_PX..h - EDGE_PX {
+            let row = y * w;
+            // Segment test on 16 pixels at once (OpenCV's SIMD FAST): walk the circle 25 times
+            // (16 + 9 to wrap), counting consecutive brighter / darker pixels per lane.
+            let mut x0 = EDGE_PX;
+            let mut done_to = EDGE_PX;
+            while done_to < EDGE_PX + n {
+                if x0 + LANES > EDGE_PX + n {
+                    x0 = (EDGE_PX + n).saturating_sub(LANES).max(EDGE_PX);
+                }
+                let flags = segment_test_lanes(img, row + x0, &offsets25, t8);
+                let any = u128::from_le_bytes(flags) != 0;
+                for (j, &f) in flags.iter().enumerate().filter(|_| any) {
+                    let x = x0 + j;
+                    if f == 0 || x < done_to || x >= EDGE_PX + n {
+                        continue;
+                    }
+                    let i = (row + x) as isize;
+                    let c = i16::from(img[row + x]);
+                    let mut diff = [0i16; 16];
+                    for (k, o) in offsets.iter().enumerate() {
+                        diff[k] = i16::from(img[(i + o) as usize]) - c;
+                    }
+                    // Flag bit 0: bright arc, bit 1: dark arc (never both for 9 of 16).
+                    let score = if f & 1 != 0 {
+                        arc_score(&diff)
+                    } else {
+                        arc_score(&diff.map(|v| -v))
+                    };
+                    if score < t_min {
+                        continue;
+                    }
+                    let cid = ((y - EDGE_PX) / cell) * ncx + (x - EDGE_PX) / cell;
+                    self.corners.push(Corner {
+                        x: x as u32,
+                        y: y as u32,
+                        score: score as u16,
+                        key: cid as u32,
+                    });
+                    self.score_buf[row + x] = score as u16;
+                }
+                done_to = (x0 + LANES).min(EDGE_PX + n);
+                x0 += LANES;
+                if n < LANES {
+                    break;
+                }
+            }
+        }
+        // Weak corners (score below the FAST threshold) only count in cells without a strong one
+        // (decided before suppression, which is then skipped for the dropped ones).
+        let strong = u16::from(self.config.fast_threshold);
+        let n_cells = self
+            .corners
+            .iter()
+            .map(|c| c.key as usize + 1)
+            .max()
+            .unwrap_or(0);
+        let mut has_strong = vec![false; n_cells];
+        for c in &self.corners {
+            if c.score >= strong {
+                if let Some(f) = has_strong.get_mut(c.key as usize) {
+                    *f = true;
+                }
+            }
+        }
+        // 3x3 non-maximum suppression (ties: the first in raster order wins).
+        let buf = &self.score_buf;
+        self.corners.retain(|c| {
+            if c.score < strong && has_strong.get(c.key as usize).copied().unwrap_or(false) {
+                return false;
+            }
+            let i = c.y as usize * w + c.x as usize;
+            let s = c.score;
+            match (
+                buf.get(i - w - 1..i - w + 2),
+                buf.get(i - 1..i + 2),
+                buf.get(i + w - 1..i + w + 2),
+            ) {
+                (Some(a), Some(m), Some(b)) => {
+                    a[0] < s
+                        && a[1] < s
+                        && a[2] < s
+                        && m[0] < s
+                        && m[2] <= s
+                        && b[0] <= s
+                        && b[1] <= s
+                        && b[2] <= s
+                }
+                _ => false,
+            }
+        });
+        // Clear the score map for the next level.
+        for y in EDGE_PX..h - EDGE_PX {
+            for v in &mut self.score_buf[y * w + EDGE_PX..y * w + w - EDGE_PX] {
+                *v = 0;
+            }
+        }
+        if self.corners.len() > want {
+            // Round-robin over cells: rank within the cell first, then the FAST score.
+            self.corners
+                .sort_unstable_by_key(|c| (c.key, u16::MAX - c.score));
+            let mut rank = 0u32;
+            let mut prev = u32::MAX;
+            for c in &mut self.corners {
+                rank = if c.key == prev { rank + 1 } else { 0 };
+                prev = c.key;
+                c.key = rank;
+            }
+            self.corners
+                .select_nth_unstable_by_key(want, |c| (c.key, u16::MAX - c.score, c.y, c.x));
+            self.corners.truncate(want);
+        }
+        // Deterministic output order.
+        self.corners.sort_unstable_by_key(|c| (c.y, c.x));
+    }
+
+    fn describe_level(&self, l: usize, out: &mut Features) {
+        let Some(level) = self.levels.get(l) else {
+            return;
+        };
+        let w = level.width;
+        for c in &self.corners {
+            let (x, y) = (c.x as usize, c.y as usize);
+            // Intensity centroid over the radius-15 disc.
+            let center = y * w + x;
+            let img = &level.image;
+            let mut m10: i32 = 0;
+            let mut m01: i32 = 0;
+            let hp = HALF_PATCH_PX;
+            if let Some(mid) = img.get(center - hp..=center + hp) {
+                for (u, &p) in (-(hp as i32)..=hp as i32).zip(mid) {
+                    m10 += u * i32::from(p);
+                }
+            }
+            for v in 1..=hp {
+                let d = self.umax[v];
+                let (lo_row, hi_row) = (center - v * w, center + v * w);
+                let (Some(up), Some(dn)) = (
+                    img.get(lo_row - d..=lo_row + d),
+                    img.get(hi_row - d..=hi_row + d),
+                ) else {
+                    continue;
+                };
+                let mut v_sum: i32 = 0;
+                for ((u, &minus), &plus) in (-(d as i32)..=d as i32).zip(up).zip(dn) {
+                    let (plus, minus) = (i32::from(plus), i32::from(minus));
+                    v_sum += plus - minus;
+                    m10 += u * (plus + minus);
+                }
+                m01 += v as i32 * v_sum;
+            }
+            let angle = (m01 as f32).atan2(m10 as f32);
+            // Steered pattern from the table of ANGLE_BINS rotations.
+            let bin = (round_i(angle / std::f32::consts::TAU * ANGLE_BINS as f32)
+                .rem_euclid(ANGLE_BINS as isize)) as usize;
+            let blur = &level.blurred;
+            let wi = w as isize;
+            let mut desc = [0u64; 4];
+            // The patch (radius PATTERN_RADIUS_PX ≤ EDGE_PX) lies inside the level.
+            let r = PATTERN_RADIUS_PX as usize;
+            let (p0, p1) = (center - r * w - r, center + r * w + r + 1);
+            if let (Some(rot), Some(patch)) = (
+                self.rotated
+                    .get(bin * DESCRIPTOR_BITS..(bin + 1) * DESCRIPTOR_BITS),
+                blur.get(p0..p1),
+            ) {
+                let base = (r * w + r) as isize;
+                for (word, tests) in desc.iter_mut().zip(rot.chunks_exact(64)) {
+                    let mut bits = 0u64;
+                    for (b, p) in tests.iter().enumerate() {
+                        let i1 = (base + isize::from(p[1]) * wi + isize::from(p[0])) as usize;
+                        let i2 = (base + isize::from(p[3]) * wi + isize::from(p[2])) as usize;
+                        let (a, c) = (
+                            patch.get(i1).copied().unwrap_or(0),
+                            patch.get(i2).copied().unwrap_or(0),
+                        );
+                        bits |= u64::from(a < c) << b;
+                    }
+                    *word = bits;
+                }
+            }
+            out.keypoints.push(Keypoint {
+                x: c.x as f32 * level.scale,
+                y: c.y as f32 * level.scale,
+                level: l as u8,
+                scale: level.scale,
+                angle_rad: angle,
+                score: c.score,
+            });
+            out.descriptors.push(desc);
+        }
+    }
+}
+
+/// Pixels processed together by [`segment_test_lanes`].
+const LANES: usize = 16;
+
+/// FAST-9 segment test for the `LANES` pixels starting at `start` at threshold `t` (flag bit 0:
+/// brighter arc, bit 1: darker arc, 0: no corner). Written on fixed-size u8 arrays so that it compiles to SIMD.
+#[inline]
+fn segment_test_lanes(img: &[u8], start: usize, offsets25: &[isize; 25], t: u8) -> [u8; LANES] {
+    let mut c = [0u8; LANES];
+    if let Some(src) = img.get(start..start + LANES) {
+        c.copy_from_slice(src);
+    }
+    let mut hi = [0u8; LANES];
+    let mut lo = [0u8; LANES];
+    for j in 0..LANES {
+        hi[j] = c[j].saturating_add(t);
+        lo[j] = c[j].saturating_sub(t);
+    }
+    // Quick reject of the whole chunk: a 9-arc holds two adjacent compass pixels (circle
+    // indices 0/4, 4/8, 8/12, 12/0) on the same side.
+    let load = |o: isize| {
+        let s = (start as isize + o) as usize;
+        let mut p = [0u8; LANES];
+        if let Some(src) = img.get(s..s + LANES) {
+            p.copy_from_slice(src);
+        }
+        p
+    };
+    let compass = [
+        load(offsets25[0]),
+        load(offsets25[4]),
+        load(offsets25[8]),
+        load(offsets25[12]),
+    ];
+    let mut any = 0u8;
+    for j in 0..LANES {
+        let b: [u8; 4] =
+            std::array::from_fn(|k| u8::from(compass[k][j].saturating_sub(hi[j]) != 0));
+        let d: [u8; 4] =
+            std::array::from_fn(|k| u8::from(lo[j].saturating_sub(compass[k][j]) != 0));
+        any |= (b[0] & b[1]) | (b[1] & b[2]) | (b[2] & b[3]) | (b[3] & b[0]);
+        any |= (d[0] & d[1]) | (d[1] & d[2]) | (d[2] & d[3]) | (d[3] & d[0]);
+    }
+    if any == 0 {
+        return [0u8; LANES];
+    }
+    let (mut cb, mut cd, mut mb, mut md) = ([0u8; LANES], [0u8; LANES], [0u8; LANES], [0u8; LANES]);
+    for &o in &offsets25[..24] {
+        let s = (start as isize + o) as usize;
+        let mut p = [0u8; LANES];
+        if let Some(src) = img.get(s..s + LANES) {
+            p.copy_from_slice(src);
+        }
+        for j in 0..LANES {
+            // p > hi  <=>  p - hi (saturating) != 0; same for p < lo.
+            let bright = 0u8.wrapping_sub(u8::from(p[j].saturating_sub(hi[j]) != 0));
+            let dark = 0u8.wrapping_sub(u8::from(lo[j].saturating_sub(p[j]) != 0));
+            cb[j] = cb[j].wrapping_add(1) & bright;
+            cd[j] = cd[j].wrapping_add(1) & dark;
+            mb[j] = mb[j].max(cb[j]);
+            md[j] = md[j].max(cd[j]);
+        }
+    }
+    let mut out = [0u8; LANES];
+    for j in 0..LANES {
+        out[j] = u8::from(mb[j] >= 9) | (u8::from(md[j] >= 9) << 1);
+    }
+    out
+}
+
+/// Round half away from zero without a libm call.
+#[inline]
+fn round_i(v: f32) -> isize {
+    (v + 0.5f32.copysign(v)) as isize
+}
+
+/// Largest threshold at which `diff` (circle minus centre) has 9 contiguous values above it,
+/// minus one (i.e. the FAST score for the "brighter" arc; negate `diff` for the darker one).
+#[inline]
+fn arc_score(diff: &[i16; 16]) -> i16 {
+    let mut m2 = [0i16; 16];
+    for k in 0..16 {
+        m2[k] = diff[k].min(diff[(k + 1) & 15]);
+    }
+    let mut m4 = [0i16; 16];
+    for k in 0..16 {
+        m4[k] = m2[k].min(m2[(k + 2) & 15]);
+    }
+    let mut best = i16::MIN;
+    for k in 0..16 {
+        let m8 = m4[k].min(m4[(k + 4) & 15]);
+        best = best.max(m8.min(diff[(k + 8) & 15]));
+    }
+    best - 1
+}
+
+/// Bilinear downscale of `src` into `dst` (sizes already set), fixed point (8-bit weights).
+fn resize_bilinear(src: &Level, dst: &mut Level) {
+    let (sw, sh, dw, dh) = (src.width, src.height, dst.width, dst.height);
+    if sw == 0 || sh == 0 || dw == 0 || dh == 0 {
+        return;
+    }
+    let (rx, ry) = (sw as f32 / dw as f32, sh as f32 / dh as f32);
+    let cols: Vec<(usize, u32)> = (0..dw)
+        .map(|x| {
+            let fx = ((x as f32 + 0.5) * rx - 0.5).clamp(0.0, (sw - 1) as f32);
+            let x0 = (fx as usize).min(sw.saturating_sub(2));
+            (x0, ((fx - x0 as f32) * 256.0).round().min(256.0) as u32)
+        })
+        .collect();
+    let mut tmp = vec![0u16; sw];
+    for y in 0..dh {
+        let fy = ((y as f32 + 0.5) * ry - 0.5).clamp(0.0, (sh - 1) as f32);
+        let y0 = (fy as usize).min(sh.saturating_sub(2));
+        let wy = ((fy - y0 as f32) * 256.0).round().min(256.0) as u16;
+        let y1 = (y0 + 1).min(sh - 1);
+        let (r0, r1) = (
+            &src.image[y0 * sw..y0 * sw + sw],
+            &src.image[y1 * sw..y1 * sw + sw],
+        );
+        // Vertical blend (vectorisable), then horizontal gather.
+        for ((t, &a), &b) in tmp.iter_mut().zip(r0).zip(r1) {
+            *t = u16::from(a) * (256 - wy) + u16::from(b) * wy;
+        }
+        let out = &mut dst.image[y * dw..y * dw + dw];
+        for (o, &(x0, wx)) in out.iter_mut().zip(&cols) {
+            let (a, b) = (
+                tmp.get(x0).copied().unwrap_or(0),
+                tmp.get(x0 + 1).copied().unwrap_or(0),
+            );
+            *o = ((u32::from(a) * (256 - wx) + u32::from(b) * wx + 32768) >> 16) as u8;
+        }
+    }
+}
+
+/// Box smoothing (side `2 BLUR_RADIUS_PX + 1`) of a level into its `blurred` buffer (borders
+/// copied unsmoothed).
+fn box_blur(level: &mut Level, col_sums: &mut Vec<u16>) {
+    const R: usize = BLUR_RADIUS_PX;
+    const N: usize = 2 * R + 1;
+    // Fixed-point reciprocal of the box area.
+    const INV: u32 = (65536 / (N * N)) as u32;
+    let (w, h) = (level.width, level.height);
+    level.blurred.copy_from_slice(&level.image);
+    if w < N || h < N {
+        return;
+    }
+    col_sums.resize(w, 0);
+    let img = &level.image;
+    for y in R..h - R {
+        let top = &img[(y - R) * w..(y - R + 1) * w];
+        col_sums[..w]
+            .iter_mut()
+            .zip(top)
+            .for_each(|(s, &v)| *s = u16::from(v));
+        for dy in 1..N {
+            let row = &img[(y - R + dy) * w..(y - R + dy + 1) * w];
+            col_sums[..w]
+                .iter_mut()
+                .zip(row)
+                .for_each(|(s, &v)| *s += u16::from(v));
+        }
+        let m = w - 2 * R;
+        let out = &mut level.blurred[y * w + R..][..m];
+        let cs = &col_sums[..w];
+        for (i, o) in out.iter_mut().enumerate() {
+            let mut sum = 0u32;
+            for k in 0..N {
+                sum += u32::from(cs[i + k]);
+            }
+            *o = ((sum * INV + 32768) >> 16) as u8;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::slam::matcher::{match_brute_force, MatchConfig};
+    use crate::slam::synthetic::shapes_texture;
+
+    fn extractor() -> OrbExtractor {
+        OrbExtractor::new(OrbConfig::default()).unwrap_or_else(|e| panic!("{e}"))
+    }
+
+    /// Rotate by `angle_rad` and scale by `scale` about the image centre (bilinear, grey 0 outside).
+    fn warp(img: &GreyImage, angle_rad: f64, scale: f64) -> GreyImage {
+        let (w, h) = (img.width as usize, img.height as usize);
+        let (cx, cy) = (w as f64 / 2.0, h as f64 / 2.0);
+        let (s, c) = angle_rad.sin_cos();
+        let mut data = vec![0u8; w * h];
+        for y in 0..h {
+            for x in 0..w {
+                // Inverse map: p_src = R⁻¹ (p_dst − c) / scale + c.
+                let (dx, dy) = ((x as f64 - cx) / scale, (y as f64 - cy) / scale);
+                let (sx, sy) = (c * dx + s * dy + cx, -s * dx + c * dy + cy);
+                if sx < 0.0 || sy < 0.0 || sx >= (w - 1) as f64 || sy >= (h - 1) as f64 {
+                    continue;
+                }
+                let (x0, y0) = (sx.floor() as usize, sy.floor() as usize);
+                let (a, b) = (sx - x0 as f64, sy - y0 as f64);
+                let p = |xx: usize, yy: usize| f64::from(img.data[yy * w + xx]);
+                let v = (p(x0, y0) * (1.0 - a) + p(x0 + 1, y0) * a) * (1.0 - b)
+                    + (p(x0, y0 + 1) * (1.0 - a) + p(x0 + 1, y0 + 1) * a) * b;
+                data[y * w + x] = v.round() as u8;
+            }
+        }
+        GreyImage {
+            width: img.width,
+            height: img.height,
+            data,
+        }
+    }
+
+    /// (precision, recall over ground-truth correspondences, matches) for a warp of
+    /// `shapes_texture(640, 480, 11)`.
+    fn warp_scores(angle_deg: f64, scale: f64) -> (f64, f64, usize) {
+        let img = shapes_texture(640, 480, 11);
+        let warped = warp(&img, angle_deg.to_radians(), scale);
+        let mut orb = extractor();
+        let a = orb.extract(&img).unwrap_or_else(|e| panic!("{e}"));
+        let b = orb.extract(&warped).unwrap_or_else(|e| panic!("{e}"));
+        let (s, c) = angle_deg.to_radians().sin_cos();
+        let map = |k: &Keypoint| {
+            let (dx, dy) = (f64::from(k.x) - 320.0, f64::from(k.y) - 240.0);
+            (
+                (c * dx - s * dy) * scale + 320.0,
+                (s * dx + c * dy) * scale + 240.0,
+            )
+        };
+        let tol = 4.0;
+        let close = |ka: &Keypoint, kb: &Keypoint| {
+            let (x, y) = map(ka);
+            (x - f64::from(kb.x)).hypot(y - f64::from(kb.y)) <= tol * f64::from(kb.scale)
+        };
+        // Ground-truth correspondences: a keypoint of the warped image within 4 px (x its scale)
+        // of the mapped position, at the expected pyramid level ±1.
+        let level_shift = (scale.ln() / 1.2f64.ln()).round() as i32;
+        let level_ok = |ka: &Keypoint, kb: &Keypoint| {
+            (i32::from(kb.level) - i32::from(ka.level) - level_shift).abs() <= 1
+        };
+        // Counted one-to-one: the smaller of the two sides' counts of keypoints with a counterpart.
+        let in_a = a
+            .keypoints
+            .iter()
+            .filter(|ka| {
+                b.keypoints
+                    .iter()
+                    .any(|kb| close(ka, kb) && level_ok(ka, kb))
+            })
+            .count();
+        let in_b = b
+            .keypoints
+            .iter()
+            .filter(|kb| {
+                a.keypoints
+                    .iter()
+                    .any(|ka| close(ka, kb) && level_ok(ka, kb))
+            })
+            .count();
+        let repeatable = in_a.min(in_b);
+        let matches = match_brute_force(
+            &a.descriptors,
+            &a.keypoints,
+            &b.descriptors,
+            &b.keypoints,
+            &MatchConfig::default(),
+        );
+        let correct = matches
+            .iter()
+            .filter(|m| close(&a.keypoints[m.query_index], &b.keypoints[m.train_index]))
+            .count();
+        (
+            correct as f64 / matches.len().max(1) as f64,
+            correct as f64 / repeatable.max(1) as f64,
+            matches.len(),
+        )
+    }
+
+    #[test]
+    fn python_port_of_the_texture_is_bit_exact() {
+        // Sums printed by experiments/bench/slam_refs.py's `shapes_texture` for seeds 0 and 7.
+        let sum = |seed| {
+            shapes_texture(640, 480, seed)
+                .data
+                .iter()
+                .map(|&v| u64::from(v))
+                .sum::<u64>()
+        };
+        assert_eq!(sum(0), 39_142_074);
+        assert_eq!(sum(7), 43_270_714);
+    }
+
+    #[test]
+    fn extracts_the_requested_number_of_spread_features() {
+        let img = shapes_texture(640, 480, 3);
+        let f = extractor().extract(&img).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(f.keypoints.len(), f.descriptors.len());
+        assert!(
+            (950..=1000).contains(&f.keypoints.len()),
+            "{}",
+            f.keypoints.len()
+        );
+        let levels: std::collections::BTreeSet<u8> = f.keypoints.iter().map(|k| k.level).collect();
+        assert_eq!(levels.len(), 8);
+        for k in &f.keypoints {
+            let margin = EDGE_PX as f32 * k.scale - 1.0;
+            assert!(
+                k.x >= margin && k.y >= margin && k.x <= 640.0 - margin && k.y <= 480.0 - margin
+            );
+        }
+        // Spread: every quadrant holds at least 15 % of the features.
+        for (qx, qy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+            let n = f
+                .keypoints
+                .iter()
+                .filter(|k| (k.x >= 320.0) == (qx == 1) && (k.y >= 240.0) == (qy == 1))
+                .count();
+            assert!(n * 100 >= 15 * f.keypoints.len(), "quadrant {qx},{qy}: {n}");
+        }
+        // Deterministic.
+        assert_eq!(
+            extractor().extract(&img).unwrap_or_else(|e| panic!("{e}")),
+            f
+        );
+    }
+
+    #[test]
+    fn matches_survive_rotation_and_scale() {
+        for (angle, scale) in [(30.0, 1.0), (0.0, 1.2), (30.0, 1.2)] {
+            let (precision, recall, n) = warp_scores(angle, scale);
+            eprintln!(
+                "warp {angle}° x{scale}: {n} matches, precision {precision:.3}, recall {recall:.3}"
+            );
+            // Recall over ground-truth correspondences ≥ 50 % (cv2.ORB_create(1000) + BFMatcher with
+            // the same ratio test: 0.59–0.67 on these warps), precision ≥ 95 %.
+            assert!(recall >= 0.5, "warp {angle}° x{scale}: recall {recall}");
+            assert!(
+                precision >= 0.95,
+                "warp {angle}° x{scale}: precision {precision}"
+            );
+            assert!(n >= 200);
+        }
+    }
+
+    #[test]
+    fn fast_score_is_the_largest_passing_threshold() {
+        // Nine contiguous values of 50 above the centre, the rest at 0: score 49.
+        let mut d = [0i16; 16];
+        for v in d.iter_mut().skip(3).take(9) {
+            *v = 50;
+        }
+        d[7] = 30; // the weakest arc member limits the score
+        assert_eq!(arc_score(&d), 29);
+        // Lane test: a 9-arc at threshold 20 is a corner, an 8-arc is not.
+        let w = 40;
+        let mut img = vec![100u8; w * 9];
+        let centre = 4 * w + 10;
+        let offsets: [isize; 16] = CIRCLE.map(|(dx, dy)| dy * w as isize + dx);
+        let offsets25: [isize; 25] = std::array::from_fn(|k| offsets[k % 16]);
+        for o in &offsets[0..9] {
+            img[(centre as isize + o) as usize] = 150;
+        }
+        let flags = segment_test_lanes(&img, centre, &offsets25, 20);
+        assert_eq!(flags[0], 1);
+        img[(centre as isize + offsets[8]) as usize] = 100;
+        assert_eq!(segment_test_lanes(&img, centre, &offsets25, 20)[0], 0);
+    }
+
+    #[test]
+    fn degenerate_images_give_no_features_or_an_error() {
+        let mut orb = extractor();
+        let flat = GreyImage {
+            width: 640,
+            height: 480,
+            data: vec![90; 640 * 480],
+        };
+        assert!(orb
+            .extract(&flat)
+            .unwrap_or_else(|e| panic!("{e}"))
+            .keypoints
+            .is_empty());
+        let tiny = shapes_texture(20, 20, 1);
+        assert!(orb
+            .extract(&tiny)
+            .unwrap_or_else(|e| panic!("{e}"))
+            .keypoints
+            .is_empty());
+        let empty = GreyImage {
+            width: 0,
+            height: 0,
+            data: vec![],
+        };
+        assert!(orb
+            .extract(&empty)
+            .unwrap_or_else(|e| panic!("{e}"))
+            .keypoints
+            .is_empty());
+        let bad = GreyImage {
+            width: 10,
+            height: 10,
+            data: vec![0; 99],
+        };
+        assert!(matches!(
+            orb.extract(&bad),
+            Err(SlamError::BufferLength { .. })
+        ));
+        assert!(OrbExtractor::new(OrbConfig {
+            scale_factor: 1.0,
+            ..OrbConfig::default()
+        })
+        .is_err());
+        assert!(OrbExtractor::new(OrbConfig {
+            n_levels: 0,
+            ..OrbConfig::default()
+        })
+        .is_err());
+    }
+}

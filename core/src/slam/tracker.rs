@@ -1,0 +1,1081 @@
+//! The RGB-D tracker: one [`Tracker::track`] call per frame does feature extraction, pose
+//! estimation (or takes the configured pose source), keyframe insertion, local BA and culling.
+
+use std::collections::BTreeMap;
+
+use nalgebra::{Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
+use serde::{Deserialize, Serialize};
+
+use super::ba::{BundleConfig, BundleObservation, BundleProblem};
+use super::features::{hamming, Descriptor, Features, OrbConfig, OrbExtractor};
+use super::matcher::KeypointGrid;
+use super::noise::KinematicNoiseConfig;
+use super::pnp::{refine_pose, solve_pnp_ransac, Correspondence, PoseRefineConfig, RansacConfig};
+use super::SlamError;
+use crate::frame::{DepthImage, GreyImage};
+use crate::geometry::{Box2, PinholeCamera, Se3};
+
+/// Where the output camera pose comes from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PoseSource {
+    /// Visual tracking seeded by the (noisy) kinematic prior (default; the paper's system).
+    #[default]
+    Slam,
+    /// The kinematic prior with [`TrackerConfig::kinematic_noise`] applied, no visual correction.
+    Kinematics,
+    /// The ground-truth pose given with the frame (oracle, for ablations).
+    GroundTruth,
+}
+
+/// Configuration of the tracker.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct TrackerConfig {
+    /// Pose source (`slam`, `kinematics`, `ground_truth`).
+    pub pose_source: PoseSource,
+    /// Feature extraction.
+    pub orb: OrbConfig,
+    /// Noise model turning the clean forward-kinematics pose into the prior (used by `slam` as its
+    /// seed and by `kinematics` as its output). Issue 3: 1 cm / 1° per view.
+    pub kinematic_noise: KinematicNoiseConfig,
+    /// RANSAC of the coarse pose.
+    pub ransac: RansacConfig,
+    /// Motion-only refinement.
+    pub refine: PoseRefineConfig,
+    /// Local bundle adjustment.
+    pub bundle: BundleConfig,
+    /// Depth readings outside `[min_depth_m, max_depth_m]` are ignored, metres.
+    pub min_depth_m: f64,
+    /// See `min_depth_m` (ORB-SLAM2 RGB-D "close point" threshold is 40 baselines ≈ 3.2 m).
+    pub max_depth_m: f64,
+    /// Search radius of the first (coarse) projection search around the seed pose, level-0
+    /// pixels (not scaled by level: it covers pose error, not keypoint noise). Must cover the
+    /// prior's error (1° ≈ 10 px at fx = 600, 1 cm at 0.5 m ≈ 12 px).
+    pub coarse_radius_px: f64,
+    /// Search radius of the second projection search around the RANSAC pose, pixels × scale.
+    pub fine_radius_px: f64,
+    /// Largest Hamming distance for a map point ↔ keypoint match (ORB-SLAM2 `TH_HIGH` = 100).
+    pub match_max_distance: u32,
+    /// Ratio test of the projection search (best < ratio × second best; ORB-SLAM2: 0.8–0.9).
+    pub match_ratio: f32,
+    /// A keypoint's level may differ from its map point's creation level by at most this.
+    pub max_level_difference: u8,
+    /// Fewer keypoints with valid depth than this on an empty map: lost (cannot initialise).
+    pub min_init_points: usize,
+    /// Fewer pose inliers than this: lost (ORB-SLAM2: 30).
+    pub min_tracked_inliers: usize,
+    /// Insert a keyframe when the inliers drop below this fraction of the last keyframe's tracked
+    /// points (ORB-SLAM2: 0.75 for RGB-D).
+    pub keyframe_inlier_ratio: f64,
+    /// Insert a keyframe at least every this many tracked frames.
+    pub keyframe_max_interval: usize,
+    /// Keyframes in the local bundle adjustment window (ORB-SLAM2: covisible ones; here the
+    /// most recent N).
+    pub local_keyframes: usize,
+    /// New map points created per keyframe at most (closest depth first).
+    pub max_new_points: usize,
+    /// Cull a point whose found / visible ratio falls below this (ORB-SLAM2: 0.25) once it has
+    /// been visible `cull_min_visible` times.
+    pub cull_found_ratio: f64,
+    /// See `cull_found_ratio`.
+    pub cull_min_visible: u32,
+    /// Cull a point observed by fewer than 2 keyframes once this many keyframes have been added
+    /// after its creation (ORB-SLAM2: 2; 0 disables).
+    pub cull_after_keyframes: usize,
+    /// Express the SLAM map in the world by the rigid transform that best explains all kinematic
+    /// priors so far (rotation: chordal mean; translation: centroid of camera centres), so that
+    /// per-view biases average out. If false, the map frame is the first frame's prior.
+    pub anchor_to_prior_mean: bool,
+    /// After this many consecutive lost frames the map is dropped and re-initialised from the
+    /// prior.
+    pub reset_after_lost: usize,
+}
+
+impl Default for TrackerConfig {
+    fn default() -> Self {
+        Self {
+            pose_source: PoseSource::Slam,
+            orb: OrbConfig::default(),
+            kinematic_noise: KinematicNoiseConfig::default(),
+            ransac: RansacConfig::default(),
+            refine: PoseRefineConfig::default(),
+            bundle: BundleConfig::default(),
+            min_depth_m: 0.05,
+            max_depth_m: 3.0,
+            coarse_radius_px: 40.0,
+            fine_radius_px: 6.0,
+            match_max_distance: 80,
+            match_ratio: 0.9,
+            max_level_difference: 2,
+            min_init_points: 50,
+            min_tracked_inliers: 30,
+            keyframe_inlier_ratio: 0.75,
+            keyframe_max_interval: 10,
+            local_keyframes: 5,
+            max_new_points: 500,
+            cull_found_ratio: 0.25,
+            cull_min_visible: 4,
+            cull_after_keyframes: 3,
+            anchor_to_prior_mean: true,
+            reset_after_lost: 5,
+        }
+    }
+}
+
+/// One frame's input.
+#[derive(Debug, Clone, Copy)]
+pub struct TrackInput<'a> {
+    /// Grey image, same size as the camera.
+    pub grey: &'a GreyImage,
+    /// Depth in metres (0 / non-finite / negative = no return), same size as the camera.
+    pub depth: &'a DepthImage,
+    /// Intrinsics.
+    pub camera: &'a PinholeCamera,
+    /// Clean forward-kinematics camera pose (OpenCV axes); the tracker applies the noise model.
+    pub world_from_camera_fk: Se3,
+    /// Index of the view (arm configuration) this frame belongs to: selects the per-view bias.
+    pub view_index: u64,
+    /// Ground-truth pose; required for [`PoseSource::GroundTruth`], ignored otherwise.
+    pub world_from_camera_gt: Option<Se3>,
+}
+
+/// Why a frame was lost.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case", tag = "reason")]
+pub enum LostReason {
+    /// Too few keypoints (textureless image).
+    TooFewFeatures {
+        /// Keypoints found.
+        found: usize,
+        /// Needed.
+        required: usize,
+    },
+    /// Too few keypoints with valid depth to initialise the map.
+    NoDepth {
+        /// Keypoints with depth.
+        valid: usize,
+        /// Needed.
+        required: usize,
+    },
+    /// Pose estimation failed: too few matches or inliers.
+    TooFewInliers {
+        /// Best inlier count reached.
+        inliers: usize,
+        /// Needed.
+        required: usize,
+    },
+}
+
+/// Tracking state of a frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case", tag = "state")]
+pub enum TrackingState {
+    /// Pose estimated (or taken from the configured pose source).
+    Ok,
+    /// Lost: the output pose is the (noisy) kinematic prior.
+    Lost {
+        /// Why.
+        reason: LostReason,
+    },
+}
+
+/// A map point observed in the current frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ObservedPoint {
+    /// Stable map point id.
+    pub point_id: u64,
+    /// Pixel of the observing keypoint (level-0 pixels).
+    pub pixel: [f64; 2],
+    /// Position in the world, metres.
+    pub p_in_world: Point3<f64>,
+}
+
+/// The result of one [`Tracker::track`] call.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TrackOutput {
+    /// Frame counter of this tracker (0-based).
+    pub frame_index: u64,
+    /// Output camera pose (depends on the pose source; the prior when lost).
+    pub world_from_camera: Se3,
+    /// The noisy kinematic prior used for this frame.
+    pub world_from_camera_prior: Se3,
+    /// Ok or lost (with reason).
+    pub state: TrackingState,
+    /// Map points observed in this frame (pose inliers and points created by it).
+    pub observed: Vec<ObservedPoint>,
+    /// Keypoints extracted.
+    pub n_features: usize,
+    /// Pose inliers (0 when lost or not estimated).
+    pub n_inliers: usize,
+    /// Whether this frame became a keyframe.
+    pub keyframe_inserted: bool,
+    /// Map points after this frame.
+    pub n_map_points: usize,
+}
+
+impl TrackOutput {
+    /// The "local object" point cloud of the paper (Sec. III-B): the observed map points whose
+    /// pixel lies inside `bbox`.
+    pub fn points_in_box(&self, bbox: &Box2) -> Vec<ObservedPoint> {
+        self.observed
+            .iter()
+            .filter(|p| bbox.contains(p.pixel[0], p.pixel[1]))
+            .copied()
+            .collect()
+    }
+
+    /// Whether the frame was tracked.
+    pub fn is_ok(&self) -> bool {
+        self.state == TrackingState::Ok
+    }
+}
+
+#[derive(Debug, Clone)]
+struct MapPoint {
+    p_in_map: Point3<f64>,
+    descriptor: Descriptor,
+    level: u8,
+    keyframes: Vec<usize>,
+    created_kf: usize,
+    n_visible: u32,
+    n_found: u32,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct KfObservation {
+    point_id: u64,
+    pixel: [f64; 2],
+    depth_m: Option<f64>,
+    sigma_px: f64,
+}
+
+#[derive(Debug, Clone)]
+struct KeyFrame {
+    map_from_camera: Se3,
+    observations: Vec<KfObservation>,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct FrameRecord {
+    epoch: u32,
+    map_from_camera: Option<Se3>,
+    world_from_camera: Se3,
+}
+
+/// Running sums for the world ← map anchor (see [`TrackerConfig::anchor_to_prior_mean`]).
+#[derive(Debug, Clone, Copy)]
+struct Anchor {
+    rotation_sum: Matrix3<f64>,
+    prior_center_sum: Vector3<f64>,
+    map_center_sum: Vector3<f64>,
+    n: f64,
+}
+
+impl Anchor {
+    fn new() -> Self {
+        Self {
+            rotation_sum: Matrix3::zeros(),
+            prior_center_sum: Vector3::zeros(),
+            map_center_sum: Vector3::zeros(),
+            n: 0.0,
+        }
+    }
+
+    fn add(&mut self, world_from_camera_prior: &Se3, map_from_camera: &Se3) {
+        let d = world_from_camera_prior * map_from_camera.inverse();
+        self.rotation_sum += d.rotation.to_rotation_matrix().matrix();
+        self.prior_center_sum += world_from_camera_prior.translation.vector;
+        self.map_center_sum += map_from_camera.translation.vector;
+        self.n += 1.0;
+    }
+
+    fn world_from_map(&self) -> Se3 {
+        if self.n < 1.0 {
+            return Se3::identity();
+        }
+        let svd = self.rotation_sum.svd(true, true);
+        let (Some(u), Some(v_t)) = (svd.u, svd.v_t) else {
+            return Se3::identity();
+        };
+        let mut fix = Matrix3::identity();
+        fix[(2, 2)] = (u * v_t).determinant().signum();
+        let r = u * fix * v_t;
+        let rot = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(r));
+        let t = self.prior_center_sum / self.n - rot * (self.map_center_sum / self.n);
+        Se3::from_parts(Translation3::from(t), rot)
+    }
+}
+
+/// Per-frame working data.
+struct FrameData {
+    features: Features,
+    depth_m: Vec<Option<f64>>,
+    grid: KeypointGrid,
+}
+
+/// A match from the projection search.
+#[derive(Debug, Clone, Copy)]
+struct PointMatch {
+    point_id: u64,
+    keypoint: usize,
+}
+
+/// The RGB-D tracker (see the module docs).
+#[derive(Debug, Clone)]
+pub struct Tracker {
+    config: TrackerConfig,
+    orb: OrbExtractor,
+    points: BTreeMap<u64, MapPoint>,
+    keyframes: Vec<KeyFrame>,
+    next_point_id: u64,
+    frame_index: u64,
+    epoch: u32,
+    anchor: Anchor,
+    last: Option<(Se3, Se3)>,
+    frames_since_keyframe: usize,
+    last_keyframe_tracked: usize,
+    lost_streak: usize,
+    n_lost: usize,
+    records: Vec<FrameRecord>,
+}
+
+impl Tracker {
+    /// Check the configuration and build the tracker.
+    pub fn new(config: TrackerConfig) -> Result<Self, SlamError> {
+        let positive = [
+            ("min_depth_m", config.min_depth_m),
+            ("coarse_radius_px", config.coarse_radius_px),
+            ("fine_radius_px", config.fine_radius_px),
+        ];
+        for (field, v) in positive {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(SlamError::Config {
+                    field,
+                    reason: format!("{v} must be finite and > 0"),
+                });
+            }
+        }
+        if config.max_depth_m.partial_cmp(&config.min_depth_m) != Some(std::cmp::Ordering::Greater)
+        {
+            return Err(SlamError::Config {
+                field: "max_depth_m",
+                reason: "must exceed min_depth_m".into(),
+            });
+        }
+        let n = config.kinematic_noise;
+        for (field, v) in [
+            ("kinematic_noise.bias_trans_m", n.bias_trans_m),
+            ("kinematic_noise.bias_rot_deg", n.bias_rot_deg),
+            ("kinematic_noise.jitter_trans_m", n.jitter_trans_m),
+            ("kinematic_noise.jitter_rot_deg", n.jitter_rot_deg),
+            ("refine.depth_baseline_m", config.refine.depth_baseline_m),
+            ("bundle.depth_baseline_m", config.bundle.depth_baseline_m),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(SlamError::Config {
+                    field,
+                    reason: format!("{v} must be finite and ≥ 0"),
+                });
+            }
+        }
+        if config.local_keyframes == 0 {
+            return Err(SlamError::Config {
+                field: "local_keyframes",
+                reason: "must be ≥ 1".into(),
+            });
+        }
+        let orb = OrbExtractor::new(config.orb)?;
+        Ok(Self {
+            config,
+            orb,
+            points: BTreeMap::new(),
+            keyframes: Vec::new(),
+            next_point_id: 0,
+            frame_index: 0,
+            epoch: 0,
+            anchor: Anchor::new(),
+            last: None,
+            frames_since_keyframe: 0,
+            last_keyframe_tracked: 0,
+            lost_streak: 0,
+            n_lost: 0,
+            records: Vec::new(),
+        })
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &TrackerConfig {
+        &self.config
+    }
+
+    /// Number of map points.
+    pub fn n_map_points(&self) -> usize {
+        self.points.len()
+    }
+
+    /// Number of keyframes.
+    pub fn n_keyframes(&self) -> usize {
+        self.keyframes.len()
+    }
+
+    /// Number of lost frames so far.
+    pub fn n_lost(&self) -> usize {
+        self.n_lost
+    }
+
+    /// The current world ← map transform (identity for non-`slam` sources).
+    pub fn world_from_map(&self) -> Se3 {
+        if self.config.pose_source == PoseSource::Slam && self.config.anchor_to_prior_mean {
+            self.anchor.world_from_map()
+        } else {
+            Se3::identity()
+        }
+    }
+
+    /// All map points in the world frame, by id.
+    pub fn map_points_in_world(&self) -> Vec<(u64, Point3<f64>)> {
+        let w = self.world_from_map();
+        self.points
+            .iter()
+            .map(|(id, p)| (*id, w * p.p_in_map))
+            .collect()
+    }
+
+    /// The trajectory so far, one pose per tracked call, re-expressed with the latest world ← map
+    /// anchor for frames of the current map (the SLAM's best estimate of the whole trajectory at
+    /// this time; the online poses are the `world_from_camera` of each [`TrackOutput`]).
+    pub fn trajectory(&self) -> Vec<Se3> {
+        let w = self.world_from_map();
+        self.records
+            .iter()
+            .map(|r| match r.map_from_camera {
+                Some(m) if r.epoch == self.epoch => w * m,
+                _ => r.world_from_camera,
+            })
+            .collect()
+    }
+
+    /// Track one frame. Errors only for malformed input (sizes, buffers, intrinsics, a
+    /// non-finite or non-rigid prior, a missing ground-truth pose); anything the images do not
+    /// support (no texture, no depth, no consensus) is a reported lost frame.
+    pub fn track(&mut self, input: &TrackInput<'_>) -> Result<TrackOutput, SlamError> {
+        validate(input)?;
+        if self.config.pose_source == PoseSource::GroundTruth {
+            match input.world_from_camera_gt {
+                Some(gt) => check_pose(&gt, "world_from_camera_gt")?,
+                None => return Err(SlamError::MissingGroundTruth),
+            }
+        }
+        let frame_index = self.frame_index;
+        self.frame_index += 1;
+        let prior = self.config.kinematic_noise.perturb(
+            &input.world_from_camera_fk,
+            input.view_index,
+            frame_index,
+        );
+        let features = self.orb.extract(input.grey)?;
+        let depth_m: Vec<Option<f64>> = features
+            .keypoints
+            .iter()
+            .map(|k| {
+                let (u, v) = (k.x.round() as u32, k.y.round() as u32);
+                input
+                    .depth
+                    .at(u, v)
+                    .map(f64::from)
+                    .filter(|d| (self.config.min_depth_m..=self.config.max_depth_m).contains(d))
+            })
+            .collect();
+        let grid = KeypointGrid::new(
+            &features.keypoints,
+            input.camera.width,
+            input.camera.height,
+            16.0,
+        );
+        let frame = FrameData {
+            features,
+            depth_m,
+            grid,
+        };
+        let camera = input.camera;
+        let mut out = TrackOutput {
+            frame_index,
+            world_from_camera: prior,
+            world_from_camera_prior: prior,
+            state: TrackingState::Ok,
+            observed: Vec::new(),
+            n_features: frame.features.keypoints.len(),
+            n_inliers: 0,
+            keyframe_inserted: false,
+            n_map_points: 0,
+        };
+        let known = match self.config.pose_source {
+            PoseSource::Slam => None,
+            PoseSource::Kinematics => Some(prior),
+            PoseSource::GroundTruth => input.world_from_camera_gt,
+        };
+        let min_features = self
+            .config
+            .min_tracked_inliers
+            .max(self.config.ransac.min_inliers);
+        let result = if frame.features.keypoints.len() < min_features {
+            Err(LostReason::TooFewFeatures {
+                found: frame.features.keypoints.len(),
+                required: min_features,
+            })
+        } else if let Some(pose) = known {
+            Ok(self.step_known_pose(&frame, camera, pose))
+        } else {
+            self.step_slam(&frame, camera, &prior)
+        };
+        match result {
+            Ok((map_from_camera, matches, n_inliers)) => {
+                self.lost_streak = 0;
+                if self.config.pose_source == PoseSource::Slam {
+                    self.anchor.add(&prior, &map_from_camera);
+                }
+                let (map_from_camera, observed_ids, kf) =
+                    self.after_tracking(&frame, camera, map_from_camera, &matches);
+                let world_from_map = self.world_from_map();
+                out.world_from_camera = world_from_map * map_from_camera;
+                out.n_inliers = n_inliers;
+                out.keyframe_inserted = kf;
+                out.observed = observed_ids
+                    .iter()
+                    .filter_map(|m| {
+                        let p = self.points.get(&m.point_id)?;
+                        let k = frame.features.keypoints.get(m.keypoint)?;
+                        Some(ObservedPoint {
+                            point_id: m.point_id,
+                            pixel: [f64::from(k.x), f64::from(k.y)],
+                            p_in_world: world_from_map * p.p_in_map,
+                        })
+                    })
+                    .collect();
+                self.last = Some((map_from_camera, prior));
+                self.records.push(FrameRecord {
+                    epoch: self.epoch,
+                    map_from_camera: Some(map_from_camera),
+                    world_from_camera: out.world_from_camera,
+                });
+            }
+            Err(reason) => {
+                self.n_lost += 1;
+                self.lost_streak += 1;
+                out.state = TrackingState::Lost { reason };
+                out.world_from_camera = known.unwrap_or(prior);
+                if self.lost_streak >= self.config.reset_after_lost.max(1)
+                    && self.config.pose_source == PoseSource::Slam
+                {
+                    self.reset_map();
+                }
+                self.records.push(FrameRecord {
+                    epoch: self.epoch,
+                    map_from_camera: None,
+                    world_from_camera: out.world_from_camera,
+                });
+            }
+        }
+        out.n_map_points = self.points.len();
+        Ok(out)
+    }
+
+    fn reset_map(&mut self) {
+        self.points.clear();
+        self.keyframes.clear();
+        self.anchor = Anchor::new();
+        self.last = None;
+        self.epoch += 1;
+        self.lost_streak = 0;
+    }
+
+    /// Known pose: just associate to the map (no pose estimation). Returns map ← camera.
+    fn step_known_pose(
+        &self,
+        frame: &FrameData,
+        camera: &PinholeCamera,
+        world_from_camera: Se3,
+    ) -> (Se3, Vec<PointMatch>, usize) {
+        let map_from_camera = world_from_camera; // map frame = world for non-slam sources
+        let matches = self.search_by_projection(
+            frame,
+            camera,
+            &map_from_camera.inverse(),
+            2.0 * self.config.fine_radius_px,
+            true,
+        );
+        let n = matches.len();
+        (map_from_camera, matches, n)
+    }
+
+    fn step_slam(
+        &self,
+        frame: &FrameData,
+        camera: &PinholeCamera,
+        prior: &Se3,
+    ) -> Result<(Se3, Vec<PointMatch>, usize), LostReason> {
+        let anchored = self.world_from_map().inverse() * prior;
+        if self.points.is_empty() {
+            let valid = frame.depth_m.iter().flatten().count();
+            if valid < self.config.min_init_points {
+                return Err(LostReason::NoDepth {
+                    valid,
+                    required: self.config.min_init_points,
+                });
+            }
+            return Ok((anchored, Vec::new(), 0));
+        }
+        let mut seeds = Vec::with_capacity(2);
+        if let Some((last_map_from_camera, last_prior)) = self.last {
+            seeds.push(last_map_from_camera * (last_prior.inverse() * prior));
+        }
+        seeds.push(anchored);
+        let mut best_inliers = 0;
+        for seed in seeds {
+            match self.estimate_from_seed(frame, camera, &seed) {
+                Ok(r) => return Ok(r),
+                Err(n) => best_inliers = best_inliers.max(n),
+            }
+        }
+        Err(LostReason::TooFewInliers {
+            inliers: best_inliers,
+            required: self.config.min_tracked_inliers,
+        })
+    }
+
+    /// Coarse projection search + RANSAC, then fine search + robust refinement. `Err(inliers)`.
+    fn estimate_from_seed(
+        &self,
+        frame: &FrameData,
+        camera: &PinholeCamera,
+        seed: &Se3,
+    ) -> Result<(Se3, Vec<PointMatch>, usize), usize> {
+        let coarse = self.search_by_projection(
+            frame,
+            camera,
+            &seed.inverse(),
+            self.config.coarse_radius_px,
+            false,
+        );
+        let corr = self.correspondences(frame, &coarse);
+        let mut ransac = self.config.ransac;
+        ransac.seed ^= self.frame_index.wrapping_mul(0x9E37_79B9_7F4A_7C15);
+        let est = solve_pnp_ransac(&corr, camera, seed, &ransac, &self.config.refine)
+            .map_err(|_| 0usize)?;
+        let fine = self.search_by_projection(
+            frame,
+            camera,
+            &est.world_from_camera.inverse(),
+            self.config.fine_radius_px,
+            true,
+        );
+        let corr = self.correspondences(frame, &fine);
+        let refined = refine_pose(&corr, camera, &est.world_from_camera, &self.config.refine)
+            .map_err(|_| est.n_inliers)?;
+        if refined.n_inliers < self.config.min_tracked_inliers {
+            return Err(refined.n_inliers);
+        }
+        let inlier_matches: Vec<PointMatch> = fine
+            .iter()
+            .zip(&refined.inliers)
+            .filter_map(|(m, &k)| k.then_some(*m))
+            .collect();
+        Ok((refined.world_from_camera, inlier_matches, refined.n_inliers))
+    }
+
+    fn correspondences(&self, frame: &FrameData, matches: &[PointMatch]) -> Vec<Correspondence> {
+        matches
+            .iter()
+            .filter_map(|m| {
+                let p = self.points.get(&m.point_id)?;
+                let k = frame.features.keypoints.get(m.keypoint)?;
+                Some(Correspondence {
+                    p_in_world: p.p_in_map,
+                    pixel: [f64::from(k.x), f64::from(k.y)],
+                    depth_m: frame.depth_m.get(m.keypoint).copied().flatten(),
+                    sigma_px: f64::from(k.scale),
+                })
+            })
+            .collect()
+    }
+
+    /// Project every map point with `camera_from_map` and match it to the best keypoint within
+    /// `radius_px × scale` (ratio test; each keypoint keeps its closest point).
+    fn search_by_projection(
+        &self,
+        frame: &FrameData,
+        camera: &PinholeCamera,
+        camera_from_map: &Se3,
+        radius_px: f64,
+        scale_radius: bool,
+    ) -> Vec<PointMatch> {
+        let kps = &frame.features.keypoints;
+        let mut best_for_kp: Vec<Option<(u32, u64)>> = vec![None; kps.len()];
+        let mut cand = Vec::new();
+        let scale_factor = self.config.orb.scale_factor;
+        for (&id, p) in &self.points {
+            let x = camera_from_map * p.p_in_map;
+            if x.z < self.config.min_depth_m {
+                continue;
+            }
+            let Some(uv) = camera.project(&x) else {
+                continue;
+            };
+            if !camera.contains(uv) {
+                continue;
+            }
+            let r = if scale_radius {
+                radius_px * scale_factor.powi(i32::from(p.level))
+            } else {
+                radius_px
+            };
+            frame
+                .grid
+                .within(kps, uv[0] as f32, uv[1] as f32, r as f32, &mut cand);
+            let (mut best, mut second, mut best_i) = (u32::MAX, u32::MAX, usize::MAX);
+            for &i in &cand {
+                let i = i as usize;
+                let (Some(k), Some(d)) = (kps.get(i), frame.features.descriptors.get(i)) else {
+                    continue;
+                };
+                if k.level.abs_diff(p.level) > self.config.max_level_difference {
+                    continue;
+                }
+                let dist = hamming(&p.descriptor, d);
+                if dist < best {
+                    second = best;
+                    best = dist;
+                    best_i = i;
+                } else if dist < second {
+                    second = dist;
+                }
+            }
+            if best > self.config.match_max_distance
+                || (second != u32::MAX && best as f32 >= self.config.match_ratio * second as f32)
+            {
+                continue;
+            }
+            if let Some(slot) = best_for_kp.get_mut(best_i) {
+                if slot.is_none_or(|(d, _)| best < d) {
+                    *slot = Some((best, id));
+                }
+            }
+        }
+        best_for_kp
+            .iter()
+            .enumerate()
+            .filter_map(|(i, s)| {
+                s.map(|(_, id)| PointMatch {
+                    point_id: id,
+                    keypoint: i,
+                })
+            })
+            .collect()
+    }
+
+    /// Bookkeeping after a successful pose: visibility counts, keyframe insertion (new points,
+    /// local BA, culling). Returns the (possibly BA-refined) pose, the observed points and whether
+    /// a keyframe was inserted.
+    fn after_tracking(
+        &mut self,
+        frame: &FrameData,
+        camera: &PinholeCamera,
+        map_from_camera: Se3,
+        matches: &[PointMatch],
+    ) -> (Se3, Vec<PointMatch>, bool) {
+        let camera_from_map = map_from_camera.inverse();
+        for p in self.points.values_mut() {
+            let x = camera_from_map * p.p_in_map;
+            if camera.project(&x).is_some_and(|uv| camera.contains(uv)) {
+                p.n_visible += 1;
+            }
+        }
+        for m in matches {
+            if let Some(p) = self.points.get_mut(&m.point_id) {
+                p.n_found += 1;
+            }
+        }
+        self.frames_since_keyframe += 1;
+        let need_kf = self.keyframes.is_empty()
+            || self.frames_since_keyframe >= self.config.keyframe_max_interval
+            || (matches.len() as f64)
+                < self.config.keyframe_inlier_ratio * self.last_keyframe_tracked as f64;
+        if !need_kf {
+            return (map_from_camera, matches.to_vec(), false);
+        }
+        let (pose, observed) = self.insert_keyframe(frame, camera, map_from_camera, matches);
+        (pose, observed, true)
+    }
+
+    fn insert_keyframe(
+        &mut self,
+        frame: &FrameData,
+        camera: &PinholeCamera,
+        map_from_camera: Se3,
+        matches: &[PointMatch],
+    ) -> (Se3, Vec<PointMatch>) {
+        let kf_index = self.keyframes.len();
+        let kps = &frame.features.keypoints;
+        let mut observations = Vec::with_capacity(matches.len() + self.config.max_new_points);
+        let mut observed = matches.to_vec();
+        let mut used = vec![false; kps.len()];
+        for m in matches {
+            let Some(k) = kps.get(m.keypoint) else {
+                continue;
+            };
+            if let Some(u) = used.get_mut(m.keypoint) {
+                *u = true;
+            }
+            if let Some(p) = self.points.get_mut(&m.point_id) {
+                p.keyframes.push(kf_index);
+            }
+            observations.push(KfObservation {
+                point_id: m.point_id,
+                pixel: [f64::from(k.x), f64::from(k.y)],
+                depth_m: frame.depth_m.get(m.keypoint).copied().flatten(),
+                sigma_px: f64::from(k.scale),
+            });
+        }
+        // New points from unmatched keypoints with depth, closest first.
+        let mut fresh: Vec<(usize, f64)> = (0..kps.len())
+            .filter(|&i| !used.get(i).copied().unwrap_or(true))
+            .filter_map(|i| Some((i, frame.depth_m.get(i).copied().flatten()?)))
+            .collect();
+        fresh.sort_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));
+        for &(i, d) in fresh.iter().take(self.config.max_new_points) {
+            let (Some(k), Some(desc)) = (kps.get(i), frame.features.descriptors.get(i)) else {
+                continue;
+            };
+            let p_in_camera = camera.unproject(f64::from(k.x), f64::from(k.y), d);
+            let id = self.next_point_id;
+            self.next_point_id += 1;
+            self.points.insert(
+                id,
+                MapPoint {
+                    p_in_map: map_from_camera * p_in_camera,
+                    descriptor: *desc,
+                    level: k.level,
+                    keyframes: vec![kf_index],
+                    created_kf: kf_index,
+                    n_visible: 1,
+                    n_found: 1,
+                },
+            );
+            observations.push(KfObservation {
+                point_id: id,
+                pixel: [f64::from(k.x), f64::from(k.y)],
+                depth_m: Some(d),
+                sigma_px: f64::from(k.scale),
+            });
+            observed.push(PointMatch {
+                point_id: id,
+                keypoint: i,
+            });
+        }
+        self.keyframes.push(KeyFrame {
+            map_from_camera,
+            observations,
+        });
+        self.frames_since_keyframe = 0;
+        self.last_keyframe_tracked = matches.len().max(
+            self.keyframes
+                .last()
+                .map_or(0, |k| k.observations.len())
+                .min(matches.len() + self.config.max_new_points),
+        );
+        if self.config.pose_source == PoseSource::Slam && self.keyframes.len() > 1 {
+            self.local_bundle_adjustment(camera);
+        }
+        self.cull();
+        observed.retain(|m| self.points.contains_key(&m.point_id));
+        let pose = self
+            .keyframes
+            .last()
+            .map_or(map_from_camera, |k| k.map_from_camera);
+        (pose, observed)
+    }
+
+    fn local_bundle_adjustment(&mut self, camera: &PinholeCamera) {
+        let n_kf = self.keyframes.len();
+        let first_local = n_kf.saturating_sub(self.config.local_keyframes);
+        // Points seen by the local window.
+        let mut point_index: BTreeMap<u64, usize> = BTreeMap::new();
+        for kf in &self.keyframes[first_local..] {
+            for o in &kf.observations {
+                if self.points.contains_key(&o.point_id) {
+                    let n = point_index.len();
+                    point_index.entry(o.point_id).or_insert(n);
+                }
+            }
+        }
+        // Keyframes involved: the window plus fixed ones observing its points.
+        let mut kf_set: BTreeMap<usize, usize> = BTreeMap::new();
+        for id in point_index.keys() {
+            if let Some(p) = self.points.get(id) {
+                for &k in &p.keyframes {
+                    let n = kf_set.len();
+                    kf_set.entry(k).or_insert(n);
+                }
+            }
+        }
+        for k in first_local..n_kf {
+            let n = kf_set.len();
+            kf_set.entry(k).or_insert(n);
+        }
+        let kf_list: Vec<usize> = {
+            let mut v: Vec<(usize, usize)> = kf_set.iter().map(|(k, i)| (*i, *k)).collect();
+            v.sort_unstable();
+            v.into_iter().map(|(_, k)| k).collect()
+        };
+        let mut fixed: Vec<bool> = kf_list.iter().map(|&k| k < first_local || k == 0).collect();
+        if !fixed.iter().any(|&f| f) {
+            if let Some(f) = kf_list.iter().position(|&k| k == first_local) {
+                fixed[f] = true;
+            }
+        }
+        let mut observations = Vec::new();
+        let mut obs_src = Vec::new();
+        for (pi, &k) in kf_list.iter().enumerate() {
+            let Some(kf) = self.keyframes.get(k) else {
+                continue;
+            };
+            for (oi, o) in kf.observations.iter().enumerate() {
+                if let Some(&pt) = point_index.get(&o.point_id) {
+                    observations.push(BundleObservation {
+                        pose: pi,
+                        point: pt,
+                        pixel: o.pixel,
+                        depth_m: o.depth_m,
+                        sigma_px: o.sigma_px,
+                    });
+                    obs_src.push((k, oi));
+                }
+            }
+        }
+        let mut points = vec![Point3::origin(); point_index.len()];
+        for (id, &i) in &point_index {
+            if let Some(p) = self.points.get(id) {
+                points[i] = p.p_in_map;
+            }
+        }
+        let mut problem = BundleProblem {
+            camera_from_world: kf_list
+                .iter()
+                .filter_map(|&k| self.keyframes.get(k).map(|kf| kf.map_from_camera.inverse()))
+                .collect(),
+            fixed,
+            points,
+            observations,
+        };
+        if problem.camera_from_world.len() != kf_list.len() {
+            return;
+        }
+        problem.optimize(camera, &self.config.bundle);
+        for (pi, &k) in kf_list.iter().enumerate() {
+            if !problem.fixed[pi] {
+                if let (Some(kf), Some(p)) =
+                    (self.keyframes.get_mut(k), problem.camera_from_world.get(pi))
+                {
+                    kf.map_from_camera = p.inverse();
+                }
+            }
+        }
+        for (id, &i) in &point_index {
+            if let (Some(p), Some(q)) = (self.points.get_mut(id), problem.points.get(i)) {
+                p.p_in_map = *q;
+            }
+        }
+        // Drop outlier observations.
+        let flags = problem.inlier_flags(camera, &self.config.bundle);
+        let mut drop: BTreeMap<usize, Vec<usize>> = BTreeMap::new();
+        for (flag, &(k, oi)) in flags.iter().zip(&obs_src) {
+            if !flag {
+                drop.entry(k).or_default().push(oi);
+            }
+        }
+        for (k, list) in drop {
+            let Some(kf) = self.keyframes.get_mut(k) else {
+                continue;
+            };
+            for &oi in list.iter().rev() {
+                if oi < kf.observations.len() {
+                    let o = kf.observations.remove(oi);
+                    if let Some(p) = self.points.get_mut(&o.point_id) {
+                        p.keyframes.retain(|&x| x != k);
+                    }
+                }
+            }
+        }
+    }
+
+    fn cull(&mut self) {
+        let n_kf = self.keyframes.len();
+        let c = &self.config;
+        self.points.retain(|_, p| {
+            if p.keyframes.is_empty() {
+                return false;
+            }
+            if p.n_visible >= c.cull_min_visible
+                && f64::from(p.n_found) < c.cull_found_ratio * f64::from(p.n_visible)
+            {
+                return false;
+            }
+            !(c.cull_after_keyframes > 0
+                && n_kf >= p.created_kf + 1 + c.cull_after_keyframes
+                && p.keyframes.len() < 2)
+        });
+    }
+}
+
+fn check_pose(pose: &Se3, field: &'static str) -> Result<(), SlamError> {
+    if !super::is_finite_pose(pose) {
+        return Err(SlamError::NonFinitePose { field });
+    }
+    let qn = pose.rotation.quaternion().norm();
+    if (qn - 1.0).abs() > 1e-6 {
+        return Err(SlamError::NotRigid {
+            field,
+            reason: format!("rotation quaternion has norm {qn}"),
+        });
+    }
+    Ok(())
+}
+
+fn validate(input: &TrackInput<'_>) -> Result<(), SlamError> {
+    input.camera.validate()?;
+    let (w, h) = (input.camera.width, input.camera.height);
+    for (field, iw, ih, len) in [
+        (
+            "grey",
+            input.grey.width,
+            input.grey.height,
+            input.grey.data.len(),
+        ),
+        (
+            "depth",
+            input.depth.width,
+            input.depth.height,
+            input.depth.data.len(),
+        ),
+    ] {
+        if iw != w || ih != h {
+            return Err(SlamError::ImageSize {
+                field,
+                width: w,
+                height: h,
+                actual_width: iw,
+                actual_height: ih,
+            });
+        }
+        let expected = w as usize * h as usize;
+        if len != expected {
+            return Err(SlamError::BufferLength {
+                field,
+                expected,
+                actual: len,
+            });
+        }
+    }
+    check_pose(&input.world_from_camera_fk, "world_from_camera_fk")
+}

@@ -1,0 +1,415 @@
+//! Pipeline tests of `slam::Tracker` on a ray-cast synthetic RGB-D sequence (textured table plane
+//! with four textured boxes, `TabletopScene::tabletop(3)`), camera on a smooth arc.
+
+use nalgebra::Point3;
+use objslam_core::frame::{DepthImage, GreyImage};
+use objslam_core::geometry::{Box2, PinholeCamera, Se3};
+use objslam_core::slam::synthetic::{look_at, TabletopScene};
+use objslam_core::slam::{
+    ate_rmse_m, rpe, KinematicNoiseConfig, LostReason, PoseSource, SlamError, TrackInput, Tracker,
+    TrackerConfig, TrackingState,
+};
+
+const N_FRAMES: usize = 40;
+/// Frames per view: the kinematic bias changes every `FRAMES_PER_VIEW` frames.
+const FRAMES_PER_VIEW: usize = 2;
+
+fn camera() -> PinholeCamera {
+    PinholeCamera::from_fovy(640, 480, 50f64.to_radians()).unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// Ground-truth pose of frame `i`: an arc of radius 0.25 m around (0.5, 0) at 0.45 m height,
+/// looking at the table centre, 0.02 rad (5 mm) per frame.
+fn gt_pose(i: usize) -> Se3 {
+    let theta = -0.4 + 0.02 * i as f64;
+    let eye = Point3::new(0.5 - 0.25 * theta.cos(), 0.25 * theta.sin(), 0.45);
+    look_at(eye, Point3::new(0.5, 0.0, 0.0))
+}
+
+struct Sequence {
+    frames: Vec<(GreyImage, DepthImage)>,
+    gt: Vec<Se3>,
+}
+
+fn sequence() -> Sequence {
+    let scene = TabletopScene::tabletop(3);
+    let cam = camera();
+    let gt: Vec<Se3> = (0..N_FRAMES).map(gt_pose).collect();
+    let frames = gt.iter().map(|p| scene.render(&cam, p)).collect();
+    Sequence { frames, gt }
+}
+
+fn run(seq: &Sequence, config: TrackerConfig) -> (Vec<Se3>, Vec<Se3>, usize, Tracker) {
+    let cam = camera();
+    let mut tracker = Tracker::new(config).unwrap_or_else(|e| panic!("{e}"));
+    let mut online = Vec::new();
+    for (i, ((grey, depth), gt)) in seq.frames.iter().zip(&seq.gt).enumerate() {
+        let input = TrackInput {
+            grey,
+            depth,
+            camera: &cam,
+            world_from_camera_fk: *gt,
+            view_index: (i / FRAMES_PER_VIEW) as u64,
+            world_from_camera_gt: Some(*gt),
+        };
+        let out = tracker
+            .track(&input)
+            .unwrap_or_else(|e| panic!("frame {i}: {e}"));
+        online.push(out.world_from_camera);
+    }
+    let lost = tracker.n_lost();
+    (online, tracker.trajectory(), lost, tracker)
+}
+
+#[test]
+fn slam_beats_the_kinematic_prior_on_a_synthetic_sequence() {
+    let seq = sequence();
+    let noise = KinematicNoiseConfig::default(); // 1 cm / 1° per view, 0.5 mm / 0.05° jitter
+    let slam_cfg = TrackerConfig {
+        kinematic_noise: noise,
+        ..TrackerConfig::default()
+    };
+    let (online, traj, lost, tracker) = run(&seq, slam_cfg);
+    let kin_cfg = TrackerConfig {
+        pose_source: PoseSource::Kinematics,
+        kinematic_noise: noise,
+        ..TrackerConfig::default()
+    };
+    let (kin, _, kin_lost, _) = run(&seq, kin_cfg);
+    let ate_online = ate_rmse_m(&online, &seq.gt).unwrap_or_else(|e| panic!("{e}"));
+    let ate_traj = ate_rmse_m(&traj, &seq.gt).unwrap_or_else(|e| panic!("{e}"));
+    let ate_kin = ate_rmse_m(&kin, &seq.gt).unwrap_or_else(|e| panic!("{e}"));
+    let rpe_slam = rpe(&traj, &seq.gt).unwrap_or_else(|e| panic!("{e}"));
+    let rpe_kin = rpe(&kin, &seq.gt).unwrap_or_else(|e| panic!("{e}"));
+    eprintln!(
+        "ATE slam online {ate_online:.4} m, slam trajectory {ate_traj:.4} m, kinematics {ate_kin:.4} m; \
+         RPE slam {:.5} m / {:.4}°, kinematics {:.5} m / {:.4}°; lost {lost}; map points {}, keyframes {}",
+        rpe_slam.trans_m,
+        rpe_slam.rot_deg,
+        rpe_kin.trans_m,
+        rpe_kin.rot_deg,
+        tracker.n_map_points(),
+        tracker.n_keyframes()
+    );
+    assert_eq!(lost, 0);
+    assert_eq!(kin_lost, 0);
+    assert!(ate_traj <= 0.005, "slam ATE {ate_traj}");
+    assert!(ate_online <= 0.005, "slam online ATE {ate_online}");
+    assert!(ate_traj < ate_kin && ate_online < ate_kin);
+    assert!(rpe_slam.trans_m < rpe_kin.trans_m);
+    // Without the prior-mean anchor the map inherits the first view's bias (≈ 9 mm here).
+    let fixed_cfg = TrackerConfig {
+        kinematic_noise: noise,
+        anchor_to_prior_mean: false,
+        ..TrackerConfig::default()
+    };
+    let (fixed_online, _, _, _) = run(&seq, fixed_cfg);
+    let ate_fixed = ate_rmse_m(&fixed_online, &seq.gt).unwrap_or_else(|e| panic!("{e}"));
+    eprintln!("ATE slam without anchor {ate_fixed:.4} m");
+    assert!(ate_fixed > 2.0 * ate_online);
+}
+
+#[test]
+fn local_object_points_lie_on_the_boxed_object() {
+    // Ground-truth poses: the points inside the projected box of scene box 0 must lie on that box
+    // (within 5 mm of its surface hull), apart from a few background points at its silhouette.
+    let scene = TabletopScene::tabletop(3);
+    let cam = camera();
+    let cfg = TrackerConfig {
+        pose_source: PoseSource::GroundTruth,
+        ..TrackerConfig::default()
+    };
+    let mut tracker = Tracker::new(cfg).unwrap_or_else(|e| panic!("{e}"));
+    let b = scene.boxes[0];
+    let mut last = None;
+    for i in 0..3 {
+        let gt = gt_pose(10 * i);
+        let (grey, depth) = scene.render(&cam, &gt);
+        let input = TrackInput {
+            grey: &grey,
+            depth: &depth,
+            camera: &cam,
+            world_from_camera_fk: gt,
+            view_index: 0,
+            world_from_camera_gt: Some(gt),
+        };
+        let out = tracker.track(&input).unwrap_or_else(|e| panic!("{e}"));
+        assert!(out.is_ok());
+        last = Some((out, gt));
+    }
+    let Some((out, gt)) = last else {
+        panic!("no frame")
+    };
+    // Projected bounding box of the scene box.
+    let corners: Vec<[f64; 2]> = (0..8)
+        .filter_map(|k| {
+            let s = |bit: usize| if k & bit == 0 { -1.0 } else { 1.0 };
+            let p = Point3::from(
+                b.center
+                    + nalgebra::Vector3::new(
+                        s(1) * b.half_extents.x,
+                        s(2) * b.half_extents.y,
+                        s(4) * b.half_extents.z,
+                    ),
+            );
+            cam.project(&(gt.inverse() * p))
+        })
+        .collect();
+    let bbox = Box2::from_points(corners.iter()).unwrap_or_else(|| panic!("box not visible"));
+    let local = out.points_in_box(&bbox);
+    assert!(local.len() >= 20, "{} points in box", local.len());
+    let on_box = local
+        .iter()
+        .filter(|p| {
+            (p.p_in_world.coords - b.center)
+                .abs()
+                .iter()
+                .zip(b.half_extents.iter())
+                .all(|(d, h)| *d <= h + 0.005)
+        })
+        .count();
+    assert!(
+        on_box as f64 >= 0.6 * local.len() as f64,
+        "{on_box} of {} on the box",
+        local.len()
+    );
+    assert!(local.iter().all(|p| bbox.contains(p.pixel[0], p.pixel[1])));
+}
+
+fn input_for<'a>(
+    grey: &'a GreyImage,
+    depth: &'a DepthImage,
+    cam: &'a PinholeCamera,
+    pose: Se3,
+) -> TrackInput<'a> {
+    TrackInput {
+        grey,
+        depth,
+        camera: cam,
+        world_from_camera_fk: pose,
+        view_index: 0,
+        world_from_camera_gt: None,
+    }
+}
+
+#[test]
+fn bad_input_is_a_typed_error_or_a_lost_frame() {
+    let scene = TabletopScene::tabletop(3);
+    let cam = camera();
+    let gt = gt_pose(0);
+    let (grey, depth) = scene.render(&cam, &gt);
+    let mut tracker = Tracker::new(TrackerConfig::default()).unwrap_or_else(|e| panic!("{e}"));
+
+    // Wrong image size / buffer length.
+    let small = GreyImage {
+        width: 320,
+        height: 240,
+        data: vec![0; 320 * 240],
+    };
+    assert!(matches!(
+        tracker.track(&input_for(&small, &depth, &cam, gt)),
+        Err(SlamError::ImageSize { field: "grey", .. })
+    ));
+    let short = DepthImage {
+        width: 640,
+        height: 480,
+        data: vec![0.5; 100],
+    };
+    assert!(matches!(
+        tracker.track(&input_for(&grey, &short, &cam, gt)),
+        Err(SlamError::BufferLength { field: "depth", .. })
+    ));
+
+    // Non-rigid and non-finite priors.
+    let mut skewed = gt;
+    skewed.rotation =
+        nalgebra::UnitQuaternion::new_unchecked(nalgebra::Quaternion::new(2.0, 0.0, 0.0, 0.0));
+    assert!(matches!(
+        tracker.track(&input_for(&grey, &depth, &cam, skewed)),
+        Err(SlamError::NotRigid { .. })
+    ));
+    let mut nan = gt;
+    nan.translation.vector.x = f64::NAN;
+    assert!(matches!(
+        tracker.track(&input_for(&grey, &depth, &cam, nan)),
+        Err(SlamError::NonFinitePose { .. })
+    ));
+
+    // Ground truth requested but missing.
+    let mut oracle = Tracker::new(TrackerConfig {
+        pose_source: PoseSource::GroundTruth,
+        ..TrackerConfig::default()
+    })
+    .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(
+        oracle.track(&input_for(&grey, &depth, &cam, gt)),
+        Err(SlamError::MissingGroundTruth)
+    );
+
+    // All-zero (and NaN / negative) depth on an empty map: lost, output = prior.
+    let mut no_depth = DepthImage {
+        width: 640,
+        height: 480,
+        data: vec![0.0; 640 * 480],
+    };
+    no_depth.data[0] = f32::NAN;
+    no_depth.data[1] = -1.0;
+    let out = tracker
+        .track(&input_for(&grey, &no_depth, &cam, gt))
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert!(matches!(
+        out.state,
+        TrackingState::Lost {
+            reason: LostReason::NoDepth { valid: 0, .. }
+        }
+    ));
+    assert_eq!(out.world_from_camera, out.world_from_camera_prior);
+
+    // Textureless image: lost for lack of features.
+    let flat = GreyImage {
+        width: 640,
+        height: 480,
+        data: vec![128; 640 * 480],
+    };
+    let out = tracker
+        .track(&input_for(&flat, &depth, &cam, gt))
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert!(matches!(
+        out.state,
+        TrackingState::Lost {
+            reason: LostReason::TooFewFeatures { found: 0, .. }
+        }
+    ));
+
+    // A good frame initialises; then a textureless frame is lost; then tracking resumes.
+    assert!(tracker
+        .track(&input_for(&grey, &depth, &cam, gt))
+        .unwrap_or_else(|e| panic!("{e}"))
+        .is_ok());
+    assert!(!tracker
+        .track(&input_for(&flat, &depth, &cam, gt))
+        .unwrap_or_else(|e| panic!("{e}"))
+        .is_ok());
+    let (g1, d1) = scene.render(&cam, &gt_pose(1));
+    let out = tracker
+        .track(&input_for(&g1, &d1, &cam, gt_pose(1)))
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert!(out.is_ok(), "{:?}", out.state);
+    assert_eq!(tracker.n_lost(), 3);
+    // A frame of another scene under the same prior: no consensus, lost, never a panic.
+    let other = TabletopScene::tabletop(99);
+    let (g2, d2) = other.render(&cam, &gt_pose(2));
+    let out = tracker
+        .track(&input_for(&g2, &d2, &cam, gt_pose(2)))
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert!(
+        matches!(
+            out.state,
+            TrackingState::Lost {
+                reason: LostReason::TooFewInliers { .. }
+            }
+        ),
+        "{:?}",
+        out.state
+    );
+}
+
+#[test]
+fn garbage_frames_never_panic() {
+    // Seeded noise images and depths (including NaN, inf, negative and huge values), at several
+    // sizes, in every pose source: each call returns Ok (possibly lost) and never panics.
+    let mut state = 17u64;
+    let mut next = move || objslam_core::slam::synthetic::splitmix64(&mut state);
+    for (w, h) in [(640u32, 480u32), (64, 48), (37, 41), (8, 8)] {
+        let cam = PinholeCamera::from_fovy(w, h, 1.0).unwrap_or_else(|e| panic!("{e}"));
+        for source in [
+            PoseSource::Slam,
+            PoseSource::Kinematics,
+            PoseSource::GroundTruth,
+        ] {
+            let mut tracker = Tracker::new(TrackerConfig {
+                pose_source: source,
+                ..TrackerConfig::default()
+            })
+            .unwrap_or_else(|e| panic!("{e}"));
+            for f in 0..3 {
+                let n = (w * h) as usize;
+                let grey = GreyImage {
+                    width: w,
+                    height: h,
+                    data: (0..n).map(|_| (next() % 256) as u8).collect(),
+                };
+                let specials = [f32::NAN, f32::INFINITY, -1.0, 1e30, 0.0];
+                let depth = DepthImage {
+                    width: w,
+                    height: h,
+                    data: (0..n)
+                        .map(|_| {
+                            let r = next();
+                            if r % 7 == 0 {
+                                specials[(r / 7 % 5) as usize]
+                            } else {
+                                (r % 3000) as f32 / 1000.0
+                            }
+                        })
+                        .collect(),
+                };
+                let pose = gt_pose(f);
+                let input = TrackInput {
+                    grey: &grey,
+                    depth: &depth,
+                    camera: &cam,
+                    world_from_camera_fk: pose,
+                    view_index: f as u64,
+                    world_from_camera_gt: Some(pose),
+                };
+                let out = tracker
+                    .track(&input)
+                    .unwrap_or_else(|e| panic!("{w}x{h} {source:?} frame {f}: {e}"));
+                assert!(out
+                    .world_from_camera
+                    .translation
+                    .vector
+                    .iter()
+                    .all(|v| v.is_finite()));
+                assert!(out.observed.iter().all(|p| p
+                    .p_in_world
+                    .coords
+                    .iter()
+                    .all(|v| v.is_finite())));
+            }
+        }
+    }
+}
+
+#[test]
+fn tracking_is_deterministic_and_the_tracker_is_send() {
+    fn assert_send<T: Send>() {}
+    assert_send::<Tracker>();
+    let scene = TabletopScene::tabletop(5);
+    let cam = camera();
+    let frames: Vec<_> = (0..6)
+        .map(|i| (gt_pose(3 * i), scene.render(&cam, &gt_pose(3 * i))))
+        .collect();
+    let run = || {
+        let mut tracker = Tracker::new(TrackerConfig::default()).unwrap_or_else(|e| panic!("{e}"));
+        frames
+            .iter()
+            .enumerate()
+            .map(|(i, (pose, (grey, depth)))| {
+                let input = TrackInput {
+                    grey,
+                    depth,
+                    camera: &cam,
+                    world_from_camera_fk: *pose,
+                    view_index: i as u64,
+                    world_from_camera_gt: None,
+                };
+                tracker.track(&input).unwrap_or_else(|e| panic!("{e}"))
+            })
+            .collect::<Vec<_>>()
+    };
+    let (a, b) = (run(), run());
+    assert!(a.iter().all(|o| o.is_ok()));
+    assert_eq!(a, b);
+}
