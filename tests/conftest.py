@@ -10,11 +10,11 @@ REPO = Path(__file__).resolve().parents[1]
 SCENES = sorted((REPO / "scenes").glob("scene*.toml"))
 
 
-@pytest.fixture
+@pytest.fixture(scope="session")
 def repo() -> Path:
     return REPO
 
 
-@pytest.fixture
+@pytest.fixture(scope="session")
 def ci_overlay() -> Path:
     return REPO / "experiments" / "configs" / "ci.toml"

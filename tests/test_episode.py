@@ -15,9 +15,9 @@ from objslam.episode import run_episode
 KEYS = {"scene", "strategy", "seed", "n_objects_gt", "n_objects_est", "views", "frames", "path_length_m", "wall_s", "mean", "objects"}
 
 
-def _cfg(tmp_path: Path, ci_overlay: Path, **over):
+def _cfg(tmp_path: Path, ci_overlay: Path, strategy: str = "init", **over):
     sets = [f'runs_dir="{tmp_path}"'] + [f"{k}={v}" for k, v in over.items()]
-    return load_run_config(overlays=[ci_overlay], overrides=sets)
+    return load_run_config(overlays=[ci_overlay], overrides=sets, strategy=strategy)
 
 
 def _stable(m: dict) -> dict:
@@ -44,8 +44,10 @@ def test_run_folder_contract(two_runs) -> None:
     assert m["path_length_m"] > 0.5
     for o in m["objects"]:
         assert {"gt_id", "label", "est_id", "iou3d", "iou2d", "cde_cm", "yae_deg"} <= set(o)
-    # The naive baseline finds the objects of the sparse scene (they are well apart).
-    assert m["n_objects_est"] >= 4 and sum(o["est_id"] is not None for o in m["objects"]) >= 3
+    # The objects of the sparse scene (well apart) are found and matched.
+    assert sum(o["est_id"] is not None for o in m["objects"]) >= 3
+    assert m["association"]["n_objects_gt"] == 4 and 0.5 <= m["association"]["purity"] <= 1.0
+    assert set(m["stages"]) == {"raw", "iforest", "lines", "refined"}
     assert (tmp / "latest").resolve() in (a.run_dir.resolve(), two_runs[2].run_dir.resolve())
 
 
@@ -90,3 +92,16 @@ def test_bad_config_names_the_key(ci_overlay) -> None:
         load_run_config(overrides=['strategy="teleport"'])
     with pytest.raises(ConfigError, match="detector.miss_rate"):
         load_run_config(overrides=["detector.miss_rate=2.0"])
+
+
+def test_object_driven_episode_takes_next_best_views(tmp_path, ci_overlay) -> None:
+    cfg = _cfg(tmp_path, ci_overlay, strategy="object-driven", **{"explore.max_views": 2})
+    r = run_episode(cfg, progress=False)
+    m = r.metrics
+    assert m["strategy"] == "object-driven"
+    assert 1 <= m["nbv_views"] <= 2 and m["views"] == 4 + m["nbv_views"]
+    curve = m["entropy_curve"]
+    assert len(curve) == 4 + m["nbv_views"]  # after each Init view and each NBV view
+    assert all(0.0 <= h <= 1.0 for h in curve), curve
+    # The map found the scene's objects (NBV views add frames on top of the Init ones).
+    assert m["frames"] > 10 and sum(o["est_id"] is not None for o in m["objects"]) >= 3

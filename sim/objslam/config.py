@@ -94,8 +94,9 @@ class RunConfig:
 
     scene: str = "scenes/scene01.toml"
     """Scene file (relative to the repository root or absolute)."""
-    strategy: str = "init"
-    """View-selection strategy."""
+    strategy: str = "object-driven"
+    """View-selection strategy: object-driven (the paper's utility), expected-gain, random,
+    coverage or init."""
     seed: int = 0
     """Seeds sensor noise, the detector and random strategies."""
     runs_dir: str = "runs"
