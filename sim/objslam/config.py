@@ -110,6 +110,12 @@ class RunConfig:
     ``ensemble`` (the paper's method; see the core's ``association`` module)."""
     parameterize: bool = True
     """Run object parameterization (iForest, line-alignment yaw, refinement) after association."""
+    consolidate: bool = True
+    """Beyond the paper: fold same-label objects whose boxes overlap into one after each view (the
+    statistical tests split objects seen from very different viewpoints). False = the paper's
+    pipeline."""
+    min_observations: int = 3
+    """Objects seen fewer times are left out of the map (false positives, label confusions)."""
     camera: CameraConfig = field(default_factory=CameraConfig)
     detector: DetectorConfig = field(default_factory=DetectorConfig)
     naive: NaiveMapperConfig = field(default_factory=NaiveMapperConfig)
@@ -129,6 +135,8 @@ class RunConfig:
             raise ConfigError("frame_rate_hz: must be in (0, 60]")
         if not (0 < self.max_joint_speed <= 2.5):
             raise ConfigError("max_joint_speed: must be in (0, 2.5] rad/s")
+        if self.min_observations < 1:
+            raise ConfigError("min_observations: must be ≥ 1")
         if self.explore.max_views < 0:
             raise ConfigError("explore.max_views: must be ≥ 0")
         if self.record.every_n_frames < 1:

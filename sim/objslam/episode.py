@@ -141,7 +141,13 @@ def run_episode(cfg: RunConfig, *, progress: bool = True, on_frame: Callable[[Se
     rec = _Recorder(run_dir / "run.rrd" if cfg.record.enabled else None)
     mapper = _native.ActiveMapper(
         mapper_config_json=json.dumps(
-            {"association_mode": cfg.association_mode, "parameterize": cfg.parameterize, "naive": to_dict(cfg.naive)}
+            {
+                "association_mode": cfg.association_mode,
+                "parameterize": cfg.parameterize,
+                "consolidate": cfg.consolidate,
+                "min_observations": cfg.min_observations,
+                "naive": to_dict(cfg.naive),
+            }
         ),
         active_config_json=json.dumps(active_config(cfg)),
         table=(*scene.table.center, *scene.table.size),
