@@ -2,20 +2,19 @@
 //! per frame updates the map and the surface grids, and one call per decision gives the next view.
 
 use nalgebra::Matrix4;
+use numpy::PyReadonlyArray2;
 use numpy::{PyArray2, ToPyArray};
 use objslam_core::active::{ActiveConfig, ActiveSession, NextView};
-use objslam_core::explore::{ExploreError, ObservedPoints, TableRect};
-use objslam_core::frame::Frame;
-use objslam_core::geometry::Se3;
 use objslam_core::association::metrics::{association_metrics, MetricsConfig, ObjectGtIds};
+use objslam_core::explore::{ExploreError, ObservedPoints, TableRect};
 use objslam_core::frame::GreyImage;
+use objslam_core::geometry::Se3;
 use objslam_core::map::EstimateStage;
 use objslam_core::pipeline::{ObjectPipeline, PipelineConfig, PipelineError};
-use numpy::PyReadonlyArray2;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
-use crate::{camera, depth_image, detections, input_err, json_err, objects_json, pose};
+use crate::{camera, frame_from_py, input_err, json_err, objects_json, pose};
 
 fn explore_err(e: ExploreError) -> PyErr {
     input_err(e)
@@ -26,9 +25,9 @@ fn pipeline_err(e: PipelineError) -> PyErr {
 }
 
 fn grey_image(obj: &Bound<'_, PyAny>) -> PyResult<GreyImage> {
-    let arr: PyReadonlyArray2<'_, u8> = obj.extract().map_err(|_| {
-        pyo3::exceptions::PyTypeError::new_err("grey: expected a uint8 array of shape (H, W)")
-    })?;
+    let arr: PyReadonlyArray2<'_, u8> = obj
+        .extract()
+        .map_err(|_| pyo3::exceptions::PyTypeError::new_err("grey: expected a uint8 array of shape (H, W)"))?;
     let a = arr.as_array();
     let (h, w) = (a.shape()[0], a.shape()[1]);
     GreyImage::new(w as u32, h as u32, a.iter().copied().collect()).map_err(input_err)
@@ -54,8 +53,7 @@ impl ActiveMapperPy {
     #[new]
     #[pyo3(signature = (*, mapper_config_json, active_config_json, table))]
     fn new(mapper_config_json: &str, active_config_json: &str, table: (f64, f64, f64, f64)) -> PyResult<Self> {
-        let mc: PipelineConfig =
-            serde_json::from_str(mapper_config_json).map_err(|e| json_err("mapper_config", e))?;
+        let mc: PipelineConfig = serde_json::from_str(mapper_config_json).map_err(|e| json_err("mapper_config", e))?;
         let ac: ActiveConfig = serde_json::from_str(active_config_json).map_err(|e| json_err("active_config", e))?;
         let rect = TableRect { center_m: [table.0, table.1], size_m: [table.2, table.3], height_m: 0.0 };
         let session = ActiveSession::new(ac, rect).map_err(explore_err)?;
@@ -80,14 +78,7 @@ impl ActiveMapperPy {
         grey: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Vec<Option<u32>>> {
         let grey = grey.map(grey_image).transpose()?;
-        let depth = depth_image(depth)?;
-        let frame = Frame {
-            index,
-            camera: camera(intrinsics, depth.width, depth.height)?,
-            world_from_camera: pose(world_from_camera, "world_from_camera")?,
-            depth,
-            detections: self::detections(detections)?,
-        };
+        let frame = frame_from_py(index, intrinsics, depth, world_from_camera, detections)?;
         let summary = self.mapper.update(&frame, grey.as_ref()).map_err(pipeline_err)?;
         let map = self.mapper.map();
         let observed: Vec<ObservedPoints> = summary
@@ -145,15 +136,16 @@ impl ActiveMapperPy {
                 out.set_item("action", "move")?;
                 out.set_item("world_from_camera", matrix_py(py, &world_from_camera))?;
                 out.set_item("utility", utility)?;
-                let cands: Vec<(Bound<'py, PyArray2<f64>>, f64, Option<bool>)> = candidates
-                    .iter()
-                    .map(|c| (matrix_py(py, &c.world_from_camera), c.utility, c.reachable))
-                    .collect();
+                let cands: Vec<(Bound<'py, PyArray2<f64>>, f64, Option<bool>)> =
+                    candidates.iter().map(|c| (matrix_py(py, &c.world_from_camera), c.utility, c.reachable)).collect();
                 out.set_item("candidates", cands)?;
             }
             NextView::Stop { reason } => {
                 out.set_item("action", "stop")?;
-                out.set_item("reason", serde_json::to_value(reason).map_err(|e| json_err("reason", e))?.as_str().unwrap_or("?"))?;
+                out.set_item(
+                    "reason",
+                    serde_json::to_value(reason).map_err(|e| json_err("reason", e))?.as_str().unwrap_or("?"),
+                )?;
             }
         }
         Ok(out)
@@ -209,7 +201,8 @@ impl ActiveMapperPy {
                 v.push(gt);
             }
         }
-        let objs: Vec<ObjectGtIds> = by_object.into_iter().map(|(object_id, gt_ids)| ObjectGtIds { object_id, gt_ids }).collect();
+        let objs: Vec<ObjectGtIds> =
+            by_object.into_iter().map(|(object_id, gt_ids)| ObjectGtIds { object_id, gt_ids }).collect();
         let m = association_metrics(&objs, &gt_ids, &MetricsConfig::default());
         serde_json::to_string(&m).map_err(|e| json_err("association", e))
     }

@@ -127,6 +127,25 @@ pub(crate) fn detections(list: &Bound<'_, PyAny>) -> PyResult<Vec<Detection>> {
         .collect()
 }
 
+/// A core [`Frame`] from the Python arguments every per-frame call takes (validated later by the
+/// consumer's `Frame::validate`).
+pub(crate) fn frame_from_py(
+    index: u32,
+    intrinsics: &Bound<'_, PyAny>,
+    depth: &Bound<'_, PyAny>,
+    world_from_camera: &Bound<'_, PyAny>,
+    detections: &Bound<'_, PyAny>,
+) -> PyResult<Frame> {
+    let depth = depth_image(depth)?;
+    Ok(Frame {
+        index,
+        camera: camera(intrinsics, depth.width, depth.height)?,
+        world_from_camera: pose(world_from_camera, "world_from_camera")?,
+        depth,
+        detections: self::detections(detections)?,
+    })
+}
+
 pub(crate) fn json_err(field: &str, e: serde_json::Error) -> PyErr {
     input_err(format!("{field}: {e}"))
 }
@@ -159,14 +178,7 @@ impl NaiveMapperPy {
         world_from_camera: &Bound<'_, PyAny>,
         detections: &Bound<'_, PyAny>,
     ) -> PyResult<Vec<Option<u32>>> {
-        let depth = depth_image(depth)?;
-        let frame = Frame {
-            index,
-            camera: camera(intrinsics, depth.width, depth.height)?,
-            world_from_camera: pose(world_from_camera, "world_from_camera")?,
-            depth,
-            detections: self::detections(detections)?,
-        };
+        let frame = frame_from_py(index, intrinsics, depth, world_from_camera, detections)?;
         let summary = self.inner.update(&frame).map_err(frame_err)?;
         Ok(summary.assigned)
     }

@@ -8,8 +8,8 @@
 use criterion::{criterion_group, criterion_main, Criterion};
 use nalgebra::{Point3, Vector3};
 use objslam_core::explore::{
-    init_views, sample_candidates, AlwaysReachable, CandidateConfig, ExplorationGrids,
-    ExploreConfig, HistoryBook, Strategy, TableRect, UtilityContext,
+    init_views, sample_candidates, AlwaysReachable, CandidateConfig, ExplorationGrids, ExploreConfig, HistoryBook,
+    Strategy, TableRect, UtilityContext,
 };
 use objslam_core::geometry::{se3_from_yaw, PinholeCamera, Se3};
 use objslam_core::map::{EstimateStage, Label, MapObject, ObjectMap};
@@ -29,11 +29,7 @@ fn twelve_objects() -> ObjectMap {
             Label::Book => Vector3::new(0.08, 0.06, 0.02),
             Label::Bowl => Vector3::new(0.06, 0.06, 0.03),
             Label::Bottle => Vector3::new(0.035, 0.035, 0.1),
-            _ => Vector3::new(
-                0.03 + 0.02 * rng.random::<f64>(),
-                0.03 + 0.02 * rng.random::<f64>(),
-                0.04,
-            ),
+            _ => Vector3::new(0.03 + 0.02 * rng.random::<f64>(), 0.03 + 0.02 * rng.random::<f64>(), 0.04),
         };
         let c = Vector3::new(
             0.3 + 0.2 * gx + rng.random_range(-0.02..0.02),
@@ -53,40 +49,18 @@ fn twelve_objects() -> ObjectMap {
     map
 }
 
-fn setup() -> (
-    ObjectMap,
-    ExplorationGrids,
-    PinholeCamera,
-    ExploreConfig,
-    Vec<Se3>,
-) {
+fn setup() -> (ObjectMap, ExplorationGrids, PinholeCamera, ExploreConfig, Vec<Se3>) {
     let map = twelve_objects();
     let camera = PinholeCamera::from_fovy(640, 480, 1.0).unwrap_or_else(|e| panic!("{e}"));
     let cfg = ExploreConfig::default();
-    let table = TableRect {
-        center_m: [0.5, 0.0],
-        size_m: [0.8, 1.2],
-        height_m: 0.0,
-    };
+    let table = TableRect { center_m: [0.5, 0.0], size_m: [0.8, 1.2], height_m: 0.0 };
     let mut grids = ExplorationGrids::new();
     for v in init_views(&table, &CandidateConfig::default()).unwrap_or_else(|e| panic!("{e}")) {
-        grids
-            .integrate_frame(&map, &camera, &v, &[], None, &cfg.grid)
-            .unwrap_or_else(|e| panic!("{e}"));
+        grids.integrate_frame(&map, &camera, &v, &[], None, &cfg.grid).unwrap_or_else(|e| panic!("{e}"));
     }
-    let cands = sample_candidates(
-        &map,
-        &CandidateConfig::default(),
-        &cfg.grid,
-        &AlwaysReachable,
-        1,
-    )
-    .unwrap_or_else(|e| panic!("{e}"));
-    let views: Vec<Se3> = cands
-        .iter()
-        .take(100)
-        .map(|c| c.world_from_camera)
-        .collect();
+    let cands = sample_candidates(&map, &CandidateConfig::default(), &cfg.grid, &AlwaysReachable, 1)
+        .unwrap_or_else(|e| panic!("{e}"));
+    let views: Vec<Se3> = cands.iter().take(100).map(|c| c.world_from_camera).collect();
     assert_eq!(views.len(), 100, "need 100 candidates");
     (map, grids, camera, cfg, views)
 }
@@ -96,28 +70,22 @@ fn bench(c: &mut Criterion) {
     let hist = HistoryBook::default();
     c.bench_function("utility_100x12", |b| {
         b.iter(|| {
-            let ctx = UtilityContext::new(&map, &grids, &hist, &camera, &cfg)
-                .unwrap_or_else(|e| panic!("{e}"));
-            ctx.score_all(&views, Strategy::ObjectDriven, None)
-                .unwrap_or_else(|e| panic!("{e}"))
+            let ctx = UtilityContext::new(&map, &grids, &hist, &camera, &cfg).unwrap_or_else(|e| panic!("{e}"));
+            ctx.score_all(&views, Strategy::ObjectDriven, None).unwrap_or_else(|e| panic!("{e}"))
         })
     });
     c.bench_function("utility_expected_gain_100x12", |b| {
         b.iter(|| {
-            let ctx = UtilityContext::new(&map, &grids, &hist, &camera, &cfg)
-                .unwrap_or_else(|e| panic!("{e}"));
-            ctx.score_all(&views, Strategy::ExpectedGain, Some(&views[0]))
-                .unwrap_or_else(|e| panic!("{e}"))
+            let ctx = UtilityContext::new(&map, &grids, &hist, &camera, &cfg).unwrap_or_else(|e| panic!("{e}"));
+            ctx.score_all(&views, Strategy::ExpectedGain, Some(&views[0])).unwrap_or_else(|e| panic!("{e}"))
         })
     });
     let eye = Point3::new(0.5, 0.0, 0.5);
-    let pose = objslam_core::explore::look_at(&eye, &Point3::new(0.5, 0.0, 0.0))
-        .unwrap_or_else(|e| panic!("{e}"));
+    let pose = objslam_core::explore::look_at(&eye, &Point3::new(0.5, 0.0, 0.0)).unwrap_or_else(|e| panic!("{e}"));
     c.bench_function("grid_integrate_frame_12", |b| {
         b.iter(|| {
             let mut g = grids.clone();
-            g.integrate_frame(&map, &camera, &pose, &[], None, &cfg.grid)
-                .unwrap_or_else(|e| panic!("{e}"))
+            g.integrate_frame(&map, &camera, &pose, &[], None, &cfg.grid).unwrap_or_else(|e| panic!("{e}"))
         })
     });
 }

@@ -46,11 +46,7 @@ fn panda_urdf() -> PathBuf {
 fn ik_targets() -> Vec<objslam_core::geometry::Se3> {
     (0..16)
         .map(|k| {
-            let p = Vector3::new(
-                0.35 + 0.1 * (k % 4) as f64,
-                -0.3 + 0.2 * (k / 4) as f64,
-                0.15,
-            );
+            let p = Vector3::new(0.35 + 0.1 * (k % 4) as f64, -0.3 + 0.2 * (k / 4) as f64, 0.15);
             top_down_pose(p, -0.6 + 0.08 * k as f64)
         })
         .collect()
@@ -80,8 +76,7 @@ fn twelve_objects() -> Vec<ObjectGeometry> {
 }
 
 fn benches(c: &mut Criterion) {
-    let planner =
-        Planner::new(panda_urdf(), PlannerConfig::default()).unwrap_or_else(|e| panic!("{e}"));
+    let planner = Planner::new(panda_urdf(), PlannerConfig::default()).unwrap_or_else(|e| panic!("{e}"));
     let targets = ik_targets();
     let mut k = 0usize;
     c.bench_function("ik", |b| {
@@ -93,14 +88,7 @@ fn benches(c: &mut Criterion) {
     let objects = twelve_objects();
     // Queries: the TCP moves low (11 cm above the table) between gaps of the object grid, from one
     // gap's configuration to the next, so several straight lines are blocked and RRT-Connect runs.
-    let gaps = [
-        (0.385, -0.125),
-        (0.645, 0.125),
-        (0.385, 0.125),
-        (0.645, -0.125),
-        (0.515, 0.0),
-        (0.3, 0.3),
-    ];
+    let gaps = [(0.385, -0.125), (0.645, 0.125), (0.385, 0.125), (0.645, -0.125), (0.515, 0.0), (0.3, 0.3)];
     let mut starts = Vec::new();
     let mut q = Q_READY;
     for &(x, y) in &gaps {
@@ -118,15 +106,8 @@ fn benches(c: &mut Criterion) {
         let scene = planner.scene(&objects).unwrap_or_else(|e| panic!("{e}"));
         let goal = planner.inverse_tcp_free(pose, q0, &scene).map(|s| s.q);
         match goal.and_then(|g| planner.plan_path(q0, &g, &scene)) {
-            Ok(p) => eprintln!(
-                "plan_query to {:?}: {} waypoints",
-                pose.translation.vector.as_slice(),
-                p.len()
-            ),
-            Err(e) => eprintln!(
-                "plan_query to {:?}: {e}",
-                pose.translation.vector.as_slice()
-            ),
+            Ok(p) => eprintln!("plan_query to {:?}: {} waypoints", pose.translation.vector.as_slice(), p.len()),
+            Err(e) => eprintln!("plan_query to {:?}: {e}", pose.translation.vector.as_slice()),
         }
     }
     let mut i = 0usize;
@@ -134,11 +115,7 @@ fn benches(c: &mut Criterion) {
         b.iter(|| {
             i = (i + 1) % starts.len();
             let (q0, pose) = &starts[i];
-            std::hint::black_box(
-                planner
-                    .plan_to_pose(q0, pose, &objects)
-                    .map(|t| t.positions.len()),
-            )
+            std::hint::black_box(planner.plan_to_pose(q0, pose, &objects).map(|t| t.positions.len()))
         })
     });
 }

@@ -36,23 +36,17 @@ fn orb_extract(c: &mut Criterion) {
 }
 
 fn track_frame(c: &mut Criterion) {
-    let cam =
-        PinholeCamera::from_fovy(640, 480, 50f64.to_radians()).unwrap_or_else(|e| panic!("{e}"));
+    let cam = PinholeCamera::from_fovy(640, 480, 50f64.to_radians()).unwrap_or_else(|e| panic!("{e}"));
     let scene = TabletopScene::tabletop(3);
     let poses: Vec<_> = (0..20)
         .map(|i| {
             let theta = -0.2 + 0.02 * f64::from(i);
-            look_at(
-                Point3::new(0.5 - 0.25 * theta.cos(), 0.25 * theta.sin(), 0.45),
-                Point3::new(0.5, 0.0, 0.0),
-            )
+            look_at(Point3::new(0.5 - 0.25 * theta.cos(), 0.25 * theta.sin(), 0.45), Point3::new(0.5, 0.0, 0.0))
         })
         .collect();
     let frames: Vec<_> = poses.iter().map(|p| scene.render(&cam, p)).collect();
     // Back-and-forth playback order.
-    let order: Vec<usize> = (0..frames.len())
-        .chain((1..frames.len() - 1).rev())
-        .collect();
+    let order: Vec<usize> = (0..frames.len()).chain((1..frames.len() - 1).rev()).collect();
     let mut tracker = Tracker::new(TrackerConfig::default()).unwrap_or_else(|e| panic!("{e}"));
     let mut step = 0usize;
     let run = |tracker: &mut Tracker, step: usize| {

@@ -7,9 +7,9 @@
 
 use nalgebra::{Point3, Vector3};
 use objslam_core::explore::{
-    init_views, next_best_view, object_features, random_views, sample_candidates, stop_reason,
-    AlwaysReachable, CandidateConfig, ExplorationGrids, ExploreConfig, HistoryBook, ObservedPoints,
-    Occluders, Strategy, TableRect, UtilityContext,
+    init_views, next_best_view, object_features, random_views, sample_candidates, stop_reason, AlwaysReachable,
+    CandidateConfig, ExplorationGrids, ExploreConfig, HistoryBook, ObservedPoints, Occluders, Strategy, TableRect,
+    UtilityContext,
 };
 use objslam_core::frame::DepthImage;
 use objslam_core::geometry::{se3_from_yaw, PinholeCamera, Se3};
@@ -39,11 +39,7 @@ fn scene() -> ObjectMap {
 }
 
 fn table() -> TableRect {
-    TableRect {
-        center_m: [0.5, 0.0],
-        size_m: [0.8, 1.2],
-        height_m: 0.0,
-    }
+    TableRect { center_m: [0.5, 0.0], size_m: [0.8, 1.2], height_m: 0.0 }
 }
 
 fn camera() -> PinholeCamera {
@@ -51,27 +47,14 @@ fn camera() -> PinholeCamera {
 }
 
 /// Render depth and per-object points of `map` seen from `pose` (perfect sensor).
-fn render(
-    map: &ObjectMap,
-    occ: &Occluders,
-    cam: &PinholeCamera,
-    pose: &Se3,
-) -> (DepthImage, Vec<ObservedPoints>) {
+fn render(map: &ObjectMap, occ: &Occluders, cam: &PinholeCamera, pose: &Se3) -> (DepthImage, Vec<ObservedPoints>) {
     let mut depth = vec![0.0f32; (cam.width * cam.height) as usize];
-    let mut points: Vec<ObservedPoints> = map
-        .objects
-        .iter()
-        .map(|o| ObservedPoints {
-            object_id: o.id,
-            points_in_world: Vec::new(),
-        })
-        .collect();
+    let mut points: Vec<ObservedPoints> =
+        map.objects.iter().map(|o| ObservedPoints { object_id: o.id, points_in_world: Vec::new() }).collect();
     let eye = Point3::from(pose.translation.vector);
     for v in 0..cam.height {
         for u in 0..cam.width {
-            let dir_c = cam
-                .unproject(f64::from(u) + 0.5, f64::from(v) + 0.5, 1.0)
-                .coords;
+            let dir_c = cam.unproject(f64::from(u) + 0.5, f64::from(v) + 0.5, 1.0).coords;
             let dir_w = pose.rotation * dir_c;
             if let Some((id, t)) = occ.cast_ray(&eye, &dir_w, 3.0) {
                 depth[(v * cam.width + u) as usize] = t as f32;
@@ -83,10 +66,7 @@ fn render(
             }
         }
     }
-    (
-        DepthImage::new(cam.width, cam.height, depth).unwrap_or_else(|e| panic!("{e}")),
-        points,
-    )
+    (DepthImage::new(cam.width, cam.height, depth).unwrap_or_else(|e| panic!("{e}")), points)
 }
 
 struct Episode {
@@ -96,32 +76,20 @@ struct Episode {
     stopped_early: bool,
 }
 
-fn mean_normalized_entropy(
-    map: &ObjectMap,
-    grids: &ExplorationGrids,
-    hist: &HistoryBook,
-    cfg: &ExploreConfig,
-) -> f64 {
+fn mean_normalized_entropy(map: &ObjectMap, grids: &ExplorationGrids, hist: &HistoryBook, cfg: &ExploreConfig) -> f64 {
     let f = object_features(map, grids, hist, cfg);
     f.iter().map(|x| x.normalized_entropy).sum::<f64>() / f.len() as f64
 }
 
 /// The paper's configuration with a view budget.
 fn paper(max_views: usize) -> ExploreConfig {
-    ExploreConfig {
-        max_views,
-        ..ExploreConfig::default()
-    }
+    ExploreConfig { max_views, ..ExploreConfig::default() }
 }
 
 /// A configuration whose s(x) never reaches 0 (p(V̄) > 1 is impossible): episodes use the whole
 /// budget, for comparisons at an equal number of views.
 fn no_early_stop(max_views: usize) -> ExploreConfig {
-    ExploreConfig {
-        max_views,
-        done_volume_probability: 1.0,
-        ..ExploreConfig::default()
-    }
+    ExploreConfig { max_views, done_volume_probability: 1.0, ..ExploreConfig::default() }
 }
 
 fn run(strategy: Strategy, seed: u64, cfg: &ExploreConfig) -> Episode {
@@ -134,9 +102,7 @@ fn run(strategy: Strategy, seed: u64, cfg: &ExploreConfig) -> Episode {
     let mut hist = HistoryBook::default();
     let observe = |pose: &Se3, grids: &mut ExplorationGrids, hist: &mut HistoryBook| {
         let (depth, pts) = render(&map, &occ, &cam, pose);
-        grids
-            .integrate_frame(&map, &cam, pose, &pts, Some(&depth), &cfg.grid)
-            .unwrap_or_else(|e| panic!("{e}"));
+        grids.integrate_frame(&map, &cam, pose, &pts, Some(&depth), &cfg.grid).unwrap_or_else(|e| panic!("{e}"));
         hist.record(&map);
     };
     let init = init_views(&table(), &cc).unwrap_or_else(|e| panic!("{e}"));
@@ -157,42 +123,26 @@ fn run(strategy: Strategy, seed: u64, cfg: &ExploreConfig) -> Episode {
         }
         let next = match strategy {
             Strategy::ObjectDriven | Strategy::ExpectedGain => {
-                let cands = sample_candidates(
-                    &map,
-                    &cc,
-                    &cfg.grid,
-                    &AlwaysReachable,
-                    seed * 1000 + step as u64,
-                )
-                .unwrap_or_else(|e| panic!("{e}"));
+                let cands = sample_candidates(&map, &cc, &cfg.grid, &AlwaysReachable, seed * 1000 + step as u64)
+                    .unwrap_or_else(|e| panic!("{e}"));
                 let views: Vec<Se3> = cands.iter().map(|c| c.world_from_camera).collect();
-                let ctx = UtilityContext::new(&map, &grids, &hist, &cam, cfg)
-                    .unwrap_or_else(|e| panic!("{e}"));
-                let scores = ctx
-                    .score_all(&views, strategy, Some(&current))
-                    .unwrap_or_else(|e| panic!("{e}"));
+                let ctx = UtilityContext::new(&map, &grids, &hist, &cam, cfg).unwrap_or_else(|e| panic!("{e}"));
+                let scores = ctx.score_all(&views, strategy, Some(&current)).unwrap_or_else(|e| panic!("{e}"));
                 next_best_view(&scores).and_then(|i| views.get(i).copied())
             }
-            Strategy::Random => random_views(
-                &table(),
-                &map,
-                &cc,
-                &cfg.grid,
-                &AlwaysReachable,
-                1,
-                seed * 1000 + step as u64,
-            )
-            .unwrap_or_else(|e| panic!("{e}"))
-            .first()
-            .copied(),
+            Strategy::Random => {
+                random_views(&table(), &map, &cc, &cfg.grid, &AlwaysReachable, 1, seed * 1000 + step as u64)
+                    .unwrap_or_else(|e| panic!("{e}"))
+                    .first()
+                    .copied()
+            }
             Strategy::Coverage | Strategy::Init => None,
         };
         let Some(next) = next else { break };
         observe(&next, &mut grids, &mut hist);
         current = next;
         ep.views.push(next);
-        ep.mean_entropy
-            .push(mean_normalized_entropy(&map, &grids, &hist, cfg));
+        ep.mean_entropy.push(mean_normalized_entropy(&map, &grids, &hist, cfg));
     }
     ep
 }
@@ -215,23 +165,14 @@ fn object_driven_views_complete_the_map_faster_than_random_views() {
         assert_eq!(r.views.len(), k);
         random_end += r.mean_entropy.last().unwrap_or(&1.0) / seeds.len() as f64;
     }
-    eprintln!("mean H̄: init {init:.3}, object-driven {:?}, expected-gain {:?}, random (mean of 3) {random_end:.3}", od.mean_entropy, eg.mean_entropy);
-    assert!(
-        od_end < init - 0.05,
-        "object-driven improves on Init: {od_end} vs {init}"
+    eprintln!(
+        "mean H̄: init {init:.3}, object-driven {:?}, expected-gain {:?}, random (mean of 3) {random_end:.3}",
+        od.mean_entropy, eg.mean_entropy
     );
-    assert!(
-        eg_end < init - 0.05,
-        "expected-gain improves on Init: {eg_end} vs {init}"
-    );
-    assert!(
-        od_end < random_end,
-        "object-driven {od_end} vs random {random_end}"
-    );
-    assert!(
-        eg_end < random_end,
-        "expected-gain {eg_end} vs random {random_end}"
-    );
+    assert!(od_end < init - 0.05, "object-driven improves on Init: {od_end} vs {init}");
+    assert!(eg_end < init - 0.05, "expected-gain improves on Init: {eg_end} vs {init}");
+    assert!(od_end < random_end, "object-driven {od_end} vs random {random_end}");
+    assert!(eg_end < random_end, "expected-gain {eg_end} vs random {random_end}");
     // Entropy never increases with more views of a static, perfectly estimated scene.
     for w in od.mean_entropy.windows(2) {
         assert!(w[1] <= w[0] + 1e-9, "{:?}", od.mean_entropy);
@@ -245,12 +186,7 @@ fn episodes_are_deterministic_and_respect_the_view_budget() {
     assert_eq!(a.views, b.views);
     assert_eq!(a.mean_entropy, b.mean_entropy);
     assert!(a.views.len() <= 10);
-    eprintln!(
-        "object-driven: {} views, stopped early: {}, H̄ {:?}",
-        a.views.len(),
-        a.stopped_early,
-        a.mean_entropy
-    );
+    eprintln!("object-driven: {} views, stopped early: {}, H̄ {:?}", a.views.len(), a.stopped_early, a.mean_entropy);
     assert!(a.stopped_early || a.views.len() == 10);
     // With s(x) never 0 the budget is used up.
     let c = run(Strategy::ObjectDriven, 5, &no_early_stop(6));

@@ -11,8 +11,7 @@ use objslam_core::objects::iforest::{IForestConfig, IsolationForest};
 
 #[test]
 fn scores_match_sklearn() {
-    let path =
-        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/iforest_sklearn.json");
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/iforest_sklearn.json");
     let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     let json: serde_json::Value = serde_json::from_str(&text).unwrap_or_else(|e| panic!("{e}"));
     let points: Vec<Point3<f64>> = json["points"]
@@ -20,49 +19,26 @@ fn scores_match_sklearn() {
         .unwrap_or_else(|| panic!("points"))
         .iter()
         .map(|p| {
-            let v: Vec<f64> = p
-                .as_array()
-                .unwrap_or_else(|| panic!("point"))
-                .iter()
-                .filter_map(|x| x.as_f64())
-                .collect();
+            let v: Vec<f64> =
+                p.as_array().unwrap_or_else(|| panic!("point")).iter().filter_map(|x| x.as_f64()).collect();
             Point3::new(v[0], v[1], v[2])
         })
         .collect();
-    let reference: Vec<f64> = json["mean_score"]
-        .as_array()
-        .unwrap_or_else(|| panic!("scores"))
-        .iter()
-        .filter_map(|x| x.as_f64())
-        .collect();
+    let reference: Vec<f64> =
+        json["mean_score"].as_array().unwrap_or_else(|| panic!("scores")).iter().filter_map(|x| x.as_f64()).collect();
     assert_eq!(points.len(), 500);
     assert_eq!(reference.len(), 500);
     let seeds = 20u64;
     let mut ours = vec![0.0; points.len()];
     for seed in 0..seeds {
-        let forest = IsolationForest::fit(
-            &points,
-            &IForestConfig {
-                seed,
-                ..Default::default()
-            },
-        )
-        .unwrap_or_else(|e| panic!("{e}"));
+        let forest = IsolationForest::fit(&points, &IForestConfig { seed, ..Default::default() })
+            .unwrap_or_else(|e| panic!("{e}"));
         for (o, p) in ours.iter_mut().zip(&points) {
             *o += forest.score(p) / seeds as f64;
         }
     }
-    let mean_abs = ours
-        .iter()
-        .zip(&reference)
-        .map(|(a, b)| (a - b).abs())
-        .sum::<f64>()
-        / ours.len() as f64;
-    let max_abs = ours
-        .iter()
-        .zip(&reference)
-        .map(|(a, b)| (a - b).abs())
-        .fold(0.0, f64::max);
+    let mean_abs = ours.iter().zip(&reference).map(|(a, b)| (a - b).abs()).sum::<f64>() / ours.len() as f64;
+    let max_abs = ours.iter().zip(&reference).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
     let above = |s: &[f64]| s.iter().map(|v| *v > 0.6).collect::<Vec<_>>();
     let (a, b) = (above(&ours), above(&reference));
     let disagree = a.iter().zip(&b).filter(|(x, y)| x != y).count();
@@ -70,12 +46,6 @@ fn scores_match_sklearn() {
     eprintln!("mean |Δs| {mean_abs:.4}, max {max_abs:.4}; > 0.6: sklearn {flagged}, disagreements {disagree}");
     assert!(mean_abs < 0.01, "mean |Δs| = {mean_abs:.4}");
     assert!(max_abs < 0.05, "max |Δs| = {max_abs:.4}");
-    assert!(
-        flagged > 20,
-        "fixture has too few flagged points: {flagged}"
-    );
-    assert!(
-        (disagree as f64) <= 0.1 * flagged as f64,
-        "{disagree} disagreements of {flagged} flagged"
-    );
+    assert!(flagged > 20, "fixture has too few flagged points: {flagged}");
+    assert!((disagree as f64) <= 0.1 * flagged as f64, "{disagree} disagreements of {flagged} flagged");
 }

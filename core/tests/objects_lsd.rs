@@ -47,12 +47,9 @@ fn matches(r: &LineSegment, s: &LineSegment) -> bool {
 
 #[test]
 fn lsd_finds_cv2_long_segments() {
-    let text = std::fs::read_to_string(fixture_dir().join("lsd_cv2.json"))
-        .unwrap_or_else(|e| panic!("{e}"));
+    let text = std::fs::read_to_string(fixture_dir().join("lsd_cv2.json")).unwrap_or_else(|e| panic!("{e}"));
     let json: serde_json::Value = serde_json::from_str(&text).unwrap_or_else(|e| panic!("{e}"));
-    let frames = json["frames"]
-        .as_array()
-        .unwrap_or_else(|| panic!("frames"));
+    let frames = json["frames"].as_array().unwrap_or_else(|| panic!("frames"));
     let (mut total, mut found) = (0usize, 0usize);
     for f in frames {
         let file = f["file"].as_str().unwrap_or_else(|| panic!("file"));
@@ -63,53 +60,29 @@ fn lsd_finds_cv2_long_segments() {
             .unwrap_or_else(|| panic!("segments"))
             .iter()
             .map(|s| {
-                let v: Vec<f64> = s
-                    .as_array()
-                    .unwrap_or_else(|| panic!("seg"))
-                    .iter()
-                    .filter_map(|x| x.as_f64())
-                    .collect();
+                let v: Vec<f64> =
+                    s.as_array().unwrap_or_else(|| panic!("seg")).iter().filter_map(|x| x.as_f64()).collect();
                 LineSegment::new([v[0], v[1]], [v[2], v[3]])
             })
             .filter(|s| s.length_px() >= LONG_PX)
             .collect();
-        let hit = reference
-            .iter()
-            .filter(|r| ours.iter().any(|s| matches(r, s)))
-            .count();
-        for r in reference
-            .iter()
-            .filter(|r| !ours.iter().any(|s| matches(r, s)))
-        {
+        let hit = reference.iter().filter(|r| ours.iter().any(|s| matches(r, s))).count();
+        for r in reference.iter().filter(|r| !ours.iter().any(|s| matches(r, s))) {
             let best = ours
                 .iter()
                 .map(|s| {
-                    let d1 = (r.a[0] - s.a[0])
-                        .hypot(r.a[1] - s.a[1])
-                        .max((r.b[0] - s.b[0]).hypot(r.b[1] - s.b[1]));
-                    let d2 = (r.a[0] - s.b[0])
-                        .hypot(r.a[1] - s.b[1])
-                        .max((r.b[0] - s.a[0]).hypot(r.b[1] - s.a[1]));
+                    let d1 = (r.a[0] - s.a[0]).hypot(r.a[1] - s.a[1]).max((r.b[0] - s.b[0]).hypot(r.b[1] - s.b[1]));
+                    let d2 = (r.a[0] - s.b[0]).hypot(r.a[1] - s.b[1]).max((r.b[0] - s.a[0]).hypot(r.b[1] - s.a[1]));
                     (d1.min(d2), *s)
                 })
                 .min_by(|x, y| x.0.total_cmp(&y.0));
-            eprintln!(
-                "{file}: missed cv2 {r:?} (len {:.1}); nearest ours {best:?}",
-                r.length_px()
-            );
+            eprintln!("{file}: missed cv2 {r:?} (len {:.1}); nearest ours {best:?}", r.length_px());
         }
-        eprintln!(
-            "{file}: {hit}/{} long cv2 segments found; ours {} total",
-            reference.len(),
-            ours.len()
-        );
+        eprintln!("{file}: {hit}/{} long cv2 segments found; ours {} total", reference.len(), ours.len());
         total += reference.len();
         found += hit;
     }
     assert!(total >= 30, "fixture too small: {total} long segments");
     let recall = found as f64 / total as f64;
-    assert!(
-        recall >= MIN_RECALL,
-        "recall {recall:.3} < {MIN_RECALL} ({found}/{total})"
-    );
+    assert!(recall >= MIN_RECALL, "recall {recall:.3} < {MIN_RECALL} ({found}/{total})");
 }

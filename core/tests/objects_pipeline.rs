@@ -3,14 +3,10 @@
 //! Seeds are fixed; envelopes are stated in each assertion.
 
 use nalgebra::{Isometry3, Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
-use objslam_core::geometry::{
-    iou3d, yaw_error_deg, Box2, ObjectGeometry, PinholeCamera, Se3, Shape,
-};
+use objslam_core::geometry::{iou3d, yaw_error_deg, Box2, ObjectGeometry, PinholeCamera, Se3, Shape};
 use objslam_core::map::EstimateStage;
 use objslam_core::objects::lsd::LineSegment;
-use objslam_core::objects::yaw::{
-    align_yaw, cuboid, oriented_extent, project_edges, LineFrame, YawConfig,
-};
+use objslam_core::objects::yaw::{align_yaw, cuboid, oriented_extent, project_edges, LineFrame, YawConfig};
 use objslam_core::objects::{Confidence, FrameUse, ObjectEstimator, ParamConfig};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -21,10 +17,7 @@ fn look_at(eye: Vector3<f64>, target: Vector3<f64>) -> Se3 {
     let x = z.cross(&Vector3::z()).normalize();
     let y = z.cross(&x);
     let r = Rotation3::from_matrix_unchecked(Matrix3::from_columns(&[x, y, z]));
-    Isometry3::from_parts(
-        Translation3::from(eye),
-        UnitQuaternion::from_rotation_matrix(&r),
-    )
+    Isometry3::from_parts(Translation3::from(eye), UnitQuaternion::from_rotation_matrix(&r))
 }
 
 fn camera() -> PinholeCamera {
@@ -32,11 +25,7 @@ fn camera() -> PinholeCamera {
 }
 
 fn truth() -> ObjectGeometry {
-    cuboid(
-        Vector3::new(0.5, 0.1, 0.04),
-        35f64.to_radians(),
-        Vector3::new(0.07, 0.035, 0.04),
-    )
+    cuboid(Vector3::new(0.5, 0.1, 0.04), 35f64.to_radians(), Vector3::new(0.07, 0.035, 0.04))
 }
 
 fn eyes() -> Vec<Vector3<f64>> {
@@ -68,40 +57,21 @@ fn line_frame(rng: &mut ChaCha8Rng, index: u32, eye: Vector3<f64>, clutter: f64)
         }
         let t0 = rng.random_range(0.0..0.25);
         let t1 = rng.random_range(0.75..1.0);
-        let p = |t: f64| {
-            [
-                e.a[0] + t * (e.b[0] - e.a[0]),
-                e.a[1] + t * (e.b[1] - e.a[1]),
-            ]
-        };
+        let p = |t: f64| [e.a[0] + t * (e.b[0] - e.a[0]), e.a[1] + t * (e.b[1] - e.a[1])];
         let (a, b) = (p(t0), p(t1));
-        segments.push(LineSegment::new(
-            [a[0] + jitter(rng), a[1] + jitter(rng)],
-            [b[0] + jitter(rng), b[1] + jitter(rng)],
-        ));
+        segments
+            .push(LineSegment::new([a[0] + jitter(rng), a[1] + jitter(rng)], [b[0] + jitter(rng), b[1] + jitter(rng)]));
     }
     let n_true = segments.len();
     let n_clutter = ((n_true as f64) * clutter / (1.0 - clutter)).round() as usize;
     for _ in 0..n_clutter {
-        let m = [
-            rng.random_range(bbox.min[0]..bbox.max[0]),
-            rng.random_range(bbox.min[1]..bbox.max[1]),
-        ];
+        let m = [rng.random_range(bbox.min[0]..bbox.max[0]), rng.random_range(bbox.min[1]..bbox.max[1])];
         let ang: f64 = rng.random_range(0.0..std::f64::consts::PI);
         let half = rng.random_range(5.0..25.0);
         let d = [ang.cos() * half, ang.sin() * half];
-        segments.push(LineSegment::new(
-            [m[0] - d[0], m[1] - d[1]],
-            [m[0] + d[0], m[1] + d[1]],
-        ));
+        segments.push(LineSegment::new([m[0] - d[0], m[1] - d[1]], [m[0] + d[0], m[1] + d[1]]));
     }
-    LineFrame {
-        frame: index,
-        camera: cam,
-        world_from_camera: pose,
-        bbox,
-        segments,
-    }
+    LineFrame { frame: index, camera: cam, world_from_camera: pose, bbox, segments }
 }
 
 /// Points on the top and side faces of the true cube (2 mm noise) + 20 % uniform background
@@ -112,11 +82,7 @@ fn points(rng: &mut ChaCha8Rng) -> Vec<Point3<f64>> {
     let pose = g.world_from_object();
     let mut out = Vec::new();
     for _ in 0..600 {
-        let mut l = Vector3::new(
-            rng.random_range(-h.x..h.x),
-            rng.random_range(-h.y..h.y),
-            rng.random_range(-h.z..h.z),
-        );
+        let mut l = Vector3::new(rng.random_range(-h.x..h.x), rng.random_range(-h.y..h.y), rng.random_range(-h.z..h.z));
         match rng.random_range(0..5) {
             0 | 1 => l.z = h.z,
             2 => l.x = if rng.random_bool(0.5) { h.x } else { -h.x },
@@ -130,11 +96,8 @@ fn points(rng: &mut ChaCha8Rng) -> Vec<Point3<f64>> {
         out.push(pose * Point3::from(l));
     }
     for _ in 0..150 {
-        let o = Vector3::new(
-            rng.random_range(-0.15..0.15),
-            rng.random_range(-0.15..0.15),
-            rng.random_range(-0.04..0.12),
-        );
+        let o =
+            Vector3::new(rng.random_range(-0.15..0.15), rng.random_range(-0.15..0.15), rng.random_range(-0.04..0.12));
         out.push(Point3::from(g.center + o));
     }
     out
@@ -157,66 +120,35 @@ fn yaw_within_two_degrees_with_clutter() {
         assert!(yae <= 2.0, "seed {seed}: refined yaw error {yae:.2}°");
         let lines = out.stages.lines.unwrap_or_else(|| panic!("no lines stage"));
         let yae_lines = yaw_error_deg(&lines, &t, 0.05).unwrap_or(f64::NAN);
-        eprintln!(
-            "seed {seed}: lines {lines:?} refined {:?}",
-            out.stages.refined
-        );
+        eprintln!("seed {seed}: lines {lines:?} refined {:?}", out.stages.refined);
         // Alg. 2 samples every 6°, so its answer is within 3° (+ noise) of the truth.
-        assert!(
-            yae_lines <= 4.0,
-            "seed {seed}: Alg. 2 yaw error {yae_lines:.2}°"
-        );
+        assert!(yae_lines <= 4.0, "seed {seed}: Alg. 2 yaw error {yae_lines:.2}°");
         // Each stage improves 3D IoU on this cloud.
         let iou = |g: Option<ObjectGeometry>| g.map_or(0.0, |g| iou3d(&g, &t));
-        let (r, i, l, f) = (
-            iou(out.stages.raw),
-            iou(out.stages.iforest),
-            iou(out.stages.lines),
-            iou(out.stages.refined),
-        );
+        let (r, i, l, f) =
+            (iou(out.stages.raw), iou(out.stages.iforest), iou(out.stages.lines), iou(out.stages.refined));
         eprintln!("inliers {} of {}", out.inliers, pts.len());
         eprintln!("seed {seed}: yae lines {yae_lines:.2}° refined {yae:.2}°; iou3d raw {r:.3} iforest {i:.3} lines {l:.3} refined {f:.3}");
-        assert!(
-            i > r && l > i,
-            "seed {seed}: iou3d raw {r:.3} iforest {i:.3} lines {l:.3}"
-        );
+        assert!(i > r && l > i, "seed {seed}: iou3d raw {r:.3} iforest {i:.3} lines {l:.3}");
         // Envelope pinned at seeds 1–4 (measured 0.94–0.98): refinement recovers the box.
-        assert!(
-            f > 0.85 && f > l,
-            "seed {seed}: refined {f:.3} vs lines {l:.3}"
-        );
+        assert!(f > 0.85 && f > l, "seed {seed}: refined {f:.3} vs lines {l:.3}");
     }
 }
 
 #[test]
 fn alg2_alone_finds_the_sampled_yaw_on_exact_geometry() {
     let mut rng = ChaCha8Rng::seed_from_u64(11);
-    let frames: Vec<LineFrame> = eyes()
-        .into_iter()
-        .enumerate()
-        .map(|(i, e)| line_frame(&mut rng, i as u32, e, 0.3))
-        .collect();
+    let frames: Vec<LineFrame> =
+        eyes().into_iter().enumerate().map(|(i, e)| line_frame(&mut rng, i as u32, e, 0.3)).collect();
     let t = truth();
     // Candidate cube: true centre and extents, candidate yaw.
-    let a = align_yaw(
-        &frames,
-        |yaw| cuboid(t.center, yaw, t.half_extents),
-        &YawConfig::default(),
-    )
-    .unwrap_or_else(|| panic!("no alignment"));
-    let err =
-        yaw_error_deg(&cuboid(t.center, a.yaw_rad, t.half_extents), &t, 0.05).unwrap_or(f64::NAN);
-    assert!(
-        err <= 3.0 + 1e-9,
-        "Alg. 2 yaw error {err:.2}° > half the 6° sampling step"
-    );
+    let a = align_yaw(&frames, |yaw| cuboid(t.center, yaw, t.half_extents), &YawConfig::default())
+        .unwrap_or_else(|| panic!("no alignment"));
+    let err = yaw_error_deg(&cuboid(t.center, a.yaw_rad, t.half_extents), &t, 0.05).unwrap_or(f64::NAN);
+    assert!(err <= 3.0 + 1e-9, "Alg. 2 yaw error {err:.2}° > half the 6° sampling step");
     assert_eq!(a.samples.len(), 30);
     // The score of the best sample clearly beats a sample 30° away.
-    let far = a
-        .samples
-        .iter()
-        .find(|(y, _)| (y - a.yaw_rad).abs() > 29f64.to_radians())
-        .map_or(0.0, |s| s.1);
+    let far = a.samples.iter().find(|(y, _)| (y - a.yaw_rad).abs() > 29f64.to_radians()).map_or(0.0, |s| s.1);
     assert!(a.score > 1.5 * far, "best {:.2} vs far {far:.2}", a.score);
 }
 
@@ -241,17 +173,11 @@ fn fallbacks() {
     // Fewer points than min_points: raw extent, low confidence.
     let few: Vec<_> = points(&mut rng).into_iter().take(10).collect();
     let out = est.estimate(&few).unwrap_or_else(|e| panic!("{e}"));
-    assert_eq!(
-        (out.stage, out.confidence),
-        (EstimateStage::Raw, Confidence::Low)
-    );
+    assert_eq!((out.stage, out.confidence), (EstimateStage::Raw, Confidence::Low));
     // No segments: the iforest stage is final, normal confidence, yaw 0.
     let pts = points(&mut rng);
     let out = est.estimate(&pts).unwrap_or_else(|e| panic!("{e}"));
-    assert_eq!(
-        (out.stage, out.confidence),
-        (EstimateStage::Iforest, Confidence::Normal)
-    );
+    assert_eq!((out.stage, out.confidence), (EstimateStage::Iforest, Confidence::Normal));
     assert_eq!(out.geometry.yaw_rad, 0.0);
     assert!(out.stages.lines.is_none());
     let good = out.geometry;
@@ -271,9 +197,7 @@ fn fallbacks() {
     // NaN point: typed error without history.
     let mut bad = pts.clone();
     bad[3].x = f64::NAN;
-    assert!(ObjectEstimator::new(Shape::Cuboid, cfg)
-        .estimate(&bad)
-        .is_err());
+    assert!(ObjectEstimator::new(Shape::Cuboid, cfg).estimate(&bad).is_err());
     // A box partly off the image is not added.
     let mut f = line_frame(&mut rng, 0, eyes()[0], 0.3);
     f.bbox = Box2::new(-10.0, 100.0, 200.0, 300.0);
@@ -291,13 +215,7 @@ fn fallbacks() {
 #[test]
 fn window_is_a_ring_buffer() {
     let mut rng = ChaCha8Rng::seed_from_u64(5);
-    let mut est = ObjectEstimator::new(
-        Shape::Cuboid,
-        ParamConfig {
-            window_frames: 3,
-            ..Default::default()
-        },
-    );
+    let mut est = ObjectEstimator::new(Shape::Cuboid, ParamConfig { window_frames: 3, ..Default::default() });
     for i in 0..7 {
         est.add_frame(line_frame(&mut rng, i, eyes()[i as usize % 5], 0.3));
     }
@@ -311,36 +229,17 @@ fn table_filter_drops_support_points() {
     // A dense patch of table points (z = 0) around the object's base.
     for i in 0..300 {
         let a = i as f64 * 0.37;
-        pts.push(Point3::new(
-            0.5 + 0.12 * a.cos() * (i as f64 / 300.0),
-            0.1 + 0.12 * a.sin(),
-            0.0,
-        ));
+        pts.push(Point3::new(0.5 + 0.12 * a.cos() * (i as f64 / 300.0), 0.1 + 0.12 * a.sin(), 0.0));
     }
-    let cfg = ParamConfig {
-        table_z_m: Some(0.0),
-        ..Default::default()
-    };
-    let out = ObjectEstimator::new(Shape::Cuboid, cfg)
-        .estimate(&pts)
-        .unwrap_or_else(|e| panic!("{e}"));
-    let ifo = out
-        .stages
-        .iforest
-        .unwrap_or_else(|| panic!("no iforest stage"));
+    let cfg = ParamConfig { table_z_m: Some(0.0), ..Default::default() };
+    let out = ObjectEstimator::new(Shape::Cuboid, cfg).estimate(&pts).unwrap_or_else(|e| panic!("{e}"));
+    let ifo = out.stages.iforest.unwrap_or_else(|| panic!("no iforest stage"));
     let bottom = ifo.center.z - ifo.half_extents.z;
     assert!(bottom > 0.004, "bottom {bottom}");
-    let plain = ObjectEstimator::new(Shape::Cuboid, ParamConfig::default())
-        .estimate(&pts)
-        .unwrap_or_else(|e| panic!("{e}"));
-    let g = plain
-        .stages
-        .iforest
-        .unwrap_or_else(|| panic!("no iforest stage"));
-    assert!(
-        g.center.z < ifo.center.z,
-        "table points pull the plain centre down"
-    );
+    let plain =
+        ObjectEstimator::new(Shape::Cuboid, ParamConfig::default()).estimate(&pts).unwrap_or_else(|e| panic!("{e}"));
+    let g = plain.stages.iforest.unwrap_or_else(|| panic!("no iforest stage"));
+    assert!(g.center.z < ifo.center.z, "table points pull the plain centre down");
 }
 
 /// Render a grey frame of the true cube over a streaked table: back faces culled, faces painted
@@ -367,10 +266,7 @@ fn render(pose: &Se3) -> objslam_core::frame::GreyImage {
         if normal.dot(&(eye - centre)) <= 0.0 {
             continue;
         }
-        let uv: Option<Vec<[f64; 2]>> = idx
-            .iter()
-            .map(|&i| cam.project(&(camera_from_world * c[i])))
-            .collect();
+        let uv: Option<Vec<[f64; 2]>> = idx.iter().map(|&i| cam.project(&(camera_from_world * c[i]))).collect();
         if let Some(uv) = uv {
             visible.push(((eye - centre).norm(), uv, grey));
         }
@@ -408,8 +304,7 @@ fn render(pose: &Se3) -> objslam_core::frame::GreyImage {
             data[y * w + x] = acc.round().clamp(0.0, 255.0) as u8;
         }
     }
-    objslam_core::frame::GreyImage::new(cam.width, cam.height, data)
-        .unwrap_or_else(|e| panic!("{e}"))
+    objslam_core::frame::GreyImage::new(cam.width, cam.height, data).unwrap_or_else(|e| panic!("{e}"))
 }
 
 #[test]
@@ -426,30 +321,15 @@ fn rendered_frames_through_lsd_give_the_yaw() {
         let corners: Vec<[f64; 2]> = edges.iter().flat_map(|e| [e.a, e.b]).collect();
         let bbox = Box2::from_points(corners.iter()).unwrap_or_else(|| panic!("no box"));
         let segments = segments_in_box(&all, &bbox, 4.0);
-        assert!(
-            segments.len() >= 4,
-            "frame {i}: {} segments in the box",
-            segments.len()
-        );
-        let frame = LineFrame {
-            frame: i as u32,
-            camera: cam,
-            world_from_camera: pose,
-            bbox,
-            segments,
-        };
+        assert!(segments.len() >= 4, "frame {i}: {} segments in the box", segments.len());
+        let frame = LineFrame { frame: i as u32, camera: cam, world_from_camera: pose, bbox, segments };
         assert!(matches!(est.add_frame(frame), FrameUse::Added { .. }));
     }
     let mut rng = ChaCha8Rng::seed_from_u64(31);
-    let out = est
-        .estimate(&points(&mut rng))
-        .unwrap_or_else(|e| panic!("{e}"));
+    let out = est.estimate(&points(&mut rng)).unwrap_or_else(|e| panic!("{e}"));
     let yae = yaw_error_deg(&out.geometry, &g, 0.05).unwrap_or(f64::NAN);
     let iou = iou3d(&out.geometry, &g);
-    eprintln!(
-        "rendered: stage {:?}, yaw error {yae:.2}°, iou3d {iou:.3}",
-        out.stage
-    );
+    eprintln!("rendered: stage {:?}, yaw error {yae:.2}°, iou3d {iou:.3}", out.stage);
     assert_eq!(out.stage, EstimateStage::Refined);
     assert!(yae <= 2.0, "yaw error {yae:.2}°");
     assert!(iou > 0.7, "iou3d {iou:.3}");

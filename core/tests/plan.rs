@@ -13,8 +13,7 @@ use std::path::PathBuf;
 use nalgebra::{Quaternion, Translation3, UnitQuaternion, Vector3};
 use objslam_core::geometry::{ObjectGeometry, Se3, Shape};
 use objslam_core::plan::{
-    joint_max_abs_diff, CollisionScene, IkConfig, JointVector, PlanError, Planner, PlannerConfig,
-    ARM_DOF,
+    joint_max_abs_diff, CollisionScene, IkConfig, JointVector, PlanError, Planner, PlannerConfig, ARM_DOF,
 };
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -35,10 +34,7 @@ fn panda_urdf() -> PathBuf {
     pythons.push(workspace.join(".venv/bin/python"));
     pythons.push(PathBuf::from("python3"));
     for py in &pythons {
-        if let Ok(out) = std::process::Command::new(py)
-            .args(["-c", FIND_SPEC])
-            .output()
-        {
+        if let Ok(out) = std::process::Command::new(py).args(["-c", FIND_SPEC]).output() {
             if out.status.success() {
                 let base = String::from_utf8_lossy(&out.stdout).trim().to_string();
                 let urdf = PathBuf::from(base).join("assets/robots/panda/panda_v2.urdf");
@@ -59,18 +55,13 @@ fn planner() -> Planner {
 }
 
 fn fixture() -> Value {
-    let path =
-        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/panda_kinematics.json");
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/panda_kinematics.json");
     let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     serde_json::from_str(&text).unwrap_or_else(|e| panic!("fixture: {e}"))
 }
 
 fn floats(v: &Value) -> Vec<f64> {
-    v.as_array()
-        .unwrap_or_else(|| panic!("not an array: {v}"))
-        .iter()
-        .map(|x| x.as_f64().unwrap_or(f64::NAN))
-        .collect()
+    v.as_array().unwrap_or_else(|| panic!("not an array: {v}")).iter().map(|x| x.as_f64().unwrap_or(f64::NAN)).collect()
 }
 
 fn joint_vector(v: &Value) -> JointVector {
@@ -108,9 +99,7 @@ fn fk_matches_pinocchio() {
         let links_obj = case["links"].as_object().unwrap_or_else(|| panic!("links"));
         for (name, p) in links_obj {
             let expected = pose(p);
-            let i = chain
-                .link_index(name)
-                .unwrap_or_else(|| panic!("link {name} not in chain"));
+            let i = chain.link_index(name).unwrap_or_else(|| panic!("link {name} not in chain"));
             let got = links[i];
             let dp = (got.translation.vector - expected.translation.vector).norm();
             let dr = got.rotation.angle_to(&expected.rotation);
@@ -119,10 +108,7 @@ fn fk_matches_pinocchio() {
             assert!(dr < 1e-4, "{name}: rotation error {dr} rad at q = {q:?}");
         }
     }
-    eprintln!(
-        "FK worst vs pinocchio: {:.2e} m, {:.2e} rad",
-        worst.0, worst.1
-    );
+    eprintln!("FK worst vs pinocchio: {:.2e} m, {:.2e} rad", worst.0, worst.1);
 }
 
 #[test]
@@ -148,10 +134,7 @@ fn ik_reaches_every_target_pinocchio_reaches() {
         assert!(dp < 1e-3, "position error {dp} m");
         assert!(dr < 0.1, "orientation error {dr} deg");
     }
-    assert!(
-        reached >= 50,
-        "fixture should hold at least 50 reachable targets, has {reached}"
-    );
+    assert!(reached >= 50, "fixture should hold at least 50 reachable targets, has {reached}");
 }
 
 #[test]
@@ -159,20 +142,11 @@ fn ik_unreachable_target_is_a_typed_error() {
     let planner = planner();
     let far = Se3::from_parts(Translation3::new(2.0, 0.0, 0.5), UnitQuaternion::identity());
     match planner.inverse_tcp(&far, &Q_READY) {
-        Err(PlanError::IkNotConverged {
-            best_position_error_m,
-            ..
-        }) => assert!(best_position_error_m > 0.5),
+        Err(PlanError::IkNotConverged { best_position_error_m, .. }) => assert!(best_position_error_m > 0.5),
         other => panic!("expected IkNotConverged, got {other:?}"),
     }
-    let nan = Se3::from_parts(
-        Translation3::new(f64::NAN, 0.0, 0.5),
-        UnitQuaternion::identity(),
-    );
-    assert!(matches!(
-        planner.inverse_tcp(&nan, &Q_READY),
-        Err(PlanError::NonFinite { .. })
-    ));
+    let nan = Se3::from_parts(Translation3::new(f64::NAN, 0.0, 0.5), UnitQuaternion::identity());
+    assert!(matches!(planner.inverse_tcp(&nan, &Q_READY), Err(PlanError::NonFinite { .. })));
 }
 
 fn cuboid(x: f64, y: f64, yaw: f64, size: [f64; 3]) -> ObjectGeometry {
@@ -202,19 +176,10 @@ fn twelve_objects() -> Vec<ObjectGeometry> {
             let x = 0.32 + 0.13 * i as f64 + rng.random_range(-0.02..0.02);
             let y = -0.25 + 0.25 * j as f64 + rng.random_range(-0.03..0.03);
             if (i + j) % 2 == 0 {
-                let s = [
-                    rng.random_range(0.04..0.08),
-                    rng.random_range(0.04..0.12),
-                    rng.random_range(0.04..0.15),
-                ];
+                let s = [rng.random_range(0.04..0.08), rng.random_range(0.04..0.12), rng.random_range(0.04..0.15)];
                 out.push(cuboid(x, y, rng.random_range(-1.5..1.5), s));
             } else {
-                out.push(cylinder(
-                    x,
-                    y,
-                    rng.random_range(0.025..0.045),
-                    rng.random_range(0.06..0.2),
-                ));
+                out.push(cylinder(x, y, rng.random_range(0.025..0.045), rng.random_range(0.06..0.2)));
             }
         }
     }
@@ -253,17 +218,10 @@ fn assert_never_hits(planner: &Planner, positions: &[JointVector], objects: &[Ob
 fn distance_to_polyline(q: &JointVector, waypoints: &[JointVector]) -> f64 {
     let mut best = f64::INFINITY;
     for w in waypoints.windows(2) {
-        let (a, b) = (
-            nalgebra::SVector::<f64, 7>::from(w[0]),
-            nalgebra::SVector::<f64, 7>::from(w[1]),
-        );
+        let (a, b) = (nalgebra::SVector::<f64, 7>::from(w[0]), nalgebra::SVector::<f64, 7>::from(w[1]));
         let p = nalgebra::SVector::<f64, 7>::from(*q);
         let ab = b - a;
-        let t = if ab.norm_squared() > 0.0 {
-            ((p - a).dot(&ab) / ab.norm_squared()).clamp(0.0, 1.0)
-        } else {
-            0.0
-        };
+        let t = if ab.norm_squared() > 0.0 { ((p - a).dot(&ab) / ab.norm_squared()).clamp(0.0, 1.0) } else { 0.0 };
         best = best.min((a + ab * t - p).norm());
     }
     best
@@ -279,11 +237,7 @@ fn planned_paths_never_intersect_the_objects() {
     let mut planned = 0;
     let mut q = Q_READY;
     for _ in 0..8 {
-        let p = Vector3::new(
-            rng.random_range(0.3..0.7),
-            rng.random_range(-0.35..0.35),
-            rng.random_range(0.05..0.3),
-        );
+        let p = Vector3::new(rng.random_range(0.3..0.7), rng.random_range(-0.35..0.35), rng.random_range(0.05..0.3));
         let target = objslam_core::plan::grasp::top_down_pose(p, rng.random_range(-1.0..1.0));
         let traj = match planner.plan_to_pose(&q, &target, &objects) {
             Ok(t) => t,
@@ -293,19 +247,9 @@ fn planned_paths_never_intersect_the_objects() {
         planned += 1;
         assert_never_hits(&planner, &traj.positions, &objects);
         // Phase-synchronised Ruckig moves stay on the checked straight segments.
-        let off = traj
-            .positions
-            .iter()
-            .map(|q| distance_to_polyline(q, &traj.waypoints))
-            .fold(0.0, f64::max);
-        assert!(
-            off < 1e-6,
-            "trajectory leaves the planned segments by {off} rad"
-        );
-        assert!(
-            planner.path_is_free(&traj.waypoints, &scene),
-            "waypoints with margin"
-        );
+        let off = traj.positions.iter().map(|q| distance_to_polyline(q, &traj.waypoints)).fold(0.0, f64::max);
+        assert!(off < 1e-6, "trajectory leaves the planned segments by {off} rad");
+        assert!(planner.path_is_free(&traj.waypoints, &scene), "waypoints with margin");
         let goal = *traj.goal().unwrap_or_else(|| panic!("empty trajectory"));
         let reached = planner.forward_tcp(&goal);
         assert!((reached.translation.vector - target.translation.vector).norm() < 1e-3);
@@ -318,14 +262,8 @@ fn planned_paths_never_intersect_the_objects() {
 fn wall_sides(planner: &Planner, wall: &[ObjectGeometry]) -> (JointVector, JointVector) {
     let scene = planner.scene(wall).unwrap_or_else(|e| panic!("{e}"));
     let pose = |y: f64| objslam_core::plan::grasp::top_down_pose(Vector3::new(0.5, y, 0.15), 0.0);
-    let left = planner
-        .inverse_tcp_free(&pose(0.2), &Q_READY, &scene)
-        .unwrap_or_else(|e| panic!("{e}"))
-        .q;
-    let right = planner
-        .inverse_tcp_free(&pose(-0.2), &left, &scene)
-        .unwrap_or_else(|e| panic!("{e}"))
-        .q;
+    let left = planner.inverse_tcp_free(&pose(0.2), &Q_READY, &scene).unwrap_or_else(|e| panic!("{e}")).q;
+    let right = planner.inverse_tcp_free(&pose(-0.2), &left, &scene).unwrap_or_else(|e| panic!("{e}")).q;
     (left, right)
 }
 
@@ -336,21 +274,12 @@ fn rrt_connect_goes_around_a_wall() {
     let wall = vec![cuboid(0.5, 0.0, 0.0, [0.3, 0.04, 0.5])];
     let scene = planner.scene(&wall).unwrap_or_else(|e| panic!("{e}"));
     let (left, right) = wall_sides(&planner, &wall);
-    let path = planner
-        .plan_path(&left, &right, &scene)
-        .unwrap_or_else(|e| panic!("{e}"));
-    assert!(
-        path.len() >= 3,
-        "straight line should be blocked by the wall"
-    );
-    let traj = planner
-        .time_parameterize(&path)
-        .unwrap_or_else(|e| panic!("{e}"));
+    let path = planner.plan_path(&left, &right, &scene).unwrap_or_else(|e| panic!("{e}"));
+    assert!(path.len() >= 3, "straight line should be blocked by the wall");
+    let traj = planner.time_parameterize(&path).unwrap_or_else(|e| panic!("{e}"));
     assert_never_hits(&planner, &traj.positions, &wall);
     // Determinism: same inputs, same path.
-    let again = planner
-        .plan_path(&left, &right, &scene)
-        .unwrap_or_else(|e| panic!("{e}"));
+    let again = planner.plan_path(&left, &right, &scene).unwrap_or_else(|e| panic!("{e}"));
     assert_eq!(path, again);
 }
 
@@ -359,59 +288,29 @@ fn planner_failures_are_typed() {
     let planner = planner();
     let scene = planner.scene(&[]).unwrap_or_else(|e| panic!("{e}"));
     let down: JointVector = [0.0, 1.7, 0.0, -0.5, 0.0, 1.5, 0.0];
-    assert!(matches!(
-        planner.plan_path(&down, &Q_READY, &scene),
-        Err(PlanError::StartInCollision { .. })
-    ));
-    assert!(matches!(
-        planner.plan_path(&Q_READY, &down, &scene),
-        Err(PlanError::GoalInCollision { .. })
-    ));
+    assert!(matches!(planner.plan_path(&down, &Q_READY, &scene), Err(PlanError::StartInCollision { .. })));
+    assert!(matches!(planner.plan_path(&Q_READY, &down, &scene), Err(PlanError::GoalInCollision { .. })));
     let mut outside = Q_READY;
     outside[3] = 0.5;
-    assert!(matches!(
-        planner.plan_path(&outside, &Q_READY, &scene),
-        Err(PlanError::OutsideLimits { joint: 3, .. })
-    ));
+    assert!(matches!(planner.plan_path(&outside, &Q_READY, &scene), Err(PlanError::OutsideLimits { joint: 3, .. })));
     // Straight line blocked by a wall, no RRT budget → exhausted; zero time-out → time-out.
     let wall = vec![cuboid(0.5, 0.0, 0.0, [0.3, 0.04, 0.5])];
     let (left, right) = wall_sides(&planner, &wall);
-    let cfg = PlannerConfig {
-        rrt_max_iterations: 0,
-        ..PlannerConfig::default()
-    };
+    let cfg = PlannerConfig { rrt_max_iterations: 0, ..PlannerConfig::default() };
     let small = Planner::new(panda_urdf(), cfg).unwrap_or_else(|e| panic!("{e}"));
     let scene = small.scene(&wall).unwrap_or_else(|e| panic!("{e}"));
-    assert!(matches!(
-        small.plan_path(&left, &right, &scene),
-        Err(PlanError::PlannerExhausted { iterations: 0 })
-    ));
-    let cfg = PlannerConfig {
-        timeout_s: Some(0.0),
-        ..PlannerConfig::default()
-    };
+    assert!(matches!(small.plan_path(&left, &right, &scene), Err(PlanError::PlannerExhausted { iterations: 0 })));
+    let cfg = PlannerConfig { timeout_s: Some(0.0), ..PlannerConfig::default() };
     let hurried = Planner::new(panda_urdf(), cfg).unwrap_or_else(|e| panic!("{e}"));
-    assert!(matches!(
-        hurried.plan_path(&left, &right, &scene),
-        Err(PlanError::Timeout { .. })
-    ));
+    assert!(matches!(hurried.plan_path(&left, &right, &scene), Err(PlanError::Timeout { .. })));
     // A TCP pose inside a box: IK converges but every solution collides.
     let boxed = vec![cuboid(0.5, 0.0, 0.0, [0.2, 0.2, 0.3])];
     let inside = objslam_core::plan::grasp::top_down_pose(Vector3::new(0.5, 0.0, 0.15), 0.0);
-    assert!(matches!(
-        planner.plan_to_pose(&Q_READY, &inside, &boxed),
-        Err(PlanError::IkRejected { .. })
-    ));
+    assert!(matches!(planner.plan_to_pose(&Q_READY, &inside, &boxed), Err(PlanError::IkRejected { .. })));
     let missing = Planner::new("/nonexistent/panda.urdf", PlannerConfig::default());
     assert!(matches!(missing, Err(PlanError::Urdf { .. })));
-    let bad = ObjectGeometry {
-        half_extents: Vector3::new(0.0, 0.1, 0.1),
-        ..cuboid(0.5, 0.0, 0.0, [0.1, 0.1, 0.1])
-    };
-    assert!(matches!(
-        planner.scene(&[bad]),
-        Err(PlanError::InvalidObject { index: 0 })
-    ));
+    let bad = ObjectGeometry { half_extents: Vector3::new(0.0, 0.1, 0.1), ..cuboid(0.5, 0.0, 0.0, [0.1, 0.1, 0.1]) };
+    assert!(matches!(planner.scene(&[bad]), Err(PlanError::InvalidObject { index: 0 })));
 }
 
 #[test]
@@ -421,18 +320,13 @@ fn grasp_on_known_box_closes_across_its_short_side() {
     let yaw = 30f64.to_radians();
     let block = cuboid(0.5, 0.1, yaw, [0.04, 0.10, 0.06]);
     let neighbour = cylinder(0.5, -0.1, 0.03, 0.1);
-    let cands = planner
-        .grasp_candidates(&block, &[neighbour], &Q_READY)
-        .unwrap_or_else(|e| panic!("{e}"));
+    let cands = planner.grasp_candidates(&block, &[neighbour], &Q_READY).unwrap_or_else(|e| panic!("{e}"));
     // Short side only (the 10 cm side does not fit), two yaws × deep / shallow.
     assert_eq!(cands.len(), 4);
     assert!(cands.iter().all(|c| c.short_side));
     let best = &cands[0];
     assert!((best.depth_below_top_m - 0.025).abs() < 1e-9);
-    assert!(
-        best.reachable(),
-        "best candidate must be reachable: {best:?}"
-    );
+    assert!(best.reachable(), "best candidate must be reachable: {best:?}");
     assert!((best.expected_closed_width_m - 0.04).abs() < 1e-9);
     assert!((best.open_width_m - 0.06).abs() < 1e-9);
     // The closing axis is the box's x axis (short side), up to sign.
@@ -450,9 +344,7 @@ fn grasp_on_known_box_closes_across_its_short_side() {
     assert!((planner.forward_tcp(&q).translation.vector - g.translation.vector).norm() < 1e-3);
 
     // Whole grasp motion plans, and the approach stays near-vertical.
-    let motion = planner
-        .plan_grasp(&Q_READY, &block, &[neighbour])
-        .unwrap_or_else(|e| panic!("{e}"));
+    let motion = planner.plan_grasp(&Q_READY, &block, &[neighbour]).unwrap_or_else(|e| panic!("{e}"));
     let mut max_dev = 0.0f64;
     for q in &motion.approach.positions {
         let p = planner.forward_tcp(q).translation.vector;
@@ -467,36 +359,20 @@ fn grasp_bad_inputs() {
     let planner = planner();
     // Wider than the gripper on both sides.
     let wide = cuboid(0.5, 0.0, 0.0, [0.12, 0.15, 0.05]);
-    assert!(matches!(
-        planner.grasp_candidates(&wide, &[], &Q_READY),
-        Err(PlanError::TooWide { .. })
-    ));
+    assert!(matches!(planner.grasp_candidates(&wide, &[], &Q_READY), Err(PlanError::TooWide { .. })));
     // Out of reach: candidates exist but none is reachable.
     let far = cylinder(1.5, 0.0, 0.03, 0.1);
-    let cands = planner
-        .grasp_candidates(&far, &[], &Q_READY)
-        .unwrap_or_else(|e| panic!("{e}"));
+    let cands = planner.grasp_candidates(&far, &[], &Q_READY).unwrap_or_else(|e| panic!("{e}"));
     assert!(cands.iter().all(|c| !c.reachable()));
-    assert!(matches!(
-        planner.plan_grasp(&Q_READY, &far, &[]),
-        Err(PlanError::NoReachableGrasp { .. })
-    ));
+    assert!(matches!(planner.plan_grasp(&Q_READY, &far, &[]), Err(PlanError::NoReachableGrasp { .. })));
     // Cylinder: the first candidate keeps the current hand yaw.
     let can = cylinder(0.45, 0.0, 0.033, 0.12);
-    let cands = planner
-        .grasp_candidates(&can, &[], &Q_READY)
-        .unwrap_or_else(|e| panic!("{e}"));
+    let cands = planner.grasp_candidates(&can, &[], &Q_READY).unwrap_or_else(|e| panic!("{e}"));
     let yaw_now = objslam_core::plan::grasp::hand_yaw_of(&planner.forward_tcp(&Q_READY));
     assert!(objslam_core::geometry::wrap_angle(cands[0].hand_yaw_rad - yaw_now).abs() < 1e-9);
     assert!((cands[0].expected_closed_width_m - 0.066).abs() < 1e-9);
-    let nan = ObjectGeometry {
-        center: Vector3::new(f64::NAN, 0.0, 0.0),
-        ..can
-    };
-    assert!(matches!(
-        planner.grasp_candidates(&nan, &[], &Q_READY),
-        Err(PlanError::InvalidObject { .. })
-    ));
+    let nan = ObjectGeometry { center: Vector3::new(f64::NAN, 0.0, 0.0), ..can };
+    assert!(matches!(planner.grasp_candidates(&nan, &[], &Q_READY), Err(PlanError::InvalidObject { .. })));
 }
 
 /// The capsule model covers the Panda's collision meshes up to `CAPSULE_COVERAGE_TOLERANCE_M`
@@ -504,14 +380,11 @@ fn grasp_bad_inputs() {
 #[test]
 fn capsules_cover_the_collision_meshes() {
     use objslam_core::plan::collision::{panda_capsules, CAPSULE_COVERAGE_TOLERANCE_M};
-    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/fixtures/panda_collision_samples.json");
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/panda_collision_samples.json");
     let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     let fx: Value = serde_json::from_str(&text).unwrap_or_else(|e| panic!("{e}"));
     let capsules = panda_capsules();
-    let links = fx["points_in_link"]
-        .as_object()
-        .unwrap_or_else(|| panic!("points_in_link"));
+    let links = fx["points_in_link"].as_object().unwrap_or_else(|| panic!("points_in_link"));
     assert_eq!(links.len(), 9);
     for (link, points) in links {
         let caps: Vec<_> = capsules.iter().filter(|c| &c.link == link).collect();
@@ -538,10 +411,7 @@ fn capsules_cover_the_collision_meshes() {
         }
         assert!(n > 400, "{link}: {n} samples");
         // 0.1 mm for the fixture's rounding.
-        assert!(
-            worst <= CAPSULE_COVERAGE_TOLERANCE_M + 1e-4,
-            "{link}: mesh sticks out of its capsules by {worst} m"
-        );
+        assert!(worst <= CAPSULE_COVERAGE_TOLERANCE_M + 1e-4, "{link}: mesh sticks out of its capsules by {worst} m");
     }
 }
 
@@ -564,11 +434,7 @@ fn blocks_across_the_workspace_are_graspable() {
             }
         }
     }
-    assert!(
-        failed.is_empty(),
-        "{} of {total} workspace blocks not graspable: {failed:?}",
-        failed.len()
-    );
+    assert!(failed.is_empty(), "{} of {total} workspace blocks not graspable: {failed:?}", failed.len());
 }
 
 /// Grasping each object of the seeded 12-object clutter with the other 11 as neighbours: every
@@ -582,12 +448,7 @@ fn grasping_in_clutter_envelope() {
     let objects = twelve_objects();
     let mut planned = 0;
     for (k, o) in objects.iter().enumerate() {
-        let neighbours: Vec<_> = objects
-            .iter()
-            .enumerate()
-            .filter(|(j, _)| *j != k)
-            .map(|(_, o)| *o)
-            .collect();
+        let neighbours: Vec<_> = objects.iter().enumerate().filter(|(j, _)| *j != k).map(|(_, o)| *o).collect();
         match planner.plan_grasp(&Q_READY, o, &neighbours) {
             Ok(m) => {
                 planned += 1;

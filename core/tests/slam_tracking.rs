@@ -6,8 +6,8 @@ use objslam_core::frame::{DepthImage, GreyImage};
 use objslam_core::geometry::{Box2, PinholeCamera, Se3};
 use objslam_core::slam::synthetic::{look_at, TabletopScene};
 use objslam_core::slam::{
-    ate_rmse_m, rpe, KinematicNoiseConfig, LostReason, PoseSource, SlamError, TrackInput, Tracker,
-    TrackerConfig, TrackingState,
+    ate_rmse_m, rpe, KinematicNoiseConfig, LostReason, PoseSource, SlamError, TrackInput, Tracker, TrackerConfig,
+    TrackingState,
 };
 
 const N_FRAMES: usize = 40;
@@ -52,9 +52,7 @@ fn run(seq: &Sequence, config: TrackerConfig) -> (Vec<Se3>, Vec<Se3>, usize, Tra
             view_index: (i / FRAMES_PER_VIEW) as u64,
             world_from_camera_gt: Some(*gt),
         };
-        let out = tracker
-            .track(&input)
-            .unwrap_or_else(|e| panic!("frame {i}: {e}"));
+        let out = tracker.track(&input).unwrap_or_else(|e| panic!("frame {i}: {e}"));
         online.push(out.world_from_camera);
     }
     let lost = tracker.n_lost();
@@ -65,16 +63,10 @@ fn run(seq: &Sequence, config: TrackerConfig) -> (Vec<Se3>, Vec<Se3>, usize, Tra
 fn slam_beats_the_kinematic_prior_on_a_synthetic_sequence() {
     let seq = sequence();
     let noise = KinematicNoiseConfig::default(); // 1 cm / 1° per view, 0.5 mm / 0.05° jitter
-    let slam_cfg = TrackerConfig {
-        kinematic_noise: noise,
-        ..TrackerConfig::default()
-    };
+    let slam_cfg = TrackerConfig { kinematic_noise: noise, ..TrackerConfig::default() };
     let (online, traj, lost, tracker) = run(&seq, slam_cfg);
-    let kin_cfg = TrackerConfig {
-        pose_source: PoseSource::Kinematics,
-        kinematic_noise: noise,
-        ..TrackerConfig::default()
-    };
+    let kin_cfg =
+        TrackerConfig { pose_source: PoseSource::Kinematics, kinematic_noise: noise, ..TrackerConfig::default() };
     let (kin, _, kin_lost, _) = run(&seq, kin_cfg);
     let ate_online = ate_rmse_m(&online, &seq.gt).unwrap_or_else(|e| panic!("{e}"));
     let ate_traj = ate_rmse_m(&traj, &seq.gt).unwrap_or_else(|e| panic!("{e}"));
@@ -98,11 +90,7 @@ fn slam_beats_the_kinematic_prior_on_a_synthetic_sequence() {
     assert!(ate_traj < ate_kin && ate_online < ate_kin);
     assert!(rpe_slam.trans_m < rpe_kin.trans_m);
     // Without the prior-mean anchor the map inherits the first view's bias (≈ 9 mm here).
-    let fixed_cfg = TrackerConfig {
-        kinematic_noise: noise,
-        anchor_to_prior_mean: false,
-        ..TrackerConfig::default()
-    };
+    let fixed_cfg = TrackerConfig { kinematic_noise: noise, anchor_to_prior_mean: false, ..TrackerConfig::default() };
     let (fixed_online, _, _, _) = run(&seq, fixed_cfg);
     let ate_fixed = ate_rmse_m(&fixed_online, &seq.gt).unwrap_or_else(|e| panic!("{e}"));
     eprintln!("ATE slam without anchor {ate_fixed:.4} m");
@@ -115,10 +103,7 @@ fn local_object_points_lie_on_the_boxed_object() {
     // (within 5 mm of its surface hull), apart from a few background points at its silhouette.
     let scene = TabletopScene::tabletop(3);
     let cam = camera();
-    let cfg = TrackerConfig {
-        pose_source: PoseSource::GroundTruth,
-        ..TrackerConfig::default()
-    };
+    let cfg = TrackerConfig { pose_source: PoseSource::GroundTruth, ..TrackerConfig::default() };
     let mut tracker = Tracker::new(cfg).unwrap_or_else(|e| panic!("{e}"));
     let b = scene.boxes[0];
     let mut last = None;
@@ -137,20 +122,14 @@ fn local_object_points_lie_on_the_boxed_object() {
         assert!(out.is_ok());
         last = Some((out, gt));
     }
-    let Some((out, gt)) = last else {
-        panic!("no frame")
-    };
+    let Some((out, gt)) = last else { panic!("no frame") };
     // Projected bounding box of the scene box.
     let corners: Vec<[f64; 2]> = (0..8)
         .filter_map(|k| {
             let s = |bit: usize| if k & bit == 0 { -1.0 } else { 1.0 };
             let p = Point3::from(
                 b.center
-                    + nalgebra::Vector3::new(
-                        s(1) * b.half_extents.x,
-                        s(2) * b.half_extents.y,
-                        s(4) * b.half_extents.z,
-                    ),
+                    + nalgebra::Vector3::new(s(1) * b.half_extents.x, s(2) * b.half_extents.y, s(4) * b.half_extents.z),
             );
             cam.project(&(gt.inverse() * p))
         })
@@ -161,35 +140,15 @@ fn local_object_points_lie_on_the_boxed_object() {
     let on_box = local
         .iter()
         .filter(|p| {
-            (p.p_in_world.coords - b.center)
-                .abs()
-                .iter()
-                .zip(b.half_extents.iter())
-                .all(|(d, h)| *d <= h + 0.005)
+            (p.p_in_world.coords - b.center).abs().iter().zip(b.half_extents.iter()).all(|(d, h)| *d <= h + 0.005)
         })
         .count();
-    assert!(
-        on_box as f64 >= 0.6 * local.len() as f64,
-        "{on_box} of {} on the box",
-        local.len()
-    );
+    assert!(on_box as f64 >= 0.6 * local.len() as f64, "{on_box} of {} on the box", local.len());
     assert!(local.iter().all(|p| bbox.contains(p.pixel[0], p.pixel[1])));
 }
 
-fn input_for<'a>(
-    grey: &'a GreyImage,
-    depth: &'a DepthImage,
-    cam: &'a PinholeCamera,
-    pose: Se3,
-) -> TrackInput<'a> {
-    TrackInput {
-        grey,
-        depth,
-        camera: cam,
-        world_from_camera_fk: pose,
-        view_index: 0,
-        world_from_camera_gt: None,
-    }
+fn input_for<'a>(grey: &'a GreyImage, depth: &'a DepthImage, cam: &'a PinholeCamera, pose: Se3) -> TrackInput<'a> {
+    TrackInput { grey, depth, camera: cam, world_from_camera_fk: pose, view_index: 0, world_from_camera_gt: None }
 }
 
 #[test]
@@ -201,20 +160,12 @@ fn bad_input_is_a_typed_error_or_a_lost_frame() {
     let mut tracker = Tracker::new(TrackerConfig::default()).unwrap_or_else(|e| panic!("{e}"));
 
     // Wrong image size / buffer length.
-    let small = GreyImage {
-        width: 320,
-        height: 240,
-        data: vec![0; 320 * 240],
-    };
+    let small = GreyImage { width: 320, height: 240, data: vec![0; 320 * 240] };
     assert!(matches!(
         tracker.track(&input_for(&small, &depth, &cam, gt)),
         Err(SlamError::ImageSize { field: "grey", .. })
     ));
-    let short = DepthImage {
-        width: 640,
-        height: 480,
-        data: vec![0.5; 100],
-    };
+    let short = DepthImage { width: 640, height: 480, data: vec![0.5; 100] };
     assert!(matches!(
         tracker.track(&input_for(&grey, &short, &cam, gt)),
         Err(SlamError::BufferLength { field: "depth", .. })
@@ -222,96 +173,42 @@ fn bad_input_is_a_typed_error_or_a_lost_frame() {
 
     // Non-rigid and non-finite priors.
     let mut skewed = gt;
-    skewed.rotation =
-        nalgebra::UnitQuaternion::new_unchecked(nalgebra::Quaternion::new(2.0, 0.0, 0.0, 0.0));
-    assert!(matches!(
-        tracker.track(&input_for(&grey, &depth, &cam, skewed)),
-        Err(SlamError::NotRigid { .. })
-    ));
+    skewed.rotation = nalgebra::UnitQuaternion::new_unchecked(nalgebra::Quaternion::new(2.0, 0.0, 0.0, 0.0));
+    assert!(matches!(tracker.track(&input_for(&grey, &depth, &cam, skewed)), Err(SlamError::NotRigid { .. })));
     let mut nan = gt;
     nan.translation.vector.x = f64::NAN;
-    assert!(matches!(
-        tracker.track(&input_for(&grey, &depth, &cam, nan)),
-        Err(SlamError::NonFinitePose { .. })
-    ));
+    assert!(matches!(tracker.track(&input_for(&grey, &depth, &cam, nan)), Err(SlamError::NonFinitePose { .. })));
 
     // Ground truth requested but missing.
-    let mut oracle = Tracker::new(TrackerConfig {
-        pose_source: PoseSource::GroundTruth,
-        ..TrackerConfig::default()
-    })
-    .unwrap_or_else(|e| panic!("{e}"));
-    assert_eq!(
-        oracle.track(&input_for(&grey, &depth, &cam, gt)),
-        Err(SlamError::MissingGroundTruth)
-    );
+    let mut oracle = Tracker::new(TrackerConfig { pose_source: PoseSource::GroundTruth, ..TrackerConfig::default() })
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(oracle.track(&input_for(&grey, &depth, &cam, gt)), Err(SlamError::MissingGroundTruth));
 
     // All-zero (and NaN / negative) depth on an empty map: lost, output = prior.
-    let mut no_depth = DepthImage {
-        width: 640,
-        height: 480,
-        data: vec![0.0; 640 * 480],
-    };
+    let mut no_depth = DepthImage { width: 640, height: 480, data: vec![0.0; 640 * 480] };
     no_depth.data[0] = f32::NAN;
     no_depth.data[1] = -1.0;
-    let out = tracker
-        .track(&input_for(&grey, &no_depth, &cam, gt))
-        .unwrap_or_else(|e| panic!("{e}"));
-    assert!(matches!(
-        out.state,
-        TrackingState::Lost {
-            reason: LostReason::NoDepth { valid: 0, .. }
-        }
-    ));
+    let out = tracker.track(&input_for(&grey, &no_depth, &cam, gt)).unwrap_or_else(|e| panic!("{e}"));
+    assert!(matches!(out.state, TrackingState::Lost { reason: LostReason::NoDepth { valid: 0, .. } }));
     assert_eq!(out.world_from_camera, out.world_from_camera_prior);
 
     // Textureless image: lost for lack of features.
-    let flat = GreyImage {
-        width: 640,
-        height: 480,
-        data: vec![128; 640 * 480],
-    };
-    let out = tracker
-        .track(&input_for(&flat, &depth, &cam, gt))
-        .unwrap_or_else(|e| panic!("{e}"));
-    assert!(matches!(
-        out.state,
-        TrackingState::Lost {
-            reason: LostReason::TooFewFeatures { found: 0, .. }
-        }
-    ));
+    let flat = GreyImage { width: 640, height: 480, data: vec![128; 640 * 480] };
+    let out = tracker.track(&input_for(&flat, &depth, &cam, gt)).unwrap_or_else(|e| panic!("{e}"));
+    assert!(matches!(out.state, TrackingState::Lost { reason: LostReason::TooFewFeatures { found: 0, .. } }));
 
     // A good frame initialises; then a textureless frame is lost; then tracking resumes.
-    assert!(tracker
-        .track(&input_for(&grey, &depth, &cam, gt))
-        .unwrap_or_else(|e| panic!("{e}"))
-        .is_ok());
-    assert!(!tracker
-        .track(&input_for(&flat, &depth, &cam, gt))
-        .unwrap_or_else(|e| panic!("{e}"))
-        .is_ok());
+    assert!(tracker.track(&input_for(&grey, &depth, &cam, gt)).unwrap_or_else(|e| panic!("{e}")).is_ok());
+    assert!(!tracker.track(&input_for(&flat, &depth, &cam, gt)).unwrap_or_else(|e| panic!("{e}")).is_ok());
     let (g1, d1) = scene.render(&cam, &gt_pose(1));
-    let out = tracker
-        .track(&input_for(&g1, &d1, &cam, gt_pose(1)))
-        .unwrap_or_else(|e| panic!("{e}"));
+    let out = tracker.track(&input_for(&g1, &d1, &cam, gt_pose(1))).unwrap_or_else(|e| panic!("{e}"));
     assert!(out.is_ok(), "{:?}", out.state);
     assert_eq!(tracker.n_lost(), 3);
     // A frame of another scene under the same prior: no consensus, lost, never a panic.
     let other = TabletopScene::tabletop(99);
     let (g2, d2) = other.render(&cam, &gt_pose(2));
-    let out = tracker
-        .track(&input_for(&g2, &d2, &cam, gt_pose(2)))
-        .unwrap_or_else(|e| panic!("{e}"));
-    assert!(
-        matches!(
-            out.state,
-            TrackingState::Lost {
-                reason: LostReason::TooFewInliers { .. }
-            }
-        ),
-        "{:?}",
-        out.state
-    );
+    let out = tracker.track(&input_for(&g2, &d2, &cam, gt_pose(2))).unwrap_or_else(|e| panic!("{e}"));
+    assert!(matches!(out.state, TrackingState::Lost { reason: LostReason::TooFewInliers { .. } }), "{:?}", out.state);
 }
 
 #[test]
@@ -322,23 +219,12 @@ fn garbage_frames_never_panic() {
     let mut next = move || objslam_core::slam::synthetic::splitmix64(&mut state);
     for (w, h) in [(640u32, 480u32), (64, 48), (37, 41), (8, 8)] {
         let cam = PinholeCamera::from_fovy(w, h, 1.0).unwrap_or_else(|e| panic!("{e}"));
-        for source in [
-            PoseSource::Slam,
-            PoseSource::Kinematics,
-            PoseSource::GroundTruth,
-        ] {
-            let mut tracker = Tracker::new(TrackerConfig {
-                pose_source: source,
-                ..TrackerConfig::default()
-            })
-            .unwrap_or_else(|e| panic!("{e}"));
+        for source in [PoseSource::Slam, PoseSource::Kinematics, PoseSource::GroundTruth] {
+            let mut tracker = Tracker::new(TrackerConfig { pose_source: source, ..TrackerConfig::default() })
+                .unwrap_or_else(|e| panic!("{e}"));
             for f in 0..3 {
                 let n = (w * h) as usize;
-                let grey = GreyImage {
-                    width: w,
-                    height: h,
-                    data: (0..n).map(|_| (next() % 256) as u8).collect(),
-                };
+                let grey = GreyImage { width: w, height: h, data: (0..n).map(|_| (next() % 256) as u8).collect() };
                 let specials = [f32::NAN, f32::INFINITY, -1.0, 1e30, 0.0];
                 let depth = DepthImage {
                     width: w,
@@ -363,20 +249,9 @@ fn garbage_frames_never_panic() {
                     view_index: f as u64,
                     world_from_camera_gt: Some(pose),
                 };
-                let out = tracker
-                    .track(&input)
-                    .unwrap_or_else(|e| panic!("{w}x{h} {source:?} frame {f}: {e}"));
-                assert!(out
-                    .world_from_camera
-                    .translation
-                    .vector
-                    .iter()
-                    .all(|v| v.is_finite()));
-                assert!(out.observed.iter().all(|p| p
-                    .p_in_world
-                    .coords
-                    .iter()
-                    .all(|v| v.is_finite())));
+                let out = tracker.track(&input).unwrap_or_else(|e| panic!("{w}x{h} {source:?} frame {f}: {e}"));
+                assert!(out.world_from_camera.translation.vector.iter().all(|v| v.is_finite()));
+                assert!(out.observed.iter().all(|p| p.p_in_world.coords.iter().all(|v| v.is_finite())));
             }
         }
     }
@@ -388,9 +263,7 @@ fn tracking_is_deterministic_and_the_tracker_is_send() {
     assert_send::<Tracker>();
     let scene = TabletopScene::tabletop(5);
     let cam = camera();
-    let frames: Vec<_> = (0..6)
-        .map(|i| (gt_pose(3 * i), scene.render(&cam, &gt_pose(3 * i))))
-        .collect();
+    let frames: Vec<_> = (0..6).map(|i| (gt_pose(3 * i), scene.render(&cam, &gt_pose(3 * i)))).collect();
     let run = || {
         let mut tracker = Tracker::new(TrackerConfig::default()).unwrap_or_else(|e| panic!("{e}"));
         frames

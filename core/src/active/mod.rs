@@ -25,9 +25,9 @@
 use serde::{Deserialize, Serialize};
 
 use crate::explore::{
-    self, coverage_views, random_views, sample_candidates_around, stop_reason, CandidateConfig,
-    ExplorationGrids, ExploreConfig, ExploreError, HistoryBook, ObservedPoints, Reachability, StopReason, Strategy,
-    TableRect, UtilityContext,
+    self, coverage_views, random_views, sample_candidates_around, stop_reason, CandidateConfig, ExplorationGrids,
+    ExploreConfig, ExploreError, HistoryBook, ObservedPoints, Reachability, StopReason, Strategy, TableRect,
+    UtilityContext,
 };
 use crate::frame::Frame;
 use crate::geometry::{PinholeCamera, Se3};
@@ -169,7 +169,8 @@ impl ActiveSession {
     /// A session for a table; validates the config.
     pub fn new(config: ActiveConfig, table: TableRect) -> Result<Self, ExploreError> {
         let strategy = Strategy::parse(&config.strategy)?;
-        let mut explore = ExploreConfig { lambda: config.lambda, max_views: config.max_views, ..ExploreConfig::default() };
+        let mut explore =
+            ExploreConfig { lambda: config.lambda, max_views: config.max_views, ..ExploreConfig::default() };
         explore.grid.cell_size_m = config.cell_m;
         explore.done_occupied_ratio = config.done_occupied_ratio;
         explore.done_normalized_entropy = config.done_normalized_entropy;
@@ -235,7 +236,14 @@ impl ActiveSession {
         observed: &[ObservedPoints],
     ) -> Result<(), ExploreError> {
         self.grids
-            .integrate_frame(map, &frame.camera, &frame.world_from_camera, observed, Some(&frame.depth), &self.explore.grid)
+            .integrate_frame(
+                map,
+                &frame.camera,
+                &frame.world_from_camera,
+                observed,
+                Some(&frame.depth),
+                &self.explore.grid,
+            )
             .map(|_| ())
     }
 
@@ -276,13 +284,18 @@ impl ActiveSession {
                 let queue = self.coverage_queue.get_or_insert_with(Vec::new);
                 while let Some(pose) = queue.pop() {
                     if reachable.reachable(&pose) {
-                        return Ok(NextView::Move { world_from_camera: pose, utility: f64::NAN, candidates: Vec::new() });
+                        return Ok(NextView::Move {
+                            world_from_camera: pose,
+                            utility: f64::NAN,
+                            candidates: Vec::new(),
+                        });
                     }
                 }
                 Ok(NextView::Stop { reason: SessionStop::StrategyDone })
             }
             Strategy::Random => {
-                let views = random_views(&self.table, map, &self.candidates, &self.explore.grid, reachable, 1, step_seed)?;
+                let views =
+                    random_views(&self.table, map, &self.candidates, &self.explore.grid, reachable, 1, step_seed)?;
                 Ok(match views.first() {
                     Some(p) => NextView::Move { world_from_camera: *p, utility: f64::NAN, candidates: Vec::new() },
                     None => NextView::Stop { reason: SessionStop::NoReachableView },

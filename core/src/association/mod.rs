@@ -108,9 +108,9 @@ pub mod mapper;
 pub mod metrics;
 pub mod stats;
 
-use std::sync::OnceLock;
 use std::collections::{BTreeMap, BTreeSet, HashSet};
 use std::hash::{BuildHasherDefault, Hasher};
+use std::sync::OnceLock;
 
 use nalgebra::{Point3, Vector3};
 use pathfinding::prelude::{kuhn_munkres, Matrix};

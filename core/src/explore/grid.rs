@@ -121,9 +121,7 @@ impl FaceGrid {
 
     /// Occupancy probability of cell `i`.
     pub fn probability(&self, i: usize) -> f64 {
-        self.log_odds
-            .get(i)
-            .map_or(0.5, |l| probability_from_log_odds(f64::from(*l)))
+        self.log_odds.get(i).map_or(0.5, |l| probability_from_log_odds(f64::from(*l)))
     }
 
     /// Number of cells (including masked ones).
@@ -244,9 +242,7 @@ const MAX_CELLS_PER_SIDE: usize = 300;
 
 fn sanitize_half_extents(h: &Vector3<f64>) -> Result<Vector3<f64>, ExploreError> {
     if h.iter().any(|v| !v.is_finite()) {
-        return Err(ExploreError::NonFinite {
-            field: "half_extents",
-        });
+        return Err(ExploreError::NonFinite { field: "half_extents" });
     }
     Ok(h.map(|v| v.max(MIN_HALF_EXTENT_M)))
 }
@@ -290,15 +286,9 @@ fn surface_point(shape: Shape, h: &Vector3<f64>, face: Face, u: f64, v: f64) -> 
                 Face::NegX => (Point3::new(-h.x, -h.y + u * 2.0 * h.y, z), -Vector3::x()),
                 Face::PosY => (Point3::new(-h.x + u * 2.0 * h.x, h.y, z), Vector3::y()),
                 Face::NegY => (Point3::new(-h.x + u * 2.0 * h.x, -h.y, z), -Vector3::y()),
-                Face::Top => (
-                    Point3::new(-h.x + u * 2.0 * h.x, -h.y + v * 2.0 * h.y, h.z),
-                    Vector3::z(),
-                ),
+                Face::Top => (Point3::new(-h.x + u * 2.0 * h.x, -h.y + v * 2.0 * h.y, h.z), Vector3::z()),
             };
-            CellPose {
-                p_in_object: p,
-                normal_in_object: n,
-            }
+            CellPose { p_in_object: p, normal_in_object: n }
         }
         Shape::Cylinder => {
             let r = cylinder_radius(h);
@@ -307,10 +297,7 @@ fn surface_point(shape: Shape, h: &Vector3<f64>, face: Face, u: f64, v: f64) -> 
                     // u ∈ [0, 1] spans azimuths az0 − 45° … az0 + 45° counter-clockwise.
                     let az = az0 - std::f64::consts::FRAC_PI_4 + u * std::f64::consts::FRAC_PI_2;
                     let (s, c) = az.sin_cos();
-                    CellPose {
-                        p_in_object: Point3::new(r * c, r * s, z),
-                        normal_in_object: Vector3::new(c, s, 0.0),
-                    }
+                    CellPose { p_in_object: Point3::new(r * c, r * s, z), normal_in_object: Vector3::new(c, s, 0.0) }
                 }
                 None => CellPose {
                     p_in_object: Point3::new(-r + u * 2.0 * r, -r + v * 2.0 * r, h.z),
@@ -335,13 +322,8 @@ fn locate(shape: Shape, h: &Vector3<f64>, p: &Point3<f64>) -> Option<(Face, f64,
                 ((p.z - h.z).abs(), Some(Face::Top)),
                 ((p.z + h.z).abs(), None),
             ];
-            let (d, face) = candidates
-                .iter()
-                .copied()
-                .fold(
-                    (f64::INFINITY, None),
-                    |best, c| if c.0 < best.0 { c } else { best },
-                );
+            let (d, face) =
+                candidates.iter().copied().fold((f64::INFINITY, None), |best, c| if c.0 < best.0 { c } else { best });
             let face = face?;
             let ux = ((p.x + h.x) / (2.0 * h.x)).clamp(0.0, 1.0);
             let uy = ((p.y + h.y) / (2.0 * h.y)).clamp(0.0, 1.0);
@@ -376,8 +358,7 @@ fn locate(shape: Shape, h: &Vector3<f64>, p: &Point3<f64>) -> Option<(Face, f64,
             };
             let az0 = face.azimuth_rad().unwrap_or(0.0);
             let rel = crate::geometry::wrap_angle(az - az0);
-            let u =
-                ((rel + std::f64::consts::FRAC_PI_4) / std::f64::consts::FRAC_PI_2).clamp(0.0, 1.0);
+            let u = ((rel + std::f64::consts::FRAC_PI_4) / std::f64::consts::FRAC_PI_2).clamp(0.0, 1.0);
             Some((face, u, v, d_lat))
         }
     }
@@ -409,14 +390,7 @@ fn build_face(shape: Shape, h: &Vector3<f64>, face: Face, cell_m: f64) -> FaceGr
             }
         }
     }
-    FaceGrid {
-        face,
-        cols,
-        rows,
-        log_odds: vec![0.0; n],
-        updates: vec![0; n],
-        valid,
-    }
+    FaceGrid { face, cols, rows, log_odds: vec![0.0; n], updates: vec![0; n], valid }
 }
 
 impl SurfaceGrid {
@@ -425,17 +399,8 @@ impl SurfaceGrid {
         config.validate()?;
         let shape = object.label.shape();
         let h = sanitize_half_extents(&object.half_extents)?;
-        let faces = Face::ALL
-            .iter()
-            .map(|f| build_face(shape, &h, *f, config.cell_size_m))
-            .collect();
-        Ok(Self {
-            object_id: object.id,
-            shape,
-            half_extents: h,
-            cell_size_m: config.cell_size_m,
-            faces,
-        })
+        let faces = Face::ALL.iter().map(|f| build_face(shape, &h, *f, config.cell_size_m)).collect();
+        Ok(Self { object_id: object.id, shape, half_extents: h, cell_size_m: config.cell_size_m, faces })
     }
 
     /// Follow the object's current estimate. The pose needs nothing (cells are in the object
@@ -449,10 +414,8 @@ impl SurfaceGrid {
         if shape == self.shape && same_size && config.cell_size_m == self.cell_size_m {
             return Ok(false);
         }
-        let mut faces: Vec<FaceGrid> = Face::ALL
-            .iter()
-            .map(|f| build_face(shape, &h, *f, config.cell_size_m))
-            .collect();
+        let mut faces: Vec<FaceGrid> =
+            Face::ALL.iter().map(|f| build_face(shape, &h, *f, config.cell_size_m)).collect();
         for (new, old) in faces.iter_mut().zip(self.faces.iter()) {
             for i in 0..new.len() {
                 let u = ((i % new.cols) as f64 + 0.5) / new.cols as f64;
@@ -492,30 +455,19 @@ impl SurfaceGrid {
         let fi = Face::ALL.iter().position(|f| *f == face)?;
         let f = self.faces.get(fi)?;
         let cell = cell_index(f.cols, f.rows, u, v);
-        f.valid
-            .get(cell)
-            .copied()
-            .unwrap_or(false)
-            .then_some(CellRef { face: fi, cell })
+        f.valid.get(cell).copied().unwrap_or(false).then_some(CellRef { face: fi, cell })
     }
 
     /// Every valid cell, in storage order (face, then row-major).
     pub fn cells(&self) -> impl Iterator<Item = CellRef> + '_ {
         self.faces.iter().enumerate().flat_map(|(fi, f)| {
-            f.valid
-                .iter()
-                .enumerate()
-                .filter(|(_, ok)| **ok)
-                .map(move |(ci, _)| CellRef { face: fi, cell: ci })
+            f.valid.iter().enumerate().filter(|(_, ok)| **ok).map(move |(ci, _)| CellRef { face: fi, cell: ci })
         })
     }
 
     /// Log-odds of a cell (0 for an invalid reference).
     pub fn log_odds(&self, r: CellRef) -> f64 {
-        self.faces
-            .get(r.face)
-            .and_then(|f| f.log_odds.get(r.cell))
-            .map_or(0.0, |l| f64::from(*l))
+        self.faces.get(r.face).and_then(|f| f.log_odds.get(r.cell)).map_or(0.0, |l| f64::from(*l))
     }
 
     /// State of a cell (`None` for an invalid or masked reference).
@@ -532,11 +484,7 @@ impl SurfaceGrid {
         let (Some(l), Some(n)) = (f.log_odds.get_mut(r.cell), f.updates.get_mut(r.cell)) else {
             return;
         };
-        let delta = if hit {
-            log_odds(config.p_hit)
-        } else {
-            log_odds(config.p_miss)
-        };
+        let delta = if hit { log_odds(config.p_hit) } else { log_odds(config.p_miss) };
         let (lo, hi) = (log_odds(config.p_min), log_odds(config.p_max));
         *l = (f64::from(*l) + delta).clamp(lo, hi) as f32;
         *n = n.saturating_add(1);

@@ -101,21 +101,19 @@ use std::collections::BTreeMap;
 use nalgebra::Point3;
 
 pub use grid::{
-    binary_entropy_bits, log_odds, plogp_bits, probability_from_log_odds, CellPose, CellRef,
-    CellState, Face, FaceGrid, GridStats, SurfaceGrid, WorldCell,
+    binary_entropy_bits, log_odds, plogp_bits, probability_from_log_odds, CellPose, CellRef, CellState, Face, FaceGrid,
+    GridStats, SurfaceGrid, WorldCell,
 };
 pub use utility::{
-    expected_entropy_reduction, needs_exploring, next_best_view, object_features, stop_reason,
-    HistoryBook, ObjectFeatures, ObjectHistory, ObjectViewTerms, StopReason, UtilityContext,
-    ViewScore,
+    expected_entropy_reduction, needs_exploring, next_best_view, object_features, stop_reason, HistoryBook,
+    ObjectFeatures, ObjectHistory, ObjectViewTerms, StopReason, UtilityContext, ViewScore,
 };
 pub use views::{
-    camera_position_free, coverage_views, init_views, look_at, look_at_with_up, random_views,
-    sample_candidates, sample_candidates_around, AlwaysReachable, CandidateView, Reachability,
+    camera_position_free, coverage_views, init_views, look_at, look_at_with_up, random_views, sample_candidates,
+    sample_candidates_around, AlwaysReachable, CandidateView, Reachability,
 };
 pub use visibility::{
-    integrate_object, point_visibility, CellVisibility, ObjectFrameUpdate, ObservedPoints,
-    Occluders, Viewpoint,
+    integrate_object, point_visibility, CellVisibility, ObjectFrameUpdate, ObservedPoints, Occluders, Viewpoint,
 };
 
 use crate::frame::DepthImage;
@@ -160,10 +158,7 @@ fn check_range(field: &'static str, v: f64, lo: f64, hi: f64) -> Result<(), Expl
     if v.is_finite() && v >= lo && v <= hi {
         Ok(())
     } else {
-        Err(ExploreError::InvalidConfig {
-            field,
-            reason: format!("{v} outside [{lo}, {hi}]"),
-        })
+        Err(ExploreError::InvalidConfig { field, reason: format!("{v} outside [{lo}, {hi}]") })
     }
 }
 
@@ -282,13 +277,8 @@ pub enum Strategy {
 
 impl Strategy {
     /// All strategies, in report order.
-    pub const ALL: [Strategy; 5] = [
-        Strategy::ObjectDriven,
-        Strategy::Random,
-        Strategy::Coverage,
-        Strategy::Init,
-        Strategy::ExpectedGain,
-    ];
+    pub const ALL: [Strategy; 5] =
+        [Strategy::ObjectDriven, Strategy::Random, Strategy::Coverage, Strategy::Init, Strategy::ExpectedGain];
 
     /// The report name.
     pub fn as_str(self) -> &'static str {
@@ -371,32 +361,12 @@ impl ExploreConfig {
     pub fn validate(&self) -> Result<(), ExploreError> {
         self.grid.validate()?;
         check_range("lambda", self.lambda, 0.0, 1e6)?;
-        check_range(
-            "done_normalized_entropy",
-            self.done_normalized_entropy,
-            0.0,
-            1.0,
-        )?;
+        check_range("done_normalized_entropy", self.done_normalized_entropy, 0.0, 1.0)?;
         check_range("done_occupied_ratio", self.done_occupied_ratio, 0.0, 1.0)?;
-        check_range(
-            "done_volume_probability",
-            self.done_volume_probability,
-            0.0,
-            1.0,
-        )?;
+        check_range("done_volume_probability", self.done_volume_probability, 0.0, 1.0)?;
         check_range("volume_sigma_floor", self.volume_sigma_floor, 1e-9, 1e3)?;
-        check_range(
-            "motion_cost_bits_per_m",
-            self.motion_cost_bits_per_m,
-            0.0,
-            1e9,
-        )?;
-        check_range(
-            "motion_cost_m_per_rad",
-            self.motion_cost_m_per_rad,
-            0.0,
-            1e3,
-        )
+        check_range("motion_cost_bits_per_m", self.motion_cost_bits_per_m, 0.0, 1e9)?;
+        check_range("motion_cost_m_per_rad", self.motion_cost_m_per_rad, 0.0, 1e3)
     }
 }
 
@@ -414,19 +384,11 @@ pub struct TableRect {
 impl TableRect {
     /// Check the values are finite and the size positive.
     pub fn validate(&self) -> Result<(), ExploreError> {
-        if self
-            .center_m
-            .iter()
-            .chain(self.size_m.iter())
-            .any(|v| !v.is_finite())
-            || !self.height_m.is_finite()
-        {
+        if self.center_m.iter().chain(self.size_m.iter()).any(|v| !v.is_finite()) || !self.height_m.is_finite() {
             return Err(ExploreError::NonFinite { field: "table" });
         }
         if self.size_m.iter().any(|v| *v <= 0.0) {
-            return Err(ExploreError::Degenerate {
-                what: format!("table size {:?}", self.size_m),
-            });
+            return Err(ExploreError::Degenerate { what: format!("table size {:?}", self.size_m) });
         }
         Ok(())
     }
@@ -504,10 +466,7 @@ impl CandidateConfig {
         check_range("coverage_overlap", self.coverage_overlap, 0.0, 0.95)?;
         check_range("coverage_inset_m", self.coverage_inset_m, 0.0, 10.0)?;
         if self.views_per_object == 0 {
-            return Err(ExploreError::InvalidConfig {
-                field: "views_per_object",
-                reason: "must be ≥ 1".into(),
-            });
+            return Err(ExploreError::InvalidConfig { field: "views_per_object", reason: "must be ≥ 1".into() });
         }
         Ok(())
     }
@@ -545,11 +504,7 @@ impl ExplorationGrids {
         if self.grids.is_empty() {
             return None;
         }
-        let sum: f64 = self
-            .grids
-            .values()
-            .map(|g| g.stats().normalized_entropy())
-            .sum();
+        let sum: f64 = self.grids.values().map(|g| g.stats().normalized_entropy()).sum();
         Some(sum / self.grids.len() as f64)
     }
 
@@ -595,24 +550,16 @@ impl ExplorationGrids {
         if let Some(d) = depth {
             if d.width != camera.width || d.height != camera.height {
                 return Err(ExploreError::Degenerate {
-                    what: format!(
-                        "depth {}x{} vs camera {}x{}",
-                        d.width, d.height, camera.width, camera.height
-                    ),
+                    what: format!("depth {}x{} vs camera {}x{}", d.width, d.height, camera.width, camera.height),
                 });
             }
         }
         let mut points: BTreeMap<u32, Vec<Point3<f64>>> = BTreeMap::new();
         for ob in observed {
             if map.get(ob.object_id).is_none() {
-                return Err(ExploreError::UnknownObject {
-                    object_id: ob.object_id,
-                });
+                return Err(ExploreError::UnknownObject { object_id: ob.object_id });
             }
-            points
-                .entry(ob.object_id)
-                .or_default()
-                .extend(ob.points_in_world.iter().copied());
+            points.entry(ob.object_id).or_default().extend(ob.points_in_world.iter().copied());
         }
         let resampled = self.sync(map, config)?;
         let occluders = Occluders::from_map(map, config);
@@ -624,16 +571,7 @@ impl ExplorationGrids {
                 continue;
             };
             let pts = points.get(&o.id).map_or(&[][..], |v| v.as_slice());
-            objects.push(integrate_object(
-                grid,
-                o,
-                pts,
-                camera,
-                world_from_camera,
-                depth,
-                &occluders,
-                config,
-            ));
+            objects.push(integrate_object(grid, o, pts, camera, world_from_camera, depth, &occluders, config));
         }
         Ok(FrameUpdate { objects, resampled })
     }

@@ -33,10 +33,7 @@ fn camera() -> PinholeCamera {
 /// Eye at `dist` from `center`, azimuth `az_deg` about z, elevation `el_deg`.
 fn eye_around(center: [f64; 3], az_deg: f64, el_deg: f64, dist: f64) -> Point3<f64> {
     let (az, el) = (az_deg.to_radians(), el_deg.to_radians());
-    Point3::from(
-        Vector3::from(center)
-            + Vector3::new(el.cos() * az.cos(), el.cos() * az.sin(), el.sin()) * dist,
-    )
+    Point3::from(Vector3::from(center) + Vector3::new(el.cos() * az.cos(), el.cos() * az.sin(), el.sin()) * dist)
 }
 
 fn view(eye: Point3<f64>, target: [f64; 3]) -> Se3 {
@@ -55,11 +52,7 @@ fn all_unknown_grid_has_maximal_entropy() {
     // ±x: 6×4, ±y: 10×4, top: 10×6 cells of 1 cm.
     assert_eq!(s.cells(), 2 * 24 + 2 * 40 + 60);
     assert_eq!(s.unknown, s.cells());
-    assert!(
-        (s.entropy_bits - s.cells() as f64).abs() < 1e-9,
-        "H_obj = {}",
-        s.entropy_bits
-    );
+    assert!((s.entropy_bits - s.cells() as f64).abs() < 1e-9, "H_obj = {}", s.entropy_bits);
     assert!((s.normalized_entropy() - 1.0).abs() < 1e-12);
     assert_eq!(s.occupied_ratio(), 0.0);
     // H(p) ≤ H(0.5) = 1 bit for every p.
@@ -88,46 +81,26 @@ fn every_cell_centre_maps_back_to_its_cell() {
     ] {
         let g = SurfaceGrid::new(&o, &cfg).unwrap_or_else(|e| panic!("{e}"));
         for c in g.cells() {
-            let pose = g
-                .cell_pose(c)
-                .unwrap_or_else(|| panic!("no pose for {c:?}"));
+            let pose = g.cell_pose(c).unwrap_or_else(|| panic!("no pose for {c:?}"));
             assert!((pose.normal_in_object.norm() - 1.0).abs() < 1e-12);
             // Slightly outside the surface along the normal still lands on the same cell.
             let p = pose.p_in_object + pose.normal_in_object * 0.001;
-            assert_eq!(
-                g.cell_of_point(&p, 0.03),
-                Some(c),
-                "{:?} cell {c:?}",
-                o.label
-            );
+            assert_eq!(g.cell_of_point(&p, 0.03), Some(c), "{:?} cell {c:?}", o.label);
         }
         // A point below the object (nearest face: bottom) and a far point are not projected.
         let h = o.half_extents;
-        assert_eq!(
-            g.cell_of_point(&Point3::new(0.0, 0.0, -h.z - 0.001), 0.03),
-            None
-        );
-        assert_eq!(
-            g.cell_of_point(&Point3::new(0.0, 0.0, h.z + 0.2), 0.03),
-            None
-        );
+        assert_eq!(g.cell_of_point(&Point3::new(0.0, 0.0, -h.z - 0.001), 0.03), None);
+        assert_eq!(g.cell_of_point(&Point3::new(0.0, 0.0, h.z + 0.2), 0.03), None);
     }
 }
 
 fn top_points(o: &MapObject, spacing_m: f64) -> Vec<Point3<f64>> {
     let h = o.half_extents;
     let mut pts = Vec::new();
-    let (nx, ny) = (
-        (2.0 * h.x / spacing_m) as usize,
-        (2.0 * h.y / spacing_m) as usize,
-    );
+    let (nx, ny) = ((2.0 * h.x / spacing_m) as usize, (2.0 * h.y / spacing_m) as usize);
     for i in 0..nx {
         for j in 0..ny {
-            let p = Point3::new(
-                -h.x + (i as f64 + 0.5) * spacing_m,
-                -h.y + (j as f64 + 0.5) * spacing_m,
-                h.z,
-            );
+            let p = Point3::new(-h.x + (i as f64 + 0.5) * spacing_m, -h.y + (j as f64 + 0.5) * spacing_m, h.z);
             pts.push(o.world_from_object * p);
         }
     }
@@ -137,25 +110,15 @@ fn top_points(o: &MapObject, spacing_m: f64) -> Vec<Point3<f64>> {
 #[test]
 fn observing_a_face_lowers_normalized_entropy() {
     let cfg = GridConfig::default();
-    let map = map_of(vec![object(
-        Label::Block,
-        [0.5, 0.0, 0.05],
-        0.4,
-        [0.05, 0.05, 0.05],
-    )]);
+    let map = map_of(vec![object(Label::Block, [0.5, 0.0, 0.05], 0.4, [0.05, 0.05, 0.05])]);
     let o = &map.objects[0];
     let mut grids = ExplorationGrids::new();
     grids.sync(&map, &cfg).unwrap_or_else(|e| panic!("{e}"));
     let before = grids.get(o.id).map(|g| g.stats()).unwrap_or_default();
     // Straight down from 0.4 m above the top: only the top faces the camera within 80°.
     let pose = view(Point3::new(0.5, 0.0, 0.5), [0.5, 0.0, 0.05]);
-    let obs = [ObservedPoints {
-        object_id: o.id,
-        points_in_world: top_points(o, 0.005),
-    }];
-    let up = grids
-        .integrate_frame(&map, &camera(), &pose, &obs, None, &cfg)
-        .unwrap_or_else(|e| panic!("{e}"));
+    let obs = [ObservedPoints { object_id: o.id, points_in_world: top_points(o, 0.005) }];
+    let up = grids.integrate_frame(&map, &camera(), &pose, &obs, None, &cfg).unwrap_or_else(|e| panic!("{e}"));
     let g = grids.get(o.id).unwrap_or_else(|| panic!("no grid"));
     let after = g.stats();
     assert!(
@@ -178,19 +141,9 @@ fn observing_a_face_lowers_normalized_entropy() {
     // A side view with no points and no depth: the facing side and the top become free, the far
     // side stays unknown.
     let mut grids2 = ExplorationGrids::new();
-    let side = view(
-        eye_around([0.5, 0.0, 0.05], 0.0, 30.0, 0.5),
-        [0.5, 0.0, 0.05],
-    );
-    let map0 = map_of(vec![object(
-        Label::Block,
-        [0.5, 0.0, 0.05],
-        0.0,
-        [0.05, 0.05, 0.05],
-    )]);
-    grids2
-        .integrate_frame(&map0, &camera(), &side, &[], None, &cfg)
-        .unwrap_or_else(|e| panic!("{e}"));
+    let side = view(eye_around([0.5, 0.0, 0.05], 0.0, 30.0, 0.5), [0.5, 0.0, 0.05]);
+    let map0 = map_of(vec![object(Label::Block, [0.5, 0.0, 0.05], 0.0, [0.05, 0.05, 0.05])]);
+    grids2.integrate_frame(&map0, &camera(), &side, &[], None, &cfg).unwrap_or_else(|e| panic!("{e}"));
     let g2 = grids2.get(0).unwrap_or_else(|| panic!("no grid"));
     assert_eq!(g2.face_stats(face_index(Face::PosX)).free, 100);
     assert_eq!(g2.face_stats(face_index(Face::Top)).free, 100);
@@ -210,104 +163,53 @@ fn occluded_cells_stay_unknown() {
     let pose = view(eye, [0.55, 0.0, 0.04]);
     let map = map_of(vec![wall.clone(), target.clone()]);
     let mut grids = ExplorationGrids::new();
-    grids
-        .integrate_frame(&map, &camera(), &pose, &[], None, &cfg)
-        .unwrap_or_else(|e| panic!("{e}"));
+    grids.integrate_frame(&map, &camera(), &pose, &[], None, &cfg).unwrap_or_else(|e| panic!("{e}"));
     let g_target = grids.get(1).unwrap_or_else(|| panic!("no grid"));
     let s = g_target.stats();
-    assert_eq!(
-        s.unknown,
-        s.cells(),
-        "target behind the wall must stay unknown: {s:?}"
-    );
+    assert_eq!(s.unknown, s.cells(), "target behind the wall must stay unknown: {s:?}");
     let g_wall = grids.get(0).unwrap_or_else(|| panic!("no grid"));
-    assert_eq!(
-        g_wall.face_stats(face_index(Face::NegX)).free,
-        g_wall.face_stats(face_index(Face::NegX)).cells()
-    );
+    assert_eq!(g_wall.face_stats(face_index(Face::NegX)).free, g_wall.face_stats(face_index(Face::NegX)).cells());
     // The same cell is reported occluded by the visibility query.
     let occ = Occluders::from_map(&map, &cfg);
-    let c = g_target
-        .cell_pose(CellRef {
-            face: face_index(Face::NegX),
-            cell: 0,
-        })
-        .unwrap_or_else(|| panic!("cell"));
+    let c = g_target.cell_pose(CellRef { face: face_index(Face::NegX), cell: 0 }).unwrap_or_else(|| panic!("cell"));
     let p_w = target.world_from_object * c.p_in_object;
-    let vis = point_visibility(
-        &p_w,
-        &c.normal_in_object,
-        1,
-        &Viewpoint::new(&camera(), &pose),
-        &occ,
-        &cfg,
-    );
+    let vis = point_visibility(&p_w, &c.normal_in_object, 1, &Viewpoint::new(&camera(), &pose), &occ, &cfg);
     assert_eq!(vis, CellVisibility::Occluded);
     // Control: without the wall the facing side is seen (free).
     let map_alone = map_of(vec![target]);
     let mut grids2 = ExplorationGrids::new();
-    grids2
-        .integrate_frame(&map_alone, &camera(), &pose, &[], None, &cfg)
-        .unwrap_or_else(|e| panic!("{e}"));
+    grids2.integrate_frame(&map_alone, &camera(), &pose, &[], None, &cfg).unwrap_or_else(|e| panic!("{e}"));
     let g2 = grids2.get(0).unwrap_or_else(|| panic!("no grid"));
     assert_eq!(g2.face_stats(face_index(Face::NegX)).free, 64);
     // The table plane blocks a camera below it.
-    assert!(occ.segment_blocked(
-        &Point3::new(0.5, 0.5, -0.1),
-        &Point3::new(0.5, 0.0, 0.1),
-        None
-    ));
+    assert!(occ.segment_blocked(&Point3::new(0.5, 0.5, -0.1), &Point3::new(0.5, 0.0, 0.1), None));
 }
 
 #[test]
 fn depth_in_front_of_a_cell_leaves_it_unknown_and_matching_depth_makes_it_occupied() {
     let cfg = GridConfig::default();
-    let map = map_of(vec![object(
-        Label::Block,
-        [0.5, 0.0, 0.05],
-        0.0,
-        [0.05, 0.05, 0.05],
-    )]);
+    let map = map_of(vec![object(Label::Block, [0.5, 0.0, 0.05], 0.0, [0.05, 0.05, 0.05])]);
     let cam = PinholeCamera::from_fovy(64, 48, 1.0).unwrap_or_else(|e| panic!("{e}"));
     let pose = view(Point3::new(0.5, 0.0, 0.5), [0.5, 0.0, 0.05]);
     // Everything at 0.2 m: an unmodelled occluder in front of the top (at 0.4 m).
     let near = DepthImage::new(64, 48, vec![0.2; 64 * 48]).unwrap_or_else(|e| panic!("{e}"));
     let mut grids = ExplorationGrids::new();
-    let up = grids
-        .integrate_frame(&map, &cam, &pose, &[], Some(&near), &cfg)
-        .unwrap_or_else(|e| panic!("{e}"));
+    let up = grids.integrate_frame(&map, &cam, &pose, &[], Some(&near), &cfg).unwrap_or_else(|e| panic!("{e}"));
     assert_eq!(grids.get(0).map(|g| g.stats().unknown), Some(500));
     assert_eq!(up.objects[0].depth_rejected, 100);
     // Depth exactly at the top (0.45 m − 0.05 m − 0.05 m... the top is at z = 0.1, camera at 0.5).
     let at_top = DepthImage::new(64, 48, vec![0.4; 64 * 48]).unwrap_or_else(|e| panic!("{e}"));
-    grids
-        .integrate_frame(&map, &cam, &pose, &[], Some(&at_top), &cfg)
-        .unwrap_or_else(|e| panic!("{e}"));
-    assert_eq!(
-        grids
-            .get(0)
-            .map(|g| g.face_stats(face_index(Face::Top)).occupied),
-        Some(100)
-    );
+    grids.integrate_frame(&map, &cam, &pose, &[], Some(&at_top), &cfg).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(grids.get(0).map(|g| g.face_stats(face_index(Face::Top)).occupied), Some(100));
     // Depth behind the top (the estimate is too tall): free.
     let far = DepthImage::new(64, 48, vec![0.6; 64 * 48]).unwrap_or_else(|e| panic!("{e}"));
     let mut grids2 = ExplorationGrids::new();
-    grids2
-        .integrate_frame(&map, &cam, &pose, &[], Some(&far), &cfg)
-        .unwrap_or_else(|e| panic!("{e}"));
-    assert_eq!(
-        grids2
-            .get(0)
-            .map(|g| g.face_stats(face_index(Face::Top)).free),
-        Some(100)
-    );
+    grids2.integrate_frame(&map, &cam, &pose, &[], Some(&far), &cfg).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(grids2.get(0).map(|g| g.face_stats(face_index(Face::Top)).free), Some(100));
 }
 
 fn observe_all_but(grids: &mut ExplorationGrids, id: u32, skip: Face, cfg: &GridConfig) {
-    let g = grids
-        .grids
-        .get_mut(&id)
-        .unwrap_or_else(|| panic!("no grid"));
+    let g = grids.grids.get_mut(&id).unwrap_or_else(|| panic!("no grid"));
     let cells: Vec<CellRef> = g.cells().filter(|c| Face::ALL[c.face] != skip).collect();
     for c in cells {
         for _ in 0..6 {
@@ -322,19 +224,15 @@ fn utility_prefers_the_view_facing_the_unobserved_face() {
     let center = [0.5, 0.0, 0.05];
     let map = map_of(vec![object(Label::Block, center, 0.0, [0.05, 0.05, 0.05])]);
     let mut grids = ExplorationGrids::new();
-    grids
-        .sync(&map, &cfg.grid)
-        .unwrap_or_else(|e| panic!("{e}"));
+    grids.sync(&map, &cfg.grid).unwrap_or_else(|e| panic!("{e}"));
     observe_all_but(&mut grids, 0, Face::NegX, &cfg.grid);
-    let ctx = UtilityContext::new(&map, &grids, &HistoryBook::default(), &camera(), &cfg)
-        .unwrap_or_else(|e| panic!("{e}"));
+    let ctx =
+        UtilityContext::new(&map, &grids, &HistoryBook::default(), &camera(), &cfg).unwrap_or_else(|e| panic!("{e}"));
     let facing_seen = view(eye_around(center, 0.0, 30.0, 0.45), center);
     let facing_unseen = view(eye_around(center, 180.0, 30.0, 0.45), center);
     let side = view(eye_around(center, 90.0, 30.0, 0.45), center);
     for strategy in [Strategy::ObjectDriven, Strategy::ExpectedGain] {
-        let s = ctx
-            .score_all(&[facing_seen, side, facing_unseen], strategy, None)
-            .unwrap_or_else(|e| panic!("{e}"));
+        let s = ctx.score_all(&[facing_seen, side, facing_unseen], strategy, None).unwrap_or_else(|e| panic!("{e}"));
         assert!(
             s[2].utility > s[0].utility && s[2].utility > s[1].utility,
             "{strategy:?}: {:?}",
@@ -346,12 +244,8 @@ fn utility_prefers_the_view_facing_the_unobserved_face() {
     }
     // Motion cost: a far view loses exactly μ·(distance + ρ·angle).
     let cur = facing_seen;
-    let a = ctx
-        .score(&facing_unseen, Strategy::ExpectedGain, None)
-        .unwrap_or_else(|e| panic!("{e}"));
-    let b = ctx
-        .score(&facing_unseen, Strategy::ExpectedGain, Some(&cur))
-        .unwrap_or_else(|e| panic!("{e}"));
+    let a = ctx.score(&facing_unseen, Strategy::ExpectedGain, None).unwrap_or_else(|e| panic!("{e}"));
+    let b = ctx.score(&facing_unseen, Strategy::ExpectedGain, Some(&cur)).unwrap_or_else(|e| panic!("{e}"));
     let d = (cur.translation.vector - facing_unseen.translation.vector).norm();
     let ang = cur.rotation.angle_to(&facing_unseen.rotation);
     let expected = cfg.motion_cost_bits_per_m * (d + cfg.motion_cost_m_per_rad * ang);
@@ -365,21 +259,12 @@ fn occlusion_term_follows_the_paper_formula() {
     let b = object(Label::Block, [0.62, 0.0, 0.05], 0.0, [0.05, 0.05, 0.05]);
     let map = map_of(vec![a, b]);
     let mut grids = ExplorationGrids::new();
-    grids
-        .sync(&map, &cfg.grid)
-        .unwrap_or_else(|e| panic!("{e}"));
-    let ctx = UtilityContext::new(&map, &grids, &HistoryBook::default(), &camera(), &cfg)
-        .unwrap_or_else(|e| panic!("{e}"));
+    grids.sync(&map, &cfg.grid).unwrap_or_else(|e| panic!("{e}"));
+    let ctx =
+        UtilityContext::new(&map, &grids, &HistoryBook::default(), &camera(), &cfg).unwrap_or_else(|e| panic!("{e}"));
     // Looking along +x, the two blocks overlap in the image.
     let s = ctx
-        .score(
-            &view(
-                eye_around([0.56, 0.0, 0.05], 180.0, 20.0, 0.5),
-                [0.56, 0.0, 0.05],
-            ),
-            Strategy::ObjectDriven,
-            None,
-        )
+        .score(&view(eye_around([0.56, 0.0, 0.05], 180.0, 20.0, 0.5), [0.56, 0.0, 0.05]), Strategy::ObjectDriven, None)
         .unwrap_or_else(|e| panic!("{e}"));
     assert_eq!(s.objects.len(), 2);
     for t in &s.objects {
@@ -392,14 +277,7 @@ fn occlusion_term_follows_the_paper_formula() {
     }
     // Looking along y they do not overlap.
     let s2 = ctx
-        .score(
-            &view(
-                eye_around([0.56, 0.0, 0.05], 90.0, 20.0, 0.5),
-                [0.56, 0.0, 0.05],
-            ),
-            Strategy::ObjectDriven,
-            None,
-        )
+        .score(&view(eye_around([0.56, 0.0, 0.05], 90.0, 20.0, 0.5), [0.56, 0.0, 0.05]), Strategy::ObjectDriven, None)
         .unwrap_or_else(|e| panic!("{e}"));
     assert!(s2.objects.iter().all(|t| t.r_iou == 0.0));
 }
@@ -412,23 +290,13 @@ fn volume_convergence_and_s_rule() {
         yaw_rad: 0.0,
         half_extents: Vector3::new(0.05 * s, 0.05, 0.05),
     };
-    let steady = ObjectHistory {
-        estimates: vec![g(1.0), g(1.0), g(1.0)],
-    };
+    let steady = ObjectHistory { estimates: vec![g(1.0), g(1.0), g(1.0)] };
     assert!((steady.volume_convergence(2, 0.05) - 1.0).abs() < 1e-12);
     assert_eq!(steady.consecutive_iou(), Some(1.0));
-    let jump = ObjectHistory {
-        estimates: vec![g(1.0), g(1.0), g(1.0), g(2.0)],
-    };
+    let jump = ObjectHistory { estimates: vec![g(1.0), g(1.0), g(1.0), g(2.0)] };
     // Normalised volumes 0.8, 0.8, 0.8, 1.6: σ = √0.12, z = 0.6/√0.12 → p = exp(−1.5).
     assert!((jump.volume_convergence(2, 0.05) - (-1.5f64).exp()).abs() < 1e-9);
-    assert_eq!(
-        ObjectHistory {
-            estimates: vec![g(1.0)]
-        }
-        .volume_convergence(2, 0.05),
-        0.0
-    );
+    assert_eq!(ObjectHistory { estimates: vec![g(1.0)] }.volume_convergence(2, 0.05), 0.0);
     let cfg = ExploreConfig::default();
     assert!(!needs_exploring(0.4, 0.1, 0.9, &cfg));
     assert!(!needs_exploring(0.9, 0.6, 0.9, &cfg));
@@ -436,16 +304,9 @@ fn volume_convergence_and_s_rule() {
     assert!(needs_exploring(0.6, 0.4, 0.95, &cfg));
 
     // Stopping: a fully observed, steady object is done; the budget stops anyway.
-    let map = map_of(vec![object(
-        Label::Block,
-        [0.5, 0.0, 0.05],
-        0.0,
-        [0.05, 0.05, 0.05],
-    )]);
+    let map = map_of(vec![object(Label::Block, [0.5, 0.0, 0.05], 0.0, [0.05, 0.05, 0.05])]);
     let mut grids = ExplorationGrids::new();
-    grids
-        .sync(&map, &cfg.grid)
-        .unwrap_or_else(|e| panic!("{e}"));
+    grids.sync(&map, &cfg.grid).unwrap_or_else(|e| panic!("{e}"));
     let mut hist = HistoryBook::default();
     let f0 = object_features(&map, &grids, &hist, &cfg);
     assert_eq!(stop_reason(&f0, 3, &cfg), None);
@@ -453,10 +314,7 @@ fn volume_convergence_and_s_rule() {
     observe_all_but(&mut grids, 0, Face::Top, &cfg.grid);
     {
         let g = grids.grids.get_mut(&0).unwrap_or_else(|| panic!("no grid"));
-        let cells: Vec<CellRef> = g
-            .cells()
-            .filter(|c| Face::ALL[c.face] == Face::Top)
-            .collect();
+        let cells: Vec<CellRef> = g.cells().filter(|c| Face::ALL[c.face] == Face::Top).collect();
         for c in cells {
             for _ in 0..6 {
                 g.update_cell(c, false, &cfg.grid);
@@ -466,11 +324,7 @@ fn volume_convergence_and_s_rule() {
     hist.record(&map);
     hist.record(&map);
     let f1 = object_features(&map, &grids, &hist, &cfg);
-    assert!(
-        f1[0].normalized_entropy < 0.5 && f1[0].volume_probability > 0.99,
-        "{:?}",
-        f1[0]
-    );
+    assert!(f1[0].normalized_entropy < 0.5 && f1[0].volume_probability > 0.99, "{:?}", f1[0]);
     assert_eq!(stop_reason(&f1, 3, &cfg), Some(StopReason::AllExplored));
     assert_eq!(stop_reason(&[], 3, &cfg), None);
 }
@@ -478,35 +332,18 @@ fn volume_convergence_and_s_rule() {
 #[test]
 fn grids_follow_the_object_when_its_estimate_changes() {
     let cfg = GridConfig::default();
-    let mut map = map_of(vec![object(
-        Label::Block,
-        [0.5, 0.0, 0.05],
-        0.0,
-        [0.05, 0.05, 0.05],
-    )]);
+    let mut map = map_of(vec![object(Label::Block, [0.5, 0.0, 0.05], 0.0, [0.05, 0.05, 0.05])]);
     let mut grids = ExplorationGrids::new();
     grids.sync(&map, &cfg).unwrap_or_else(|e| panic!("{e}"));
     observe_all_but(&mut grids, 0, Face::NegX, &cfg);
-    let before = grids
-        .get(0)
-        .map(|g| g.face_stats(face_index(Face::PosX)))
-        .unwrap_or_default();
+    let before = grids.get(0).map(|g| g.face_stats(face_index(Face::PosX))).unwrap_or_default();
     // Move and rotate: nothing to resample, states unchanged.
     map.objects[0].world_from_object = se3_from_yaw(Vector3::new(0.45, 0.1, 0.05), 1.0);
-    assert!(grids
-        .sync(&map, &cfg)
-        .unwrap_or_else(|e| panic!("{e}"))
-        .is_empty());
-    assert_eq!(
-        grids.get(0).map(|g| g.face_stats(face_index(Face::PosX))),
-        Some(before)
-    );
+    assert!(grids.sync(&map, &cfg).unwrap_or_else(|e| panic!("{e}")).is_empty());
+    assert_eq!(grids.get(0).map(|g| g.face_stats(face_index(Face::PosX))), Some(before));
     // Grow by 1.5 along y: +x face (y × z) gets 15 × 10 cells, all still observed; −x unknown.
     map.objects[0].half_extents = Vector3::new(0.05, 0.075, 0.05);
-    assert_eq!(
-        grids.sync(&map, &cfg).unwrap_or_else(|e| panic!("{e}")),
-        vec![0]
-    );
+    assert_eq!(grids.sync(&map, &cfg).unwrap_or_else(|e| panic!("{e}")), vec![0]);
     let g = grids.get(0).unwrap_or_else(|| panic!("no grid"));
     let px = g.face_stats(face_index(Face::PosX));
     assert_eq!(px.cells(), 150);
@@ -531,12 +368,9 @@ fn same_seed_gives_same_candidates_and_utilities() {
     let map = three_object_map();
     let cc = CandidateConfig::default();
     let cfg = ExploreConfig::default();
-    let a = sample_candidates(&map, &cc, &cfg.grid, &AlwaysReachable, 7)
-        .unwrap_or_else(|e| panic!("{e}"));
-    let b = sample_candidates(&map, &cc, &cfg.grid, &AlwaysReachable, 7)
-        .unwrap_or_else(|e| panic!("{e}"));
-    let c = sample_candidates(&map, &cc, &cfg.grid, &AlwaysReachable, 8)
-        .unwrap_or_else(|e| panic!("{e}"));
+    let a = sample_candidates(&map, &cc, &cfg.grid, &AlwaysReachable, 7).unwrap_or_else(|e| panic!("{e}"));
+    let b = sample_candidates(&map, &cc, &cfg.grid, &AlwaysReachable, 7).unwrap_or_else(|e| panic!("{e}"));
+    let c = sample_candidates(&map, &cc, &cfg.grid, &AlwaysReachable, 8).unwrap_or_else(|e| panic!("{e}"));
     assert_eq!(a, b);
     assert_ne!(a, c);
     assert!(a.len() >= 30, "{} candidates", a.len());
@@ -544,41 +378,25 @@ fn same_seed_gives_same_candidates_and_utilities() {
     for v in &a {
         let eye = Point3::from(v.world_from_camera.translation.vector);
         assert!(camera_position_free(&eye, &occ, &cc));
-        let target = map
-            .get(v.target_object.unwrap_or(u32::MAX))
-            .unwrap_or_else(|| panic!("target"));
+        let target = map.get(v.target_object.unwrap_or(u32::MAX)).unwrap_or_else(|| panic!("target"));
         let d = (target.world_from_object.translation.vector - eye.coords).norm();
         assert!((0.35 - 1e-9..=0.6 + 1e-9).contains(&d));
         // The optical axis points at the target.
         let z = v.world_from_camera.rotation * Vector3::z();
-        assert!(
-            (z.dot(&(target.world_from_object.translation.vector - eye.coords)) / d - 1.0).abs()
-                < 1e-9
-        );
+        assert!((z.dot(&(target.world_from_object.translation.vector - eye.coords)) / d - 1.0).abs() < 1e-9);
     }
     let grids = {
         let mut g = ExplorationGrids::new();
-        g.integrate_frame(
-            &map,
-            &camera(),
-            &a[0].world_from_camera,
-            &[],
-            None,
-            &cfg.grid,
-        )
-        .unwrap_or_else(|e| panic!("{e}"));
+        g.integrate_frame(&map, &camera(), &a[0].world_from_camera, &[], None, &cfg.grid)
+            .unwrap_or_else(|e| panic!("{e}"));
         g
     };
     let views: Vec<Se3> = a.iter().map(|v| v.world_from_camera).collect();
-    let ctx = UtilityContext::new(&map, &grids, &HistoryBook::default(), &camera(), &cfg)
-        .unwrap_or_else(|e| panic!("{e}"));
+    let ctx =
+        UtilityContext::new(&map, &grids, &HistoryBook::default(), &camera(), &cfg).unwrap_or_else(|e| panic!("{e}"));
     for strategy in [Strategy::ObjectDriven, Strategy::ExpectedGain] {
-        let s1 = ctx
-            .score_all(&views, strategy, Some(&views[0]))
-            .unwrap_or_else(|e| panic!("{e}"));
-        let s2 = ctx
-            .score_all(&views, strategy, Some(&views[0]))
-            .unwrap_or_else(|e| panic!("{e}"));
+        let s1 = ctx.score_all(&views, strategy, Some(&views[0])).unwrap_or_else(|e| panic!("{e}"));
+        let s2 = ctx.score_all(&views, strategy, Some(&views[0])).unwrap_or_else(|e| panic!("{e}"));
         assert_eq!(s1, s2);
         assert!(next_best_view(&s1).is_some());
     }
@@ -588,12 +406,9 @@ fn same_seed_gives_same_candidates_and_utilities() {
     assert!(!one.is_empty() && one.iter().all(|v| v.target_object == Some(1)));
     // A reachability callback filters.
     let only_positive_y = |p: &Se3| p.translation.vector.y > 0.0;
-    let f = sample_candidates(&map, &cc, &cfg.grid, &only_positive_y, 7)
-        .unwrap_or_else(|e| panic!("{e}"));
+    let f = sample_candidates(&map, &cc, &cfg.grid, &only_positive_y, 7).unwrap_or_else(|e| panic!("{e}"));
     assert!(!f.is_empty() && f.len() < a.len());
-    assert!(f
-        .iter()
-        .all(|v| v.world_from_camera.translation.vector.y > 0.0));
+    assert!(f.iter().all(|v| v.world_from_camera.translation.vector.y > 0.0));
 }
 
 #[test]
@@ -608,13 +423,10 @@ fn look_at_points_z_at_target_with_image_up_along_world_z() {
     assert!(up.z > 0.0);
     // The target projects to the principal point.
     let cam = camera();
-    let uv = cam
-        .project(&(t.inverse() * target))
-        .unwrap_or([f64::NAN; 2]);
+    let uv = cam.project(&(t.inverse() * target)).unwrap_or([f64::NAN; 2]);
     assert!((uv[0] - cam.cx).abs() < 1e-9 && (uv[1] - cam.cy).abs() < 1e-9);
     // Straight down: image up points away from the robot base (radially).
-    let down = look_at(&Point3::new(0.5, 0.0, 0.45), &Point3::new(0.5, 0.0, 0.0))
-        .unwrap_or_else(|e| panic!("{e}"));
+    let down = look_at(&Point3::new(0.5, 0.0, 0.45), &Point3::new(0.5, 0.0, 0.0)).unwrap_or_else(|e| panic!("{e}"));
     let up_down = down.rotation * -Vector3::y();
     assert!((up_down - Vector3::x()).norm() < 1e-9, "{up_down:?}");
     assert!(look_at(&eye, &eye).is_err());
@@ -623,11 +435,7 @@ fn look_at_points_z_at_target_with_image_up_along_world_z() {
 
 #[test]
 fn baseline_generators() {
-    let table = TableRect {
-        center_m: [0.5, 0.0],
-        size_m: [0.8, 1.2],
-        height_m: 0.0,
-    };
+    let table = TableRect { center_m: [0.5, 0.0], size_m: [0.8, 1.2], height_m: 0.0 };
     let cc = CandidateConfig::default();
     let init = init_views(&table, &cc).unwrap_or_else(|e| panic!("{e}"));
     assert_eq!(init.len(), 4);
@@ -644,10 +452,7 @@ fn baseline_generators() {
     // Boustrophedon: consecutive waypoints move along y within a lane, then one step in x.
     let first = cov[0].rotation;
     for v in &cov {
-        assert!(
-            v.rotation.angle_to(&first) < 1e-9,
-            "coverage views share one orientation"
-        );
+        assert!(v.rotation.angle_to(&first) < 1e-9, "coverage views share one orientation");
         assert!((v.rotation * -Vector3::y() - Vector3::x()).norm() < 1e-9);
     }
     for w in cov.windows(2) {
@@ -655,42 +460,15 @@ fn baseline_generators() {
         assert!((a.x - b.x).abs() < 1e-12 || (a.y - b.y).abs() < 1e-12);
     }
     let map = three_object_map();
-    let r1 = random_views(
-        &table,
-        &map,
-        &cc,
-        &GridConfig::default(),
-        &AlwaysReachable,
-        10,
-        3,
-    )
-    .unwrap_or_else(|e| panic!("{e}"));
-    let r2 = random_views(
-        &table,
-        &map,
-        &cc,
-        &GridConfig::default(),
-        &AlwaysReachable,
-        10,
-        3,
-    )
-    .unwrap_or_else(|e| panic!("{e}"));
+    let r1 = random_views(&table, &map, &cc, &GridConfig::default(), &AlwaysReachable, 10, 3)
+        .unwrap_or_else(|e| panic!("{e}"));
+    let r2 = random_views(&table, &map, &cc, &GridConfig::default(), &AlwaysReachable, 10, 3)
+        .unwrap_or_else(|e| panic!("{e}"));
     assert_eq!(r1.len(), 10);
     assert_eq!(r1, r2);
     let never = |_: &Se3| false;
-    assert!(
-        random_views(&table, &map, &cc, &GridConfig::default(), &never, 10, 3)
-            .unwrap_or_default()
-            .is_empty()
-    );
-    assert!(init_views(
-        &TableRect {
-            size_m: [0.0, 1.0],
-            ..table
-        },
-        &cc
-    )
-    .is_err());
+    assert!(random_views(&table, &map, &cc, &GridConfig::default(), &never, 10, 3).unwrap_or_default().is_empty());
+    assert!(init_views(&TableRect { size_m: [0.0, 1.0], ..table }, &cc).is_err());
 }
 
 #[test]
@@ -699,10 +477,7 @@ fn bad_inputs_give_typed_errors() {
     let map = three_object_map();
     let mut grids = ExplorationGrids::new();
     let pose = view(Point3::new(0.5, 0.0, 0.5), [0.5, 0.0, 0.0]);
-    let ghost = [ObservedPoints {
-        object_id: 99,
-        points_in_world: vec![Point3::origin()],
-    }];
+    let ghost = [ObservedPoints { object_id: 99, points_in_world: vec![Point3::origin()] }];
     assert_eq!(
         grids.integrate_frame(&map, &camera(), &pose, &ghost, None, &cfg),
         Err(ExploreError::UnknownObject { object_id: 99 })
@@ -718,63 +493,31 @@ fn bad_inputs_give_typed_errors() {
         grids.integrate_frame(&map, &camera(), &pose, &[], Some(&small), &cfg),
         Err(ExploreError::Degenerate { .. })
     ));
-    let bad_cfg = GridConfig {
-        p_miss: 0.7,
-        ..GridConfig::default()
-    };
+    let bad_cfg = GridConfig { p_miss: 0.7, ..GridConfig::default() };
     assert!(matches!(
         grids.integrate_frame(&map, &camera(), &pose, &[], None, &bad_cfg),
-        Err(ExploreError::InvalidConfig {
-            field: "p_miss",
-            ..
-        })
+        Err(ExploreError::InvalidConfig { field: "p_miss", .. })
     ));
     // NaN points are dropped, not panics.
-    let nan_pts = [ObservedPoints {
-        object_id: 0,
-        points_in_world: vec![Point3::new(f64::NAN, 0.0, 0.0)],
-    }];
-    let up = grids
-        .integrate_frame(&map, &camera(), &pose, &nan_pts, None, &cfg)
-        .unwrap_or_else(|e| panic!("{e}"));
+    let nan_pts = [ObservedPoints { object_id: 0, points_in_world: vec![Point3::new(f64::NAN, 0.0, 0.0)] }];
+    let up = grids.integrate_frame(&map, &camera(), &pose, &nan_pts, None, &cfg).unwrap_or_else(|e| panic!("{e}"));
     assert_eq!(up.objects[0].points_dropped, 1);
     // A non-finite size is an error; a zero size is raised to the minimum and still has cells.
     let mut nan_map = map.clone();
     nan_map.objects[0].half_extents.x = f64::NAN;
     assert!(ExplorationGrids::new().sync(&nan_map, &cfg).is_err());
     let flat = object(Label::Book, [0.5, 0.0, 0.0], 0.0, [0.1, 0.1, 0.0]);
-    assert!(
-        SurfaceGrid::new(&flat, &cfg)
-            .map(|g| g.stats().cells())
-            .unwrap_or(0)
-            > 0
-    );
+    assert!(SurfaceGrid::new(&flat, &cfg).map(|g| g.stats().cells()).unwrap_or(0) > 0);
     // Empty map: no candidates, no NBV, utility 0.
     let empty = ObjectMap::new();
     let ec = ExploreConfig::default();
-    assert!(sample_candidates(
-        &empty,
-        &CandidateConfig::default(),
-        &cfg,
-        &AlwaysReachable,
-        1
-    )
-    .unwrap_or_default()
-    .is_empty());
+    assert!(sample_candidates(&empty, &CandidateConfig::default(), &cfg, &AlwaysReachable, 1)
+        .unwrap_or_default()
+        .is_empty());
     assert_eq!(next_best_view(&[]), None);
-    let ctx = UtilityContext::new(
-        &empty,
-        &ExplorationGrids::new(),
-        &HistoryBook::default(),
-        &camera(),
-        &ec,
-    )
-    .unwrap_or_else(|e| panic!("{e}"));
-    assert_eq!(
-        ctx.score(&pose, Strategy::ObjectDriven, None)
-            .map(|s| s.utility),
-        Ok(0.0)
-    );
+    let ctx = UtilityContext::new(&empty, &ExplorationGrids::new(), &HistoryBook::default(), &camera(), &ec)
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(ctx.score(&pose, Strategy::ObjectDriven, None).map(|s| s.utility), Ok(0.0));
     assert!(ctx.score(&bad_pose, Strategy::ObjectDriven, None).is_err());
     assert_eq!(Strategy::parse("expected-gain"), Ok(Strategy::ExpectedGain));
     assert!(Strategy::parse("greedy").is_err());
@@ -798,54 +541,32 @@ fn utility_matches_closed_form_for_one_unknown_cube() {
     let center = [0.5, 0.0, 0.05];
     let map = map_of(vec![object(Label::Block, center, 0.0, [0.05, 0.05, 0.05])]);
     let mut grids = ExplorationGrids::new();
-    grids
-        .sync(&map, &cfg.grid)
-        .unwrap_or_else(|e| panic!("{e}"));
-    let ctx = UtilityContext::new(&map, &grids, &HistoryBook::default(), &camera(), &cfg)
-        .unwrap_or_else(|e| panic!("{e}"));
+    grids.sync(&map, &cfg.grid).unwrap_or_else(|e| panic!("{e}"));
+    let ctx =
+        UtilityContext::new(&map, &grids, &HistoryBook::default(), &camera(), &cfg).unwrap_or_else(|e| panic!("{e}"));
     // Level with the centre, facing +x: only the +x face (100 cells) faces the camera within 80°.
     let level = ctx
-        .score(
-            &view(eye_around(center, 0.0, 0.0, 0.5), center),
-            Strategy::ObjectDriven,
-            None,
-        )
+        .score(&view(eye_around(center, 0.0, 0.0, 0.5), center), Strategy::ObjectDriven, None)
         .unwrap_or_else(|e| panic!("{e}"));
     assert!((level.utility - 100.0).abs() < 1e-9, "{level:?}");
     assert_eq!(level.objects[0].visible_cells, 100);
     // 45° above +x: the +x face and the top (incidence 45°) are seen: 200 bits.
     let high = ctx
-        .score(
-            &view(eye_around(center, 0.0, 45.0, 0.5), center),
-            Strategy::ObjectDriven,
-            None,
-        )
+        .score(&view(eye_around(center, 0.0, 45.0, 0.5), center), Strategy::ObjectDriven, None)
         .unwrap_or_else(|e| panic!("{e}"));
     assert!((high.utility - 200.0).abs() < 1e-9, "{high:?}");
     // Whole-object scope: H_obj = 500 bits from any view that sees the object.
-    let whole = ExploreConfig {
-        entropy_scope: EntropyScope::Object,
-        ..ExploreConfig::default()
-    };
-    let ctx2 = UtilityContext::new(&map, &grids, &HistoryBook::default(), &camera(), &whole)
-        .unwrap_or_else(|e| panic!("{e}"));
+    let whole = ExploreConfig { entropy_scope: EntropyScope::Object, ..ExploreConfig::default() };
+    let ctx2 =
+        UtilityContext::new(&map, &grids, &HistoryBook::default(), &camera(), &whole).unwrap_or_else(|e| panic!("{e}"));
     let s2 = ctx2
-        .score(
-            &view(eye_around(center, 0.0, 0.0, 0.5), center),
-            Strategy::ObjectDriven,
-            None,
-        )
+        .score(&view(eye_around(center, 0.0, 0.0, 0.5), center), Strategy::ObjectDriven, None)
         .unwrap_or_else(|e| panic!("{e}"));
     assert!((s2.utility - 500.0).abs() < 1e-9);
     // Looking away: the object is not in the view, f = 0.
-    let away = look_at(
-        &eye_around(center, 0.0, 0.0, 0.5),
-        &Point3::new(2.0, 0.0, 0.05),
-    )
-    .unwrap_or_else(|e| panic!("{e}"));
-    let s3 = ctx
-        .score(&away, Strategy::ObjectDriven, None)
-        .unwrap_or_else(|e| panic!("{e}"));
+    let away =
+        look_at(&eye_around(center, 0.0, 0.0, 0.5), &Point3::new(2.0, 0.0, 0.05)).unwrap_or_else(|e| panic!("{e}"));
+    let s3 = ctx.score(&away, Strategy::ObjectDriven, None).unwrap_or_else(|e| panic!("{e}"));
     assert_eq!(s3.utility, 0.0);
     assert!(s3.objects.is_empty());
 }

@@ -5,9 +5,7 @@ use std::collections::BTreeMap;
 
 use nalgebra::{Point3, Vector3};
 
-use super::grid::{
-    binary_entropy_bits, log_odds, plogp_bits, probability_from_log_odds, GridStats,
-};
+use super::grid::{binary_entropy_bits, log_odds, plogp_bits, probability_from_log_odds, GridStats};
 use super::visibility::{check_pose, point_visibility, CellVisibility, Occluders, Viewpoint};
 use super::{EntropyScope, ExplorationGrids, ExploreConfig, ExploreError, IouMode, Strategy};
 use crate::geometry::{iou3d, Box2, ObjectGeometry, PinholeCamera, Se3};
@@ -33,12 +31,8 @@ impl ObjectHistory {
     /// normal density never exceeds 0.399, so the paper's `p > 0.8` test would never pass).
     /// Fewer than `min_len` estimates (or none with a positive finite volume): 0 (not converged).
     pub fn volume_convergence(&self, min_len: usize, volume_sigma_floor: f64) -> f64 {
-        let v: Vec<f64> = self
-            .estimates
-            .iter()
-            .map(ObjectGeometry::volume)
-            .filter(|v| v.is_finite() && *v > 0.0)
-            .collect();
+        let v: Vec<f64> =
+            self.estimates.iter().map(ObjectGeometry::volume).filter(|v| v.is_finite() && *v > 0.0).collect();
         if v.len() < min_len.max(1) {
             return 0.0;
         }
@@ -53,12 +47,8 @@ impl ObjectHistory {
 
     /// The latest volume normalised by the mean of all, V̄⁽ᵗ⁾ (1 without history).
     pub fn normalized_volume(&self) -> f64 {
-        let v: Vec<f64> = self
-            .estimates
-            .iter()
-            .map(ObjectGeometry::volume)
-            .filter(|v| v.is_finite() && *v > 0.0)
-            .collect();
+        let v: Vec<f64> =
+            self.estimates.iter().map(ObjectGeometry::volume).filter(|v| v.is_finite() && *v > 0.0).collect();
         match v.last() {
             Some(last) => last / (v.iter().sum::<f64>() / v.len() as f64),
             None => 1.0,
@@ -71,10 +61,7 @@ impl ObjectHistory {
         if n < 2 {
             return None;
         }
-        Some(iou3d(
-            self.estimates.get(n - 2)?,
-            self.estimates.get(n - 1)?,
-        ))
+        Some(iou3d(self.estimates.get(n - 2)?, self.estimates.get(n - 1)?))
     }
 }
 
@@ -91,11 +78,7 @@ impl HistoryBook {
     pub fn record(&mut self, map: &ObjectMap) {
         self.objects.retain(|id, _| map.get(*id).is_some());
         for o in &map.objects {
-            self.objects
-                .entry(o.id)
-                .or_default()
-                .estimates
-                .push(o.geometry());
+            self.objects.entry(o.id).or_default().estimates.push(o.geometry());
         }
     }
 }
@@ -133,8 +116,7 @@ pub fn needs_exploring(
     volume_probability: f64,
     config: &ExploreConfig,
 ) -> bool {
-    let complete = normalized_entropy < config.done_normalized_entropy
-        || occupied_ratio > config.done_occupied_ratio;
+    let complete = normalized_entropy < config.done_normalized_entropy || occupied_ratio > config.done_occupied_ratio;
     !(complete && volume_probability > config.done_volume_probability)
 }
 
@@ -151,9 +133,7 @@ pub fn object_features(
         .map(|o| {
             let grid = grids.get(o.id).map(|g| g.stats()).unwrap_or_default();
             let hist = histories.objects.get(&o.id);
-            let pv = hist.map_or(0.0, |h| {
-                h.volume_convergence(config.min_history_len, config.volume_sigma_floor)
-            });
+            let pv = hist.map_or(0.0, |h| h.volume_convergence(config.min_history_len, config.volume_sigma_floor));
             let hn = grid.normalized_entropy();
             let ro = grid.occupied_ratio();
             ObjectFeatures {
@@ -182,11 +162,7 @@ pub enum StopReason {
 
 /// The stopping rule: `Some(reason)` when exploration should end. An empty map never counts as
 /// "all explored" (there is nothing known yet); it stops only on the view budget.
-pub fn stop_reason(
-    features: &[ObjectFeatures],
-    views_taken: usize,
-    config: &ExploreConfig,
-) -> Option<StopReason> {
+pub fn stop_reason(features: &[ObjectFeatures], views_taken: usize, config: &ExploreConfig) -> Option<StopReason> {
     if views_taken >= config.max_views {
         return Some(StopReason::MaxViews);
     }
@@ -300,19 +276,9 @@ impl UtilityContext {
                     });
                 }
             }
-            objects.push(PreparedObject {
-                id: o.id,
-                geometry: o.geometry(),
-                features: f,
-                cells,
-            });
+            objects.push(PreparedObject { id: o.id, geometry: o.geometry(), features: f, cells });
         }
-        Ok(Self {
-            camera: *camera,
-            config: config.clone(),
-            objects,
-            occluders: Occluders::from_map(map, &config.grid),
-        })
+        Ok(Self { camera: *camera, config: config.clone(), objects, occluders: Occluders::from_map(map, &config.grid) })
     }
 
     /// The features of every object (map order).
@@ -342,23 +308,13 @@ impl UtilityContext {
             let dist = (Point3::from(o.geometry.center) - eye).norm();
             let in_view = c.z >= cfg.grid.min_range_m
                 && dist <= cfg.grid.max_range_m
-                && self
-                    .camera
-                    .project(&c)
-                    .is_some_and(|uv| self.camera.contains(uv));
+                && self.camera.project(&c).is_some_and(|uv| self.camera.contains(uv));
             if in_view {
-                visible.push((
-                    i,
-                    project_geometry(&o.geometry, &self.camera, world_from_camera),
-                ));
+                visible.push((i, project_geometry(&o.geometry, &self.camera, world_from_camera)));
             }
         }
         let cos_max = cfg.grid.max_incidence_deg.to_radians().cos();
-        let mut out = ViewScore {
-            utility: 0.0,
-            motion_cost: 0.0,
-            objects: Vec::with_capacity(visible.len()),
-        };
+        let mut out = ViewScore { utility: 0.0, motion_cost: 0.0, objects: Vec::with_capacity(visible.len()) };
         for (k, (i, bbox)) in visible.iter().enumerate() {
             let Some(o) = self.objects.get(*i) else {
                 continue;
@@ -421,20 +377,14 @@ impl UtilityContext {
                         for c in &o.cells {
                             let to_eye = eye - c.p_in_world;
                             let dist = to_eye.norm();
-                            if c.n_in_world.dot(&to_eye) < dist * cos_max
-                                || dist > cfg.grid.max_range_m
-                            {
+                            if c.n_in_world.dot(&to_eye) < dist * cos_max || dist > cfg.grid.max_range_m {
                                 continue;
                             }
                             let pc = camera_from_world * c.p_in_world;
                             if pc.z < cfg.grid.min_range_m {
                                 continue;
                             }
-                            if self
-                                .camera
-                                .project(&pc)
-                                .is_some_and(|uv| self.camera.contains(uv))
-                            {
+                            if self.camera.project(&pc).is_some_and(|uv| self.camera.contains(uv)) {
                                 h += c.entropy_bits;
                                 visible_cells += 1;
                             }
@@ -461,8 +411,7 @@ impl UtilityContext {
                 check_pose(cur, "current world_from_camera")?;
                 let d = (cur.translation.vector - world_from_camera.translation.vector).norm();
                 let angle = cur.rotation.angle_to(&world_from_camera.rotation);
-                out.motion_cost =
-                    cfg.motion_cost_bits_per_m * (d + cfg.motion_cost_m_per_rad * angle);
+                out.motion_cost = cfg.motion_cost_bits_per_m * (d + cfg.motion_cost_m_per_rad * angle);
                 out.utility -= out.motion_cost;
             }
         }
@@ -476,10 +425,7 @@ impl UtilityContext {
         strategy: Strategy,
         current: Option<&Se3>,
     ) -> Result<Vec<ViewScore>, ExploreError> {
-        views
-            .iter()
-            .map(|v| self.score(v, strategy, current))
-            .collect()
+        views.iter().map(|v| self.score(v, strategy, current)).collect()
     }
 }
 

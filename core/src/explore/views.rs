@@ -59,43 +59,24 @@ const NEAR_VERTICAL_COS: f64 = 0.99;
 /// `world_from_camera` looking from `eye` at `target` with image up (−y) along `up_hint`
 /// projected onto the image plane. Errors when the eye and target coincide or `up_hint` is
 /// (nearly) parallel to the viewing direction.
-pub fn look_at_with_up(
-    eye: &Point3<f64>,
-    target: &Point3<f64>,
-    up_hint: &Vector3<f64>,
-) -> Result<Se3, ExploreError> {
-    if eye
-        .coords
-        .iter()
-        .chain(target.coords.iter())
-        .chain(up_hint.iter())
-        .any(|v| !v.is_finite())
-    {
-        return Err(ExploreError::NonFinite {
-            field: "look_at eye/target/up",
-        });
+pub fn look_at_with_up(eye: &Point3<f64>, target: &Point3<f64>, up_hint: &Vector3<f64>) -> Result<Se3, ExploreError> {
+    if eye.coords.iter().chain(target.coords.iter()).chain(up_hint.iter()).any(|v| !v.is_finite()) {
+        return Err(ExploreError::NonFinite { field: "look_at eye/target/up" });
     }
     let d = target - eye;
     let n = d.norm();
     if n < 1e-9 {
-        return Err(ExploreError::Degenerate {
-            what: "look_at: eye and target coincide".into(),
-        });
+        return Err(ExploreError::Degenerate { what: "look_at: eye and target coincide".into() });
     }
     let z = d / n;
     let up_perp = up_hint - z * up_hint.dot(&z);
     if up_perp.norm() < 1e-6 {
-        return Err(ExploreError::Degenerate {
-            what: "look_at: up direction parallel to the view".into(),
-        });
+        return Err(ExploreError::Degenerate { what: "look_at: up direction parallel to the view".into() });
     }
     let y = -up_perp / up_perp.norm();
     let x = y.cross(&z);
     let r = Rotation3::from_matrix_unchecked(Matrix3::from_columns(&[x, y, z]));
-    Ok(Se3::from_parts(
-        Translation3::from(eye.coords),
-        UnitQuaternion::from_rotation_matrix(&r),
-    ))
+    Ok(Se3::from_parts(Translation3::from(eye.coords), UnitQuaternion::from_rotation_matrix(&r)))
 }
 
 /// A candidate view with where it came from.
@@ -109,13 +90,8 @@ pub struct CandidateView {
 
 /// Whether a camera position is admissible: above the table by `min_camera_height_m` and outside
 /// every object primitive inflated by `collision_margin_m`.
-pub fn camera_position_free(
-    eye: &Point3<f64>,
-    occluders: &Occluders,
-    config: &CandidateConfig,
-) -> bool {
-    eye.z >= config.min_camera_height_m
-        && !occluders.point_inside_any(eye, config.collision_margin_m)
+pub fn camera_position_free(eye: &Point3<f64>, occluders: &Occluders, config: &CandidateConfig) -> bool {
+    eye.z >= config.min_camera_height_m && !occluders.point_inside_any(eye, config.collision_margin_m)
 }
 
 /// Candidate views around the objects (paper: "sampled around the objects"): for each object in
@@ -160,9 +136,7 @@ pub fn sample_candidates_around(
         }
         for k in 0..n {
             let az = std::f64::consts::TAU * (k as f64 + rng.random::<f64>()) / n as f64;
-            let el = rng
-                .random_range(config.elevation_deg[0]..=config.elevation_deg[1])
-                .to_radians();
+            let el = rng.random_range(config.elevation_deg[0]..=config.elevation_deg[1]).to_radians();
             let d = rng.random_range(config.distance_m[0]..=config.distance_m[1]);
             let eye = c + Vector3::new(el.cos() * az.cos(), el.cos() * az.sin(), el.sin()) * d;
             if !camera_position_free(&eye, &occluders, config) {
@@ -170,10 +144,7 @@ pub fn sample_candidates_around(
             }
             let pose = look_at(&eye, &c)?;
             if reachable.reachable(&pose) {
-                out.push(CandidateView {
-                    world_from_camera: pose,
-                    target_object: Some(o.id),
-                });
+                out.push(CandidateView { world_from_camera: pose, target_object: Some(o.id) });
             }
         }
     }
@@ -193,23 +164,15 @@ pub fn init_views(table: &TableRect, config: &CandidateConfig) -> Result<Vec<Se3
     );
     let [cx, cy] = table.center_m;
     let h = config.init_height_m;
-    let corners = [
-        [cx - hx, cy + hy],
-        [cx + hx, cy + hy],
-        [cx + hx, cy - hy],
-        [cx - hx, cy - hy],
-    ];
+    let corners = [[cx - hx, cy + hy], [cx + hx, cy + hy], [cx + hx, cy - hy], [cx - hx, cy - hy]];
     corners
         .iter()
         .map(|p| {
             let eye = Point3::new(p[0], p[1], table.height_m + h);
             let inward = Vector3::new(cx - p[0], cy - p[1], 0.0);
             let shift = h * config.init_tilt_deg.to_radians().tan();
-            let offset = if inward.norm() > 1e-9 {
-                inward / inward.norm() * shift.min(inward.norm())
-            } else {
-                Vector3::zeros()
-            };
+            let offset =
+                if inward.norm() > 1e-9 { inward / inward.norm() * shift.min(inward.norm()) } else { Vector3::zeros() };
             let target = Point3::new(p[0], p[1], table.height_m) + offset;
             look_at(&eye, &target)
         })
@@ -240,30 +203,16 @@ pub fn coverage_views(
     );
     let lanes = |half: f64, step: f64| -> Vec<f64> {
         let n = ((2.0 * half / step).ceil() as usize).max(1);
-        (0..=n)
-            .map(|i| -half + 2.0 * half * i as f64 / n as f64)
-            .collect()
+        (0..=n).map(|i| -half + 2.0 * half * i as f64 / n as f64).collect()
     };
     let xs = lanes(hx, step_x);
     let ys = lanes(hy, step_y);
     let mut out = Vec::with_capacity(xs.len() * ys.len());
     for (i, x) in xs.iter().enumerate() {
-        let row: Vec<f64> = if i % 2 == 0 {
-            ys.clone()
-        } else {
-            ys.iter().rev().copied().collect()
-        };
+        let row: Vec<f64> = if i % 2 == 0 { ys.clone() } else { ys.iter().rev().copied().collect() };
         for y in row {
-            let eye = Point3::new(
-                table.center_m[0] + x,
-                table.center_m[1] + y,
-                table.height_m + h,
-            );
-            out.push(look_at_with_up(
-                &eye,
-                &Point3::new(eye.x, eye.y, table.height_m),
-                &Vector3::x(),
-            )?);
+            let eye = Point3::new(table.center_m[0] + x, table.center_m[1] + y, table.height_m + h);
+            out.push(look_at_with_up(&eye, &Point3::new(eye.x, eye.y, table.height_m), &Vector3::x())?);
         }
     }
     Ok(out)
@@ -297,8 +246,7 @@ pub fn random_views(
         }
         let ex = table.center_m[0] + rng.random_range(-hx..=hx);
         let ey = table.center_m[1] + rng.random_range(-hy..=hy);
-        let ez = table.height_m
-            + rng.random_range(config.random_height_m[0]..=config.random_height_m[1]);
+        let ez = table.height_m + rng.random_range(config.random_height_m[0]..=config.random_height_m[1]);
         let tx = table.center_m[0] + rng.random_range(-hx..=hx);
         let ty = table.center_m[1] + rng.random_range(-hy..=hy);
         let eye = Point3::new(ex, ey, ez);

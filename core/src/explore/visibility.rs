@@ -59,10 +59,7 @@ impl Occluders {
     /// Objects with non-finite poses or sizes are skipped.
     pub fn from_map(map: &ObjectMap, config: &GridConfig) -> Self {
         let items = map.objects.iter().filter_map(occluder_of).collect();
-        Self {
-            items,
-            table_height_m: config.table_height_m,
-        }
+        Self { items, table_height_m: config.table_height_m }
     }
 
     /// Number of object occluders.
@@ -79,12 +76,7 @@ impl Occluders {
     /// `dir`) with the table plane or any object, up to `max_t`: `(Some(object_id), t)` for an
     /// object, `(None, t)` for the table. Useful to render synthetic depth and segmentation from
     /// a map (tests, ground-truth oracles).
-    pub fn cast_ray(
-        &self,
-        origin: &Point3<f64>,
-        dir: &Vector3<f64>,
-        max_t: f64,
-    ) -> Option<(Option<u32>, f64)> {
+    pub fn cast_ray(&self, origin: &Point3<f64>, dir: &Vector3<f64>, max_t: f64) -> Option<(Option<u32>, f64)> {
         let mut best: Option<(Option<u32>, f64)> = None;
         if dir.z < 0.0 && origin.z >= self.table_height_m {
             let t = (self.table_height_m - origin.z) / dir.z;
@@ -97,16 +89,12 @@ impl Occluders {
             let p = o.object_from_world * origin;
             let d = o.object_from_world.rotation * dir;
             let toi = match &o.shape {
-                OccluderShape::Cuboid(c) => c.cast_local_ray(
-                    &Ray::new(pvec(&p.coords, false), pvec(&d, false)),
-                    limit,
-                    true,
-                ),
-                OccluderShape::Cylinder(c) => c.cast_local_ray(
-                    &Ray::new(pvec(&p.coords, true), pvec(&d, true)),
-                    limit,
-                    true,
-                ),
+                OccluderShape::Cuboid(c) => {
+                    c.cast_local_ray(&Ray::new(pvec(&p.coords, false), pvec(&d, false)), limit, true)
+                }
+                OccluderShape::Cylinder(c) => {
+                    c.cast_local_ray(&Ray::new(pvec(&p.coords, true), pvec(&d, true)), limit, true)
+                }
             };
             if let Some(t) = toi {
                 if best.is_none_or(|b| t < b.1) {
@@ -119,12 +107,7 @@ impl Occluders {
 
     /// Whether the open segment `from → to` is blocked by the table plane or by any object other
     /// than `ignore_id`.
-    pub fn segment_blocked(
-        &self,
-        from: &Point3<f64>,
-        to: &Point3<f64>,
-        ignore_id: Option<u32>,
-    ) -> bool {
+    pub fn segment_blocked(&self, from: &Point3<f64>, to: &Point3<f64>, ignore_id: Option<u32>) -> bool {
         let eps = 1e-6;
         if from.z < self.table_height_m - eps || to.z < self.table_height_m - eps {
             // Both ends above the plane never cross it; an end below it is behind the table.
@@ -149,14 +132,12 @@ impl Occluders {
             let origin = o.object_from_world * from;
             let dir_o = o.object_from_world.rotation * dir;
             let hit = match &o.shape {
-                OccluderShape::Cuboid(c) => c.intersects_local_ray(
-                    &Ray::new(pvec(&origin.coords, false), pvec(&dir_o, false)),
-                    len,
-                ),
-                OccluderShape::Cylinder(c) => c.intersects_local_ray(
-                    &Ray::new(pvec(&origin.coords, true), pvec(&dir_o, true)),
-                    len,
-                ),
+                OccluderShape::Cuboid(c) => {
+                    c.intersects_local_ray(&Ray::new(pvec(&origin.coords, false), pvec(&dir_o, false)), len)
+                }
+                OccluderShape::Cylinder(c) => {
+                    c.intersects_local_ray(&Ray::new(pvec(&origin.coords, true), pvec(&dir_o, true)), len)
+                }
             };
             if hit {
                 return true;
@@ -173,13 +154,10 @@ impl Occluders {
             match &o.shape {
                 OccluderShape::Cuboid(c) => {
                     let h = c.half_extents;
-                    q.x.abs() <= h.x + margin_m
-                        && q.y.abs() <= h.y + margin_m
-                        && q.z.abs() <= h.z + margin_m
+                    q.x.abs() <= h.x + margin_m && q.y.abs() <= h.y + margin_m && q.z.abs() <= h.z + margin_m
                 }
                 OccluderShape::Cylinder(c) => {
-                    (q.x * q.x + q.y * q.y).sqrt() <= c.radius + margin_m
-                        && q.z.abs() <= c.half_height + margin_m
+                    (q.x * q.x + q.y * q.y).sqrt() <= c.radius + margin_m && q.z.abs() <= c.half_height + margin_m
                 }
             }
         }) || p.z < self.table_height_m + margin_m
@@ -259,14 +237,10 @@ pub fn point_visibility(
     occluders: &Occluders,
     config: &GridConfig,
 ) -> CellVisibility {
-    let (camera, camera_from_world, eye) =
-        (&view.camera, &view.camera_from_world, view.eye_in_world);
+    let (camera, camera_from_world, eye) = (&view.camera, &view.camera_from_world, view.eye_in_world);
     let to_eye = eye - p_in_world;
     let dist = to_eye.norm();
-    if dist.is_nan()
-        || dist <= 0.0
-        || n_in_world.dot(&to_eye) < dist * config.max_incidence_deg.to_radians().cos()
-    {
+    if dist.is_nan() || dist <= 0.0 || n_in_world.dot(&to_eye) < dist * config.max_incidence_deg.to_radians().cos() {
         return CellVisibility::BackFacing;
     }
     let p_c = camera_from_world * p_in_world;
@@ -283,10 +257,7 @@ pub fn point_visibility(
     if occluders.segment_blocked(&eye, &start, Some(object_id)) {
         return CellVisibility::Occluded;
     }
-    CellVisibility::Visible {
-        u: uv[0] as u32,
-        v: uv[1] as u32,
-    }
+    CellVisibility::Visible { u: uv[0] as u32, v: uv[1] as u32 }
 }
 
 /// One object's points seen in one frame (world frame), as segmented by the pipeline.
@@ -330,10 +301,7 @@ pub fn integrate_object(
     occluders: &Occluders,
     config: &GridConfig,
 ) -> ObjectFrameUpdate {
-    let mut out = ObjectFrameUpdate {
-        object_id: object.id,
-        ..Default::default()
-    };
+    let mut out = ObjectFrameUpdate { object_id: object.id, ..Default::default() };
     let object_from_world = object.world_from_object.inverse();
     let view = Viewpoint::new(camera, world_from_camera);
     let camera_from_world = view.camera_from_world;
@@ -396,12 +364,7 @@ pub fn integrate_object(
 
 /// Check a camera pose is finite.
 pub(crate) fn check_pose(t: &Se3, field: &'static str) -> Result<(), ExploreError> {
-    if t.translation
-        .vector
-        .iter()
-        .chain(t.rotation.coords.iter())
-        .all(|v| v.is_finite())
-    {
+    if t.translation.vector.iter().chain(t.rotation.coords.iter()).all(|v| v.is_finite()) {
         Ok(())
     } else {
         Err(ExploreError::NonFinite { field })

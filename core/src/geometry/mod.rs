@@ -175,10 +175,7 @@ impl PinholeCamera {
         if p_in_camera.z <= MIN_DEPTH_M {
             return None;
         }
-        Some([
-            self.fx * p_in_camera.x / p_in_camera.z + self.cx,
-            self.fy * p_in_camera.y / p_in_camera.z + self.cy,
-        ])
+        Some([self.fx * p_in_camera.x / p_in_camera.z + self.cx, self.fy * p_in_camera.y / p_in_camera.z + self.cy])
     }
 
     /// Back-project pixel `(u, v)` at depth `depth_m` (along z) into the camera frame.
@@ -463,7 +460,12 @@ mod tests {
     }
 
     fn cylinder(c: [f64; 3], r: f64, hz: f64) -> ObjectGeometry {
-        ObjectGeometry { shape: Shape::Cylinder, center: Vector3::from(c), yaw_rad: 0.0, half_extents: Vector3::new(r, r, hz) }
+        ObjectGeometry {
+            shape: Shape::Cylinder,
+            center: Vector3::from(c),
+            yaw_rad: 0.0,
+            half_extents: Vector3::new(r, r, hz),
+        }
     }
 
     #[test]

@@ -41,7 +41,14 @@ pub struct NaiveConfig {
 
 impl Default for NaiveConfig {
     fn default() -> Self {
-        Self { pixel_stride: 4, iou_threshold: 0.3, voxel_m: 0.005, trim_fraction: 0.02, min_points: 20, max_depth_m: 3.0 }
+        Self {
+            pixel_stride: 4,
+            iou_threshold: 0.3,
+            voxel_m: 0.005,
+            trim_fraction: 0.02,
+            min_points: 20,
+            max_depth_m: 3.0,
+        }
     }
 }
 
@@ -89,8 +96,12 @@ impl NaiveMapper {
             frame.detections.iter().map(|d| self.points_in_box(frame, &d.bbox)).collect();
 
         // Candidate pairs (IoU of the object's projected box with the detection), greedy by IoU.
-        let projected: Vec<Option<Box2>> =
-            self.map.objects.iter().map(|o| project_geometry(&o.geometry(), &frame.camera, &frame.world_from_camera)).collect();
+        let projected: Vec<Option<Box2>> = self
+            .map
+            .objects
+            .iter()
+            .map(|o| project_geometry(&o.geometry(), &frame.camera, &frame.world_from_camera))
+            .collect();
         let mut pairs: Vec<(f64, usize, usize)> = Vec::new();
         for (di, det) in frame.detections.iter().enumerate() {
             for (oi, obj) in self.map.objects.iter().enumerate() {
@@ -123,7 +134,8 @@ impl NaiveMapper {
                 continue;
             }
             let centroid = cloud.iter().fold(Vector3::zeros(), |acc, p| acc + p.coords) / cloud.len() as f64;
-            let observation = Observation { frame: frame.index, bbox: det.bbox, score: det.score, centroid_in_world: centroid };
+            let observation =
+                Observation { frame: frame.index, bbox: det.bbox, score: det.score, centroid_in_world: centroid };
             let id = match det_to_obj[di] {
                 Some(oi) => {
                     self.map.objects[oi].observations.push(observation);
@@ -272,7 +284,8 @@ mod tests {
     #[test]
     fn block_top_is_recovered_and_tracked_across_frames() {
         let camera = PinholeCamera::from_fovy(160, 120, 0.8).unwrap_or_else(|e| panic!("{e}"));
-        let mut mapper = NaiveMapper::new(NaiveConfig { pixel_stride: 1, trim_fraction: 0.0, ..NaiveConfig::default() });
+        let mut mapper =
+            NaiveMapper::new(NaiveConfig { pixel_stride: 1, trim_fraction: 0.0, ..NaiveConfig::default() });
         for (i, x) in [0.0, 0.02, 0.04].iter().enumerate() {
             let pose = top_down_pose(*x);
             let (depth, bbox) = render(&camera, &pose, 0.05);

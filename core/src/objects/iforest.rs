@@ -54,14 +54,7 @@ pub struct IForestConfig {
 
 impl Default for IForestConfig {
     fn default() -> Self {
-        Self {
-            n_trees: 100,
-            subsample: 256,
-            score_threshold: 0.6,
-            min_points: 16,
-            seed: 0x1f0e_5700,
-            passes: 4,
-        }
+        Self { n_trees: 100, subsample: 256, score_threshold: 0.6, min_points: 16, seed: 0x1f0e_5700, passes: 4 }
     }
 }
 
@@ -111,28 +104,16 @@ impl IsolationForest {
     /// trees or a subsample below 2.
     pub fn fit(points: &[Point3<f64>], config: &IForestConfig) -> Result<Self, ObjectsError> {
         if config.n_trees == 0 {
-            return Err(ObjectsError::BadConfig {
-                field: "iforest.n_trees",
-                reason: "must be ≥ 1".into(),
-            });
+            return Err(ObjectsError::BadConfig { field: "iforest.n_trees", reason: "must be ≥ 1".into() });
         }
         if config.subsample < 2 {
-            return Err(ObjectsError::BadConfig {
-                field: "iforest.subsample",
-                reason: "must be ≥ 2".into(),
-            });
+            return Err(ObjectsError::BadConfig { field: "iforest.subsample", reason: "must be ≥ 2".into() });
         }
         let required = config.min_points.max(2);
         if points.len() < required {
-            return Err(ObjectsError::TooFewPoints {
-                required,
-                actual: points.len(),
-            });
+            return Err(ObjectsError::TooFewPoints { required, actual: points.len() });
         }
-        if let Some(index) = points
-            .iter()
-            .position(|p| !p.coords.iter().all(|v| v.is_finite()))
-        {
+        if let Some(index) = points.iter().position(|p| !p.coords.iter().all(|v| v.is_finite())) {
             return Err(ObjectsError::NonFinitePoint { index });
         }
         let data: Vec<[f64; 3]> = points.iter().map(|p| [p.x, p.y, p.z]).collect();
@@ -155,28 +136,11 @@ impl IsolationForest {
                 *dst = data[i as usize];
             }
             let root = nodes.len() as u32;
-            nodes.push(Node {
-                dim: LEAF,
-                split: 0.0,
-                left: 0,
-            });
-            build(
-                &mut sample,
-                &mut scratch,
-                0,
-                height_limit,
-                root as usize,
-                &mut nodes,
-                &mut rng,
-            );
+            nodes.push(Node { dim: LEAF, split: 0.0, left: 0 });
+            build(&mut sample, &mut scratch, 0, height_limit, root as usize, &mut nodes, &mut rng);
             roots.push(root);
         }
-        Ok(Self {
-            nodes,
-            roots,
-            sample_size,
-            c_norm: average_path_length(sample_size),
-        })
+        Ok(Self { nodes, roots, sample_size, c_norm: average_path_length(sample_size) })
     }
 
     /// Number of trees.
@@ -228,11 +192,7 @@ fn build(
     nodes: &mut Vec<Node>,
     rng: &mut ChaCha8Rng,
 ) {
-    let leaf = Node {
-        dim: LEAF,
-        split: average_path_length(pts.len()),
-        left: 0,
-    };
+    let leaf = Node { dim: LEAF, split: average_path_length(pts.len()), left: 0 };
     if depth >= height_limit || pts.len() <= 1 {
         if let Some(n) = nodes.get_mut(at) {
             *n = leaf;
@@ -284,11 +244,7 @@ fn build(
     nodes.push(leaf);
     nodes.push(leaf);
     if let Some(n) = nodes.get_mut(at) {
-        *n = Node {
-            dim,
-            split,
-            left: left as u32,
-        };
+        *n = Node { dim, split, left: left as u32 };
     }
     let (l, r) = pts.split_at_mut(left_len);
     let (sl, sr) = scratch.split_at_mut(left_len);
@@ -339,26 +295,17 @@ pub fn mean_and_half_extent<'a>(
 /// kept points (pass `k` uses seed `seed + k`). A pass that would leave fewer than
 /// [`IForestConfig::min_points`] points is not applied. `scores` are those of the first pass
 /// (the paper's single-pass scores).
-pub fn robust_centroid_scale(
-    points: &[Point3<f64>],
-    config: &IForestConfig,
-) -> Result<RobustExtent, ObjectsError> {
+pub fn robust_centroid_scale(points: &[Point3<f64>], config: &IForestConfig) -> Result<RobustExtent, ObjectsError> {
     let forest = IsolationForest::fit(points, config)?;
     let scores: Vec<f64> = points.iter().map(|p| forest.score(p)).collect();
-    let mut inlier: Vec<bool> = scores
-        .iter()
-        .map(|s| *s <= config.score_threshold)
-        .collect();
+    let mut inlier: Vec<bool> = scores.iter().map(|s| *s <= config.score_threshold).collect();
     if inlier.iter().filter(|k| **k).count() < config.min_points.max(1) {
         inlier.iter_mut().for_each(|k| *k = true);
     }
     for pass in 1..config.passes {
         let kept_idx: Vec<usize> = (0..points.len()).filter(|&i| inlier[i]).collect();
         let kept: Vec<Point3<f64>> = kept_idx.iter().map(|&i| points[i]).collect();
-        let pass_config = IForestConfig {
-            seed: config.seed.wrapping_add(pass as u64),
-            ..*config
-        };
+        let pass_config = IForestConfig { seed: config.seed.wrapping_add(pass as u64), ..*config };
         let Ok(forest) = IsolationForest::fit(&kept, &pass_config) else {
             break;
         };
@@ -375,21 +322,10 @@ pub fn robust_centroid_scale(
             inlier[i] = false;
         }
     }
-    let kept = points
-        .iter()
-        .zip(&inlier)
-        .filter(|(_, k)| **k)
-        .map(|(p, _)| p);
-    let (center, half_extents) = mean_and_half_extent(kept).ok_or(ObjectsError::TooFewPoints {
-        required: 1,
-        actual: 0,
-    })?;
-    Ok(RobustExtent {
-        center,
-        half_extents,
-        inlier,
-        scores,
-    })
+    let kept = points.iter().zip(&inlier).filter(|(_, k)| **k).map(|(p, _)| p);
+    let (center, half_extents) =
+        mean_and_half_extent(kept).ok_or(ObjectsError::TooFewPoints { required: 1, actual: 0 })?;
+    Ok(RobustExtent { center, half_extents, inlier, scores })
 }
 
 #[cfg(test)]
@@ -437,11 +373,7 @@ mod tests {
             truth.push(true);
         }
         for _ in 0..100 {
-            let o = Vector3::new(
-                rng.random_range(-0.2..0.2),
-                rng.random_range(-0.2..0.2),
-                rng.random_range(-0.2..0.2),
-            );
+            let o = Vector3::new(rng.random_range(-0.2..0.2), rng.random_range(-0.2..0.2), rng.random_range(-0.2..0.2));
             pts.push(Point3::from(center + o));
             truth.push(false);
         }
@@ -452,42 +384,19 @@ mod tests {
     fn removes_injected_outliers_keeps_inliers() {
         for seed in [5u64, 6, 7] {
             let (pts, truth) = contaminated_cloud(seed);
-            let est = robust_centroid_scale(&pts, &IForestConfig::default())
-                .unwrap_or_else(|e| panic!("{e}"));
+            let est = robust_centroid_scale(&pts, &IForestConfig::default()).unwrap_or_else(|e| panic!("{e}"));
             let outliers = truth.iter().filter(|t| !**t).count();
-            let removed_out = truth
-                .iter()
-                .zip(&est.inlier)
-                .filter(|(t, k)| !**t && !**k)
-                .count();
+            let removed_out = truth.iter().zip(&est.inlier).filter(|(t, k)| !**t && !**k).count();
             let inliers = truth.len() - outliers;
-            let dropped_in = truth
-                .iter()
-                .zip(&est.inlier)
-                .filter(|(t, k)| **t && !**k)
-                .count();
+            let dropped_in = truth.iter().zip(&est.inlier).filter(|(t, k)| **t && !**k).count();
             let removed_frac = removed_out as f64 / outliers as f64;
             let dropped_frac = dropped_in as f64 / inliers as f64;
-            assert!(
-                removed_frac >= 0.8,
-                "seed {seed}: removed {removed_frac:.3} of outliers"
-            );
-            assert!(
-                dropped_frac < 0.05,
-                "seed {seed}: dropped {dropped_frac:.3} of inliers"
-            );
+            assert!(removed_frac >= 0.8, "seed {seed}: removed {removed_frac:.3} of outliers");
+            assert!(dropped_frac < 0.05, "seed {seed}: dropped {dropped_frac:.3} of inliers");
             eprintln!("seed {seed}: removed {removed_frac:.3} of outliers, dropped {dropped_frac:.3} of inliers");
             // The extent shrinks towards the true box (raw extent is ~0.2 m per axis).
-            assert!(
-                est.half_extents.x < 0.09 && est.half_extents.y < 0.09,
-                "{:?}",
-                est.half_extents
-            );
-            assert!(
-                (est.center - Vector3::new(0.5, 0.1, 0.04)).norm() < 0.03,
-                "{:?}",
-                est.center
-            );
+            assert!(est.half_extents.x < 0.09 && est.half_extents.y < 0.09, "{:?}", est.half_extents);
+            assert!((est.center - Vector3::new(0.5, 0.1, 0.04)).norm() < 0.03, "{:?}", est.center);
         }
     }
 
@@ -497,42 +406,21 @@ mod tests {
         // in the range scikit-learn gives on such data (≈ 50–75 %).
         for seed in [5u64, 6, 7] {
             let (pts, truth) = contaminated_cloud(seed);
-            let one = robust_centroid_scale(
-                &pts,
-                &IForestConfig {
-                    passes: 1,
-                    ..Default::default()
-                },
-            )
-            .unwrap_or_else(|e| panic!("{e}"));
-            let removed = truth
-                .iter()
-                .zip(&one.inlier)
-                .filter(|(t, k)| !**t && !**k)
-                .count();
-            assert!(
-                (40..=85).contains(&removed),
-                "seed {seed}: one pass removed {removed}/100"
-            );
+            let one = robust_centroid_scale(&pts, &IForestConfig { passes: 1, ..Default::default() })
+                .unwrap_or_else(|e| panic!("{e}"));
+            let removed = truth.iter().zip(&one.inlier).filter(|(t, k)| !**t && !**k).count();
+            assert!((40..=85).contains(&removed), "seed {seed}: one pass removed {removed}/100");
         }
     }
 
     #[test]
     fn deterministic_for_a_seed() {
         let (pts, _) = contaminated_cloud(9);
-        let a = robust_centroid_scale(&pts, &IForestConfig::default())
-            .unwrap_or_else(|e| panic!("{e}"));
-        let b = robust_centroid_scale(&pts, &IForestConfig::default())
-            .unwrap_or_else(|e| panic!("{e}"));
+        let a = robust_centroid_scale(&pts, &IForestConfig::default()).unwrap_or_else(|e| panic!("{e}"));
+        let b = robust_centroid_scale(&pts, &IForestConfig::default()).unwrap_or_else(|e| panic!("{e}"));
         assert_eq!(a, b);
-        let c = robust_centroid_scale(
-            &pts,
-            &IForestConfig {
-                seed: 1,
-                ..Default::default()
-            },
-        )
-        .unwrap_or_else(|e| panic!("{e}"));
+        let c = robust_centroid_scale(&pts, &IForestConfig { seed: 1, ..Default::default() })
+            .unwrap_or_else(|e| panic!("{e}"));
         assert_ne!(a.scores, c.scores);
     }
 
@@ -540,8 +428,7 @@ mod tests {
     fn fewer_points_than_subsample_uses_all_points() {
         let (pts, _) = contaminated_cloud(3);
         let few: Vec<_> = pts.iter().step_by(10).copied().collect(); // 50 points
-        let forest =
-            IsolationForest::fit(&few, &IForestConfig::default()).unwrap_or_else(|e| panic!("{e}"));
+        let forest = IsolationForest::fit(&few, &IForestConfig::default()).unwrap_or_else(|e| panic!("{e}"));
         assert_eq!(forest.sample_size(), 50);
         assert_eq!(forest.n_trees(), 100);
     }
@@ -551,10 +438,7 @@ mod tests {
         let pts = vec![Point3::new(0.0, 0.0, 0.0); 5];
         assert_eq!(
             IsolationForest::fit(&pts, &IForestConfig::default()).err(),
-            Some(ObjectsError::TooFewPoints {
-                required: 16,
-                actual: 5
-            })
+            Some(ObjectsError::TooFewPoints { required: 16, actual: 5 })
         );
         let mut pts = vec![Point3::new(0.1, 0.2, 0.3); 20];
         pts[7].y = f64::NAN;
@@ -567,8 +451,7 @@ mod tests {
     #[test]
     fn identical_points_score_one_half_and_keep_all() {
         let pts = vec![Point3::new(0.4, -0.1, 0.02); 40];
-        let est = robust_centroid_scale(&pts, &IForestConfig::default())
-            .unwrap_or_else(|e| panic!("{e}"));
+        let est = robust_centroid_scale(&pts, &IForestConfig::default()).unwrap_or_else(|e| panic!("{e}"));
         assert!(est.scores.iter().all(|s| (s - 0.5).abs() < 1e-12));
         assert_eq!(est.n_inliers(), 40);
         assert_eq!(est.half_extents, Vector3::zeros());

@@ -63,10 +63,7 @@ pub struct LsdConfig {
 
 impl Default for LsdConfig {
     fn default() -> Self {
-        Self {
-            scale: 0.8,
-            min_length_px: 10.0,
-        }
+        Self { scale: 0.8, min_length_px: 10.0 }
     }
 }
 
@@ -74,31 +71,19 @@ impl Default for LsdConfig {
 ///
 /// Errors: [`ObjectsError::BadImage`] when the buffer does not match the size or the scale is not
 /// in (0, 1].
-pub fn detect_segments(
-    image: &GreyImage,
-    config: &LsdConfig,
-) -> Result<Vec<LineSegment>, ObjectsError> {
+pub fn detect_segments(image: &GreyImage, config: &LsdConfig) -> Result<Vec<LineSegment>, ObjectsError> {
     if !(config.scale.is_finite() && config.scale > 0.0 && config.scale <= 1.0) {
-        return Err(ObjectsError::BadConfig {
-            field: "lsd.scale",
-            reason: format!("{} not in (0, 1]", config.scale),
-        });
+        return Err(ObjectsError::BadConfig { field: "lsd.scale", reason: format!("{} not in (0, 1]", config.scale) });
     }
     let (w, h) = (image.width as usize, image.height as usize);
     if image.data.len() != w * h {
-        return Err(ObjectsError::BadImage {
-            expected: w * h,
-            actual: image.data.len(),
-        });
+        return Err(ObjectsError::BadImage { expected: w * h, actual: image.data.len() });
     }
     let segments = if config.scale < 1.0 {
         let (scaled, sw, sh) = gaussian_downscale(&image.data, w, h, config.scale);
         let back = 1.0 / config.scale;
         lsdetect::detect(&scaled, sw, sh, 1.0)
-            .map_err(|e| ObjectsError::BadImage {
-                expected: e.expected,
-                actual: e.got,
-            })?
+            .map_err(|e| ObjectsError::BadImage { expected: e.expected, actual: e.got })?
             .into_iter()
             .map(|mut s| {
                 s.x1 *= back;
@@ -109,10 +94,8 @@ pub fn detect_segments(
             })
             .collect::<Vec<_>>()
     } else {
-        lsdetect::detect(&image.data, w, h, 1.0).map_err(|e| ObjectsError::BadImage {
-            expected: e.expected,
-            actual: e.got,
-        })?
+        lsdetect::detect(&image.data, w, h, 1.0)
+            .map_err(|e| ObjectsError::BadImage { expected: e.expected, actual: e.got })?
     };
     Ok(segments
         .iter()
@@ -125,23 +108,14 @@ pub fn detect_segments(
 /// the box grown by `margin_px` and whose both endpoints lie in the box grown by
 /// `2 * margin_px` (a segment crossing the box edge belongs to the background). Order is kept.
 pub fn segments_in_box(segments: &[LineSegment], bbox: &Box2, margin_px: f64) -> Vec<LineSegment> {
-    let grow = |m: f64| {
-        Box2::new(
-            bbox.min[0] - m,
-            bbox.min[1] - m,
-            bbox.max[0] + m,
-            bbox.max[1] + m,
-        )
-    };
+    let grow = |m: f64| Box2::new(bbox.min[0] - m, bbox.min[1] - m, bbox.max[0] + m, bbox.max[1] + m);
     let inner = grow(margin_px);
     let outer = grow(2.0 * margin_px);
     segments
         .iter()
         .filter(|s| {
             let m = s.midpoint();
-            inner.contains(m[0], m[1])
-                && outer.contains(s.a[0], s.a[1])
-                && outer.contains(s.b[0], s.b[1])
+            inner.contains(m[0], m[1]) && outer.contains(s.a[0], s.a[1]) && outer.contains(s.b[0], s.b[1])
         })
         .copied()
         .collect()
@@ -152,19 +126,12 @@ pub fn segments_in_box(segments: &[LineSegment], bbox: &Box2, margin_px: f64) ->
 /// pixel-centre alignment (`cv2.resize(.., INTER_LINEAR)`), both rounded to 8 bits as OpenCV does.
 /// `lsdetect`'s own scaling picks the nearest source pixel instead, which jitters oblique edges and
 /// splits long segments; this keeps the output close to OpenCV's.
-fn gaussian_downscale(
-    image: &[u8],
-    width: usize,
-    height: usize,
-    scale: f64,
-) -> (Vec<u8>, usize, usize) {
+fn gaussian_downscale(image: &[u8], width: usize, height: usize, scale: f64) -> (Vec<u8>, usize, usize) {
     const SIGMA_SCALE: f64 = 0.6;
     const SPREC: f64 = 3.0;
     let sigma = SIGMA_SCALE / scale;
     let half = (sigma * (2.0 * SPREC * std::f64::consts::LN_10).sqrt()).ceil() as usize;
-    let kernel: Vec<f64> = (0..=2 * half)
-        .map(|i| (-0.5 * ((i as f64 - half as f64) / sigma).powi(2)).exp())
-        .collect();
+    let kernel: Vec<f64> = (0..=2 * half).map(|i| (-0.5 * ((i as f64 - half as f64) / sigma).powi(2)).exp()).collect();
     let total: f64 = kernel.iter().sum();
     let kernel: Vec<f32> = kernel.iter().map(|k| (k / total) as f32).collect();
     // Reflect-101 index (OpenCV's BORDER_DEFAULT) for the few border taps.
@@ -236,9 +203,7 @@ mod tests {
     use super::*;
 
     fn step_image(w: u32, h: u32, split: u32) -> GreyImage {
-        let data = (0..w * h)
-            .map(|i| if i % w < split { 40 } else { 210 })
-            .collect();
+        let data = (0..w * h).map(|i| if i % w < split { 40 } else { 210 }).collect();
         GreyImage::new(w, h, data).unwrap_or_else(|e| panic!("{e}"))
     }
 
@@ -255,42 +220,17 @@ mod tests {
 
     #[test]
     fn flat_image_and_bad_input() {
-        let flat = GreyImage {
-            width: 64,
-            height: 48,
-            data: vec![128; 64 * 48],
-        };
-        assert!(detect_segments(&flat, &LsdConfig::default())
-            .unwrap_or_else(|e| panic!("{e}"))
-            .is_empty());
-        let short = GreyImage {
-            width: 64,
-            height: 48,
-            data: vec![0; 10],
-        };
+        let flat = GreyImage { width: 64, height: 48, data: vec![128; 64 * 48] };
+        assert!(detect_segments(&flat, &LsdConfig::default()).unwrap_or_else(|e| panic!("{e}")).is_empty());
+        let short = GreyImage { width: 64, height: 48, data: vec![0; 10] };
         assert_eq!(
             detect_segments(&short, &LsdConfig::default()),
-            Err(ObjectsError::BadImage {
-                expected: 64 * 48,
-                actual: 10
-            })
+            Err(ObjectsError::BadImage { expected: 64 * 48, actual: 10 })
         );
-        let bad = LsdConfig {
-            scale: 0.0,
-            ..Default::default()
-        };
-        assert!(matches!(
-            detect_segments(&flat, &bad),
-            Err(ObjectsError::BadConfig { .. })
-        ));
-        let tiny = GreyImage {
-            width: 2,
-            height: 2,
-            data: vec![0, 255, 0, 255],
-        };
-        assert!(detect_segments(&tiny, &LsdConfig::default())
-            .unwrap_or_else(|e| panic!("{e}"))
-            .is_empty());
+        let bad = LsdConfig { scale: 0.0, ..Default::default() };
+        assert!(matches!(detect_segments(&flat, &bad), Err(ObjectsError::BadConfig { .. })));
+        let tiny = GreyImage { width: 2, height: 2, data: vec![0, 255, 0, 255] };
+        assert!(detect_segments(&tiny, &LsdConfig::default()).unwrap_or_else(|e| panic!("{e}")).is_empty());
     }
 
     #[test]

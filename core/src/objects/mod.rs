@@ -247,13 +247,7 @@ pub struct ObjectEstimator {
 impl ObjectEstimator {
     /// An estimator for an object modelled by `shape` (from [`crate::map::Label::shape`]).
     pub fn new(shape: Shape, config: ParamConfig) -> Self {
-        Self {
-            shape,
-            config,
-            window: VecDeque::new(),
-            last: None,
-            last_line_yaw: None,
-        }
+        Self { shape, config, window: VecDeque::new(), last: None, last_line_yaw: None }
     }
 
     /// The last estimate, if any.
@@ -270,17 +264,12 @@ impl ObjectEstimator {
     /// [`lsd::segments_in_box`]). The oldest frame leaves the window when it is full.
     pub fn add_frame(&mut self, mut frame: LineFrame) -> FrameUse {
         let m = self.config.border_margin_px;
-        let (w, h) = (
-            f64::from(frame.camera.width),
-            f64::from(frame.camera.height),
-        );
+        let (w, h) = (f64::from(frame.camera.width), f64::from(frame.camera.height));
         let b = &frame.bbox;
         if !b.is_finite() || b.min[0] < m || b.min[1] < m || b.max[0] > w - m || b.max[1] > h - m {
             return FrameUse::Truncated;
         }
-        frame
-            .segments
-            .retain(|s| s.is_finite() && s.length_px() > 0.0);
+        frame.segments.retain(|s| s.is_finite() && s.length_px() > 0.0);
         let segments = frame.segments.len();
         self.window.push_back(frame);
         while self.window.len() > self.config.window_frames.max(1) {
@@ -290,10 +279,7 @@ impl ObjectEstimator {
     }
 
     /// Re-estimate from the object's accumulated world points and the frames in the window.
-    pub fn estimate(
-        &mut self,
-        points_in_world: &[Point3<f64>],
-    ) -> Result<ObjectEstimate, ObjectsError> {
+    pub fn estimate(&mut self, points_in_world: &[Point3<f64>]) -> Result<ObjectEstimate, ObjectsError> {
         let result = self.estimate_inner(points_in_world);
         match result {
             Ok(est) => {
@@ -301,10 +287,7 @@ impl ObjectEstimator {
                 Ok(est)
             }
             Err(e) => match &self.last {
-                Some(prev) => Ok(ObjectEstimate {
-                    confidence: Confidence::Low,
-                    ..prev.clone()
-                }),
+                Some(prev) => Ok(ObjectEstimate { confidence: Confidence::Low, ..prev.clone() }),
                 None => Err(e),
             },
         }
@@ -312,10 +295,7 @@ impl ObjectEstimator {
 
     fn finish(&self, g: ObjectGeometry) -> ObjectGeometry {
         match self.shape {
-            Shape::Cuboid => ObjectGeometry {
-                shape: Shape::Cuboid,
-                ..g
-            },
+            Shape::Cuboid => ObjectGeometry { shape: Shape::Cuboid, ..g },
             Shape::Cylinder => {
                 let r = (g.half_extents.x + g.half_extents.y) / 2.0;
                 ObjectGeometry {
@@ -329,21 +309,13 @@ impl ObjectEstimator {
     }
 
     fn estimate_inner(&mut self, points: &[Point3<f64>]) -> Result<ObjectEstimate, ObjectsError> {
-        if let Some(index) = points
-            .iter()
-            .position(|p| !p.coords.iter().all(|v| v.is_finite()))
-        {
+        if let Some(index) = points.iter().position(|p| !p.coords.iter().all(|v| v.is_finite())) {
             return Err(ObjectsError::NonFinitePoint { index });
         }
-        let (raw_c, raw_s) = mean_and_half_extent(points).ok_or(ObjectsError::TooFewPoints {
-            required: 1,
-            actual: 0,
-        })?;
+        let (raw_c, raw_s) =
+            mean_and_half_extent(points).ok_or(ObjectsError::TooFewPoints { required: 1, actual: 0 })?;
         let raw = self.finish(cuboid(raw_c, 0.0, raw_s));
-        let mut stages = StageEstimates {
-            raw: Some(raw),
-            ..Default::default()
-        };
+        let mut stages = StageEstimates { raw: Some(raw), ..Default::default() };
         let degenerate = |s: &Vector3<f64>| s.iter().all(|v| *v < self.config.degenerate_extent_m);
         let low = |g: ObjectGeometry, stage, stages, inliers| ObjectEstimate {
             geometry: g,
@@ -355,11 +327,7 @@ impl ObjectEstimator {
         let above_table: Vec<Point3<f64>>;
         let points = match self.config.table_z_m {
             Some(z) => {
-                above_table = points
-                    .iter()
-                    .filter(|p| p.z >= z + self.config.table_margin_m)
-                    .copied()
-                    .collect();
+                above_table = points.iter().filter(|p| p.z >= z + self.config.table_margin_m).copied().collect();
                 &above_table[..]
             }
             None => points,
@@ -369,45 +337,32 @@ impl ObjectEstimator {
             Err(ObjectsError::TooFewPoints { .. }) => {
                 if degenerate(&raw_s) {
                     if let Some(prev) = &self.last {
-                        return Ok(ObjectEstimate {
-                            confidence: Confidence::Low,
-                            ..prev.clone()
-                        });
+                        return Ok(ObjectEstimate { confidence: Confidence::Low, ..prev.clone() });
                     }
                 }
                 return Ok(low(raw, EstimateStage::Raw, stages, points.len()));
             }
             Err(e) => return Err(e),
         };
-        let inliers: Vec<Point3<f64>> = points
-            .iter()
-            .zip(&robust.inlier)
-            .filter(|(_, k)| **k)
-            .map(|(p, _)| *p)
-            .collect();
+        let inliers: Vec<Point3<f64>> =
+            points.iter().zip(&robust.inlier).filter(|(_, k)| **k).map(|(p, _)| *p).collect();
         let n_in = inliers.len();
         if degenerate(&robust.half_extents) {
             if let Some(prev) = &self.last {
-                return Ok(ObjectEstimate {
-                    confidence: Confidence::Low,
-                    ..prev.clone()
-                });
+                return Ok(ObjectEstimate { confidence: Confidence::Low, ..prev.clone() });
             }
             let g = self.finish(cuboid(robust.center, 0.0, robust.half_extents));
             stages.iforest = Some(g);
             return Ok(low(g, EstimateStage::Iforest, stages, n_in));
         }
-        let prev_yaw = if self.config.keep_previous_yaw {
-            self.last_line_yaw
-        } else {
-            None
-        };
+        let prev_yaw = if self.config.keep_previous_yaw { self.last_line_yaw } else { None };
         let ifo = self.finish(cuboid(robust.center, 0.0, robust.half_extents));
         stages.iforest = Some(ifo);
         let iforest_final = |stages: StageEstimates| -> ObjectEstimate {
             let geometry = match (self.shape, prev_yaw) {
-                (Shape::Cuboid, Some(yaw)) => oriented_extent(&inliers, yaw)
-                    .map_or(ifo, |(c, s)| canonical_cuboid(&cuboid(c, yaw, s))),
+                (Shape::Cuboid, Some(yaw)) => {
+                    oriented_extent(&inliers, yaw).map_or(ifo, |(c, s)| canonical_cuboid(&cuboid(c, yaw, s)))
+                }
                 _ => ifo,
             };
             ObjectEstimate {
@@ -424,9 +379,7 @@ impl ObjectEstimator {
         let frames: Vec<LineFrame> = self.window.iter().cloned().collect();
         let geometry_for_yaw = |yaw: f64| {
             oriented_extent(&inliers, yaw)
-                .map_or(cuboid(robust.center, yaw, robust.half_extents), |(c, s)| {
-                    cuboid(c, yaw, s)
-                })
+                .map_or(cuboid(robust.center, yaw, robust.half_extents), |(c, s)| cuboid(c, yaw, s))
         };
         let Some(alignment) = align_yaw(&frames, geometry_for_yaw, &self.config.yaw) else {
             return Ok(iforest_final(stages));
@@ -462,12 +415,7 @@ impl ObjectEstimator {
 /// tangent to the ellipsoid iff `πᵀ Q_w π = 0`.
 pub fn dual_quadric_world(geometry: &ObjectGeometry) -> Matrix4<f64> {
     let s = geometry.half_extents;
-    let q_o = Matrix4::from_diagonal(&nalgebra::Vector4::new(
-        s.x * s.x,
-        s.y * s.y,
-        s.z * s.z,
-        -1.0,
-    ));
+    let q_o = Matrix4::from_diagonal(&nalgebra::Vector4::new(s.x * s.x, s.y * s.y, s.z * s.z, -1.0));
     let t = geometry.world_from_object().to_homogeneous();
     t * q_o * t.transpose()
 }
@@ -479,11 +427,7 @@ mod tests {
 
     #[test]
     fn dual_quadric_tangent_planes() {
-        let g = cuboid(
-            Vector3::new(0.5, -0.1, 0.04),
-            0.5,
-            Vector3::new(0.06, 0.03, 0.04),
-        );
+        let g = cuboid(Vector3::new(0.5, -0.1, 0.04), 0.5, Vector3::new(0.06, 0.03, 0.04));
         let q = dual_quadric_world(&g);
         assert!((q - q.transpose()).abs().max() < 1e-12);
         // Tangent planes: z = cz ± sz, and the object-x planes x' = ±sx after yaw.
@@ -495,19 +439,13 @@ mod tests {
         assert!((top.transpose() * q * top)[0].abs() < 1e-12);
         assert!((side.transpose() * q * side)[0].abs() < 1e-12);
         // A plane cutting the ellipsoid gives s_x² − 0.03² > 0; one missing it gives < 0.
-        assert!(
-            ((inner.transpose() * q * inner)[0] - (0.06f64.powi(2) - 0.03f64.powi(2))).abs()
-                < 1e-12
-        );
+        assert!(((inner.transpose() * q * inner)[0] - (0.06f64.powi(2) - 0.03f64.powi(2))).abs() < 1e-12);
         let away = Vector4::new(0.0, 0.0, 1.0, -0.5);
         assert!((away.transpose() * q * away)[0] < 0.0);
         // Q_o recovered at the origin with yaw 0.
         let g0 = cuboid(Vector3::zeros(), 0.0, Vector3::new(1.0, 2.0, 3.0));
         let q0 = dual_quadric_world(&g0);
-        assert_eq!(
-            q0,
-            Matrix4::from_diagonal(&Vector4::new(1.0, 4.0, 9.0, -1.0))
-        );
+        assert_eq!(q0, Matrix4::from_diagonal(&Vector4::new(1.0, 4.0, 9.0, -1.0)));
     }
 }
 
@@ -522,8 +460,7 @@ mod config_tests {
         let back: ParamConfig = serde_json::from_str(&text).unwrap_or_else(|e| panic!("{e}"));
         assert_eq!(back, cfg);
         let partial: ParamConfig =
-            serde_json::from_str(r#"{"window_frames": 5, "iforest": {"passes": 1}}"#)
-                .unwrap_or_else(|e| panic!("{e}"));
+            serde_json::from_str(r#"{"window_frames": 5, "iforest": {"passes": 1}}"#).unwrap_or_else(|e| panic!("{e}"));
         assert_eq!(partial.window_frames, 5);
         assert_eq!(partial.iforest.passes, 1);
         assert_eq!(partial.iforest.n_trees, 100);

@@ -110,21 +110,13 @@ fn to_geometry(p: &Params, min_half: f64) -> ObjectGeometry {
 /// Association: (frame index, segment index, cube edge index).
 type Assoc = Vec<(usize, usize, usize)>;
 
-fn associate(
-    g: &ObjectGeometry,
-    frames: &[LineFrame],
-    gate_px: f64,
-    config: &RefineConfig,
-) -> Assoc {
+fn associate(g: &ObjectGeometry, frames: &[LineFrame], gate_px: f64, config: &RefineConfig) -> Assoc {
     let mut out = Vec::new();
     for (fi, f) in frames.iter().enumerate() {
         let edges = project_edges(g, &f.camera, &f.world_from_camera);
         for (si, s) in f.segments.iter().enumerate() {
             let m = s.midpoint();
-            let best = edges
-                .iter()
-                .map(|e| (e, e.distance_to(m)))
-                .min_by(|x, y| x.1.total_cmp(&y.1));
+            let best = edges.iter().map(|e| (e, e.distance_to(m))).min_by(|x, y| x.1.total_cmp(&y.1));
             if let Some((e, d)) = best {
                 let ang = angle_difference(e.angle_rad(), s.angle_rad()).to_degrees();
                 if d <= gate_px && ang <= config.gate_deg {
@@ -144,13 +136,7 @@ fn signed_angle_deg(edge: &ProjectedEdge, seg_angle: f64) -> f64 {
     d.to_degrees()
 }
 
-fn residuals(
-    p: &Params,
-    p0: &Params,
-    frames: &[LineFrame],
-    assoc: &Assoc,
-    config: &RefineConfig,
-) -> Vec<f64> {
+fn residuals(p: &Params, p0: &Params, frames: &[LineFrame], assoc: &Assoc, config: &RefineConfig) -> Vec<f64> {
     let g = to_geometry(p, config.min_half_extent_m);
     let mut r = Vec::with_capacity(assoc.len() * 3 + 6);
     let mut cached: Option<(usize, Vec<ProjectedEdge>)> = None;
@@ -161,9 +147,7 @@ fn residuals(
         if cached.as_ref().map(|c| c.0) != Some(fi) {
             cached = Some((fi, project_edges(&g, &f.camera, &f.world_from_camera)));
         }
-        let edge = cached
-            .as_ref()
-            .and_then(|c| c.1.iter().find(|e| e.edge == ei));
+        let edge = cached.as_ref().and_then(|c| c.1.iter().find(|e| e.edge == ei));
         let Some(s) = f.segments.get(si) else {
             continue;
         };
@@ -191,11 +175,7 @@ fn cost(r: &[f64]) -> f64 {
 
 /// Refine yaw, scale (and centre) of a cuboid against the window's line segments. Returns `None`
 /// when fewer than [`RefineConfig::min_segments`] segments associate with the initial cube.
-pub fn refine_yaw_scale(
-    initial: &ObjectGeometry,
-    frames: &[LineFrame],
-    config: &RefineConfig,
-) -> Option<Refinement> {
+pub fn refine_yaw_scale(initial: &ObjectGeometry, frames: &[LineFrame], config: &RefineConfig) -> Option<Refinement> {
     let p0 = to_params(initial);
     let mut p = p0;
     let outer_n = config.outer_iterations.max(1);
@@ -217,12 +197,7 @@ pub fn refine_yaw_scale(
     let mut lambda = 1e-3;
     for outer in 0..config.outer_iterations {
         if outer > 0 {
-            let a = associate(
-                &to_geometry(&p, config.min_half_extent_m),
-                frames,
-                gate(outer),
-                config,
-            );
+            let a = associate(&to_geometry(&p, config.min_half_extent_m), frames, gate(outer), config);
             if a.len() < config.min_segments {
                 break;
             }
@@ -284,15 +259,9 @@ pub fn refine_yaw_scale(
         }
     }
     let mut geometry = to_geometry(&p, config.min_half_extent_m);
-    geometry.yaw_rad = (geometry.yaw_rad + std::f64::consts::FRAC_PI_2)
-        .rem_euclid(std::f64::consts::PI)
-        - std::f64::consts::FRAC_PI_2;
+    geometry.yaw_rad =
+        (geometry.yaw_rad + std::f64::consts::FRAC_PI_2).rem_euclid(std::f64::consts::PI) - std::f64::consts::FRAC_PI_2;
     let r_final = residuals(&p, &p0, frames, &assoc, config);
     let rms_after_px = (data_cost(&r_final, &assoc) / n_data(&assoc)).sqrt();
-    Some(Refinement {
-        geometry,
-        rms_before_px,
-        rms_after_px,
-        associated: assoc.len(),
-    })
+    Some(Refinement { geometry, rms_before_px, rms_after_px, associated: assoc.len() })
 }

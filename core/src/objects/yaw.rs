@@ -24,20 +24,8 @@ use super::lsd::LineSegment;
 use crate::geometry::{Box2, ObjectGeometry, PinholeCamera, Se3, Shape};
 
 /// The 12 edges of [`ObjectGeometry::corners`] (bottom ring, top ring, verticals).
-pub const CUBE_EDGES: [(usize, usize); 12] = [
-    (0, 1),
-    (1, 2),
-    (2, 3),
-    (3, 0),
-    (4, 5),
-    (5, 6),
-    (6, 7),
-    (7, 4),
-    (0, 4),
-    (1, 5),
-    (2, 6),
-    (3, 7),
-];
+pub const CUBE_EDGES: [(usize, usize); 12] =
+    [(0, 1), (1, 2), (2, 3), (3, 0), (4, 5), (5, 6), (6, 7), (7, 4), (0, 4), (1, 5), (2, 6), (3, 7)];
 
 /// One frame's line evidence for one object.
 #[derive(Debug, Clone, PartialEq)]
@@ -68,11 +56,7 @@ pub struct YawConfig {
 
 impl Default for YawConfig {
     fn default() -> Self {
-        Self {
-            samples: 30,
-            xi_deg: 5.0,
-            bonus_per_deg: 0.1,
-        }
+        Self { samples: 30, xi_deg: 5.0, bonus_per_deg: 0.1 }
     }
 }
 
@@ -90,9 +74,7 @@ pub struct ProjectedEdge {
 impl ProjectedEdge {
     /// Undirected angle in `[0, π)`.
     pub fn angle_rad(&self) -> f64 {
-        (self.b[1] - self.a[1])
-            .atan2(self.b[0] - self.a[0])
-            .rem_euclid(std::f64::consts::PI)
+        (self.b[1] - self.a[1]).atan2(self.b[0] - self.a[0]).rem_euclid(std::f64::consts::PI)
     }
 
     /// Distance from a point to this edge as a finite segment, pixels.
@@ -121,25 +103,16 @@ impl ProjectedEdge {
 
 /// Project the 12 edges of a cuboid into a frame (edges with an endpoint behind the camera are
 /// left out).
-pub fn project_edges(
-    geometry: &ObjectGeometry,
-    camera: &PinholeCamera,
-    world_from_camera: &Se3,
-) -> Vec<ProjectedEdge> {
+pub fn project_edges(geometry: &ObjectGeometry, camera: &PinholeCamera, world_from_camera: &Se3) -> Vec<ProjectedEdge> {
     let camera_from_world = world_from_camera.inverse();
     let corners = geometry.corners();
-    let uv: Vec<Option<[f64; 2]>> = corners
-        .iter()
-        .map(|c| camera.project(&(camera_from_world * c)))
-        .collect();
+    let uv: Vec<Option<[f64; 2]>> = corners.iter().map(|c| camera.project(&(camera_from_world * c))).collect();
     CUBE_EDGES
         .iter()
         .enumerate()
-        .filter_map(|(edge, &(i, j))| {
-            match (uv.get(i).copied().flatten(), uv.get(j).copied().flatten()) {
-                (Some(a), Some(b)) => Some(ProjectedEdge { edge, a, b }),
-                _ => None,
-            }
+        .filter_map(|(edge, &(i, j))| match (uv.get(i).copied().flatten(), uv.get(j).copied().flatten()) {
+            (Some(a), Some(b)) => Some(ProjectedEdge { edge, a, b }),
+            _ => None,
         })
         .collect()
 }
@@ -154,27 +127,16 @@ pub fn angle_difference(a_rad: f64, b_rad: f64) -> f64 {
 /// against it, degrees.
 pub fn nearest_edge(segment: &LineSegment, edges: &[ProjectedEdge]) -> Option<(usize, f64)> {
     let m = segment.midpoint();
-    let (k, _) = edges
-        .iter()
-        .enumerate()
-        .map(|(k, e)| (k, e.distance_to(m)))
-        .min_by(|x, y| x.1.total_cmp(&y.1))?;
+    let (k, _) = edges.iter().enumerate().map(|(k, e)| (k, e.distance_to(m))).min_by(|x, y| x.1.total_cmp(&y.1))?;
     let e = edges.get(k)?;
-    Some((
-        k,
-        angle_difference(e.angle_rad(), segment.angle_rad()).to_degrees(),
-    ))
+    Some((k, angle_difference(e.angle_rad(), segment.angle_rad()).to_degrees()))
 }
 
 /// The paper's per-frame score (Eq. "cost") of a geometry against one frame's segments, and the
 /// frame's accumulated error (sum of `e` over the segments with `e < ξ`). `(0, 0)` when the frame
 /// has no segments or no edge projects.
 pub fn frame_score(geometry: &ObjectGeometry, frame: &LineFrame, config: &YawConfig) -> (f64, f64) {
-    let prepared: Vec<([f64; 2], f64)> = frame
-        .segments
-        .iter()
-        .map(|s| (s.midpoint(), s.angle_rad()))
-        .collect();
+    let prepared: Vec<([f64; 2], f64)> = frame.segments.iter().map(|s| (s.midpoint(), s.angle_rad())).collect();
     prepared_frame_score(geometry, frame, &prepared, config)
 }
 
@@ -199,12 +161,7 @@ fn prepared_frame_score(
         .map(|e| {
             let d = [e.b[0] - e.a[0], e.b[1] - e.a[1]];
             let len2 = d[0] * d[0] + d[1] * d[1];
-            (
-                e.a,
-                d,
-                if len2 > 0.0 { 1.0 / len2 } else { 0.0 },
-                e.angle_rad(),
-            )
+            (e.a, d, if len2 > 0.0 { 1.0 / len2 } else { 0.0 }, e.angle_rad())
         })
         .collect();
     let (mut n_p, mut sum) = (0usize, 0.0);
@@ -231,10 +188,7 @@ fn prepared_frame_score(
         return (0.0, 0.0);
     }
     let mean = sum / n_p as f64;
-    (
-        n_p as f64 / n_a as f64 * (1.0 + config.bonus_per_deg * (config.xi_deg - mean)),
-        sum,
-    )
+    (n_p as f64 / n_a as f64 * (1.0 + config.bonus_per_deg * (config.xi_deg - mean)), sum)
 }
 
 /// Result of Alg. 2.
@@ -261,15 +215,8 @@ pub fn align_yaw(
     let n = config.samples.max(1);
     let mut samples = Vec::with_capacity(n);
     let mut best: Option<(f64, f64, f64)> = None;
-    let prepared: Vec<Vec<([f64; 2], f64)>> = frames
-        .iter()
-        .map(|f| {
-            f.segments
-                .iter()
-                .map(|s| (s.midpoint(), s.angle_rad()))
-                .collect()
-        })
-        .collect();
+    let prepared: Vec<Vec<([f64; 2], f64)>> =
+        frames.iter().map(|f| f.segments.iter().map(|s| (s.midpoint(), s.angle_rad())).collect()).collect();
     for k in 0..n {
         let yaw = -std::f64::consts::FRAC_PI_2 + k as f64 * std::f64::consts::PI / n as f64;
         let g = geometry_for_yaw(yaw);
@@ -284,21 +231,13 @@ pub fn align_yaw(
             best = Some((yaw, s_theta, e_theta));
         }
     }
-    best.map(|(yaw_rad, score, error_deg)| YawAlignment {
-        yaw_rad,
-        score,
-        error_deg,
-        samples,
-    })
+    best.map(|(yaw_rad, score, error_deg)| YawAlignment { yaw_rad, score, error_deg, samples })
 }
 
 /// Centre and half-extents of a point set in the frame rotated by `yaw_rad` about world z: the
 /// points are rotated into that frame, their min/max taken per axis, and the mid-range centre
 /// rotated back. `None` for an empty set.
-pub fn oriented_extent(
-    points: &[Point3<f64>],
-    yaw_rad: f64,
-) -> Option<(Vector3<f64>, Vector3<f64>)> {
+pub fn oriented_extent(points: &[Point3<f64>], yaw_rad: f64) -> Option<(Vector3<f64>, Vector3<f64>)> {
     let (s, c) = yaw_rad.sin_cos();
     let mut lo = Vector3::repeat(f64::INFINITY);
     let mut hi = Vector3::repeat(f64::NEG_INFINITY);
@@ -317,12 +256,7 @@ pub fn oriented_extent(
 
 /// A cuboid geometry from centre, yaw and half-extents.
 pub fn cuboid(center: Vector3<f64>, yaw_rad: f64, half_extents: Vector3<f64>) -> ObjectGeometry {
-    ObjectGeometry {
-        shape: Shape::Cuboid,
-        center,
-        yaw_rad,
-        half_extents,
-    }
+    ObjectGeometry { shape: Shape::Cuboid, center, yaw_rad, half_extents }
 }
 
 /// The same cuboid written with its longer horizontal side along the object x axis and yaw in
@@ -335,8 +269,8 @@ pub fn canonical_cuboid(g: &ObjectGeometry) -> ObjectGeometry {
         out.half_extents = Vector3::new(g.half_extents.y, g.half_extents.x, g.half_extents.z);
         out.yaw_rad += std::f64::consts::FRAC_PI_2;
     }
-    out.yaw_rad = (out.yaw_rad + std::f64::consts::FRAC_PI_2).rem_euclid(std::f64::consts::PI)
-        - std::f64::consts::FRAC_PI_2;
+    out.yaw_rad =
+        (out.yaw_rad + std::f64::consts::FRAC_PI_2).rem_euclid(std::f64::consts::PI) - std::f64::consts::FRAC_PI_2;
     out
 }
 
@@ -356,16 +290,10 @@ mod tests {
 
     #[test]
     fn canonical_cuboid_puts_the_long_side_on_x() {
-        let g = cuboid(
-            Vector3::new(0.5, 0.0, 0.05),
-            0.3,
-            Vector3::new(0.02, 0.06, 0.05),
-        );
+        let g = cuboid(Vector3::new(0.5, 0.0, 0.05), 0.3, Vector3::new(0.02, 0.06, 0.05));
         let c = canonical_cuboid(&g);
         assert_eq!(c.half_extents, Vector3::new(0.06, 0.02, 0.05));
-        assert!(
-            (c.yaw_rad - (0.3 + std::f64::consts::FRAC_PI_2 - std::f64::consts::PI)).abs() < 1e-12
-        );
+        assert!((c.yaw_rad - (0.3 + std::f64::consts::FRAC_PI_2 - std::f64::consts::PI)).abs() < 1e-12);
         // Same footprint.
         assert!(crate::geometry::iou3d(&g, &c) > 1.0 - 1e-9);
         let already = cuboid(Vector3::zeros(), 2.0, Vector3::new(0.06, 0.02, 0.05));
@@ -392,15 +320,9 @@ mod tests {
             bbox: Box2::new(0.0, 0.0, 640.0, 480.0),
             segments: vec![],
         };
-        assert_eq!(
-            frame_score(&in_front, &frame, &YawConfig::default()),
-            (0.0, 0.0)
+        assert_eq!(frame_score(&in_front, &frame, &YawConfig::default()), (0.0, 0.0));
+        assert!(
+            align_yaw(&[frame], |y| cuboid(in_front.center, y, in_front.half_extents), &YawConfig::default()).is_none()
         );
-        assert!(align_yaw(
-            &[frame],
-            |y| cuboid(in_front.center, y, in_front.half_extents),
-            &YawConfig::default()
-        )
-        .is_none());
     }
 }

@@ -30,12 +30,7 @@ pub struct ArmCapsule {
 }
 
 fn cap(link: &str, a: [f64; 3], b: [f64; 3], r: f64) -> ArmCapsule {
-    ArmCapsule {
-        link: link.to_string(),
-        a_in_link: a,
-        b_in_link: b,
-        radius_m: r,
-    }
+    ArmCapsule { link: link.to_string(), a_in_link: a, b_in_link: b, radius_m: r }
 }
 
 /// Finger capsule length below the hand, hand frame: fingers are modelled from z = 0.065 m to
@@ -78,20 +73,10 @@ pub fn panda_capsules() -> Vec<ArmCapsule> {
         cap("panda_link3", [0.083, 0.0, 0.0], [0.083, 0.056, 0.0], 0.085),
         cap("panda_link3", [0.0, 0.0, 0.0], [0.083, 0.0, 0.0], 0.075),
         cap("panda_link4", [0.0, 0.0, 0.0], [0.0, 0.0, 0.056], 0.09),
-        cap(
-            "panda_link4",
-            [-0.083, 0.0, 0.0],
-            [-0.083, 0.07, 0.0],
-            0.085,
-        ),
+        cap("panda_link4", [-0.083, 0.0, 0.0], [-0.083, 0.07, 0.0], 0.085),
         cap("panda_link4", [0.0, 0.0, 0.0], [-0.083, 0.0, 0.0], 0.07),
         cap("panda_link5", [0.0, 0.0, -0.21], [0.0, 0.0, -0.1], 0.07),
-        cap(
-            "panda_link5",
-            [0.0, 0.075, -0.17],
-            [0.0, 0.075, -0.06],
-            0.065,
-        ),
+        cap("panda_link5", [0.0, 0.075, -0.17], [0.0, 0.075, -0.06], 0.065),
         cap("panda_link5", [0.0, 0.0, 0.0], [0.0, 0.075, 0.0], 0.055),
         cap("panda_link5", [0.0, 0.0, -0.1], [0.0, 0.0, 0.0], 0.06),
         cap("panda_link6", [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], 0.055),
@@ -170,21 +155,12 @@ impl CollisionScene {
     /// side; the table top is at z = 0 and links must stay above `table_margin_m`.
     ///
     /// Errors: [`PlanError::InvalidObject`] for non-finite or non-positive sizes.
-    pub fn new(
-        objects: &[ObjectGeometry],
-        object_margin_m: f64,
-        table_margin_m: f64,
-    ) -> Result<Self, PlanError> {
+    pub fn new(objects: &[ObjectGeometry], object_margin_m: f64, table_margin_m: f64) -> Result<Self, PlanError> {
         let mut obstacles = Vec::with_capacity(objects.len());
         for (index, o) in objects.iter().enumerate() {
-            obstacles.push(
-                Self::obstacle(o, object_margin_m).ok_or(PlanError::InvalidObject { index })?,
-            );
+            obstacles.push(Self::obstacle(o, object_margin_m).ok_or(PlanError::InvalidObject { index })?);
         }
-        Ok(Self {
-            obstacles,
-            min_link_height_m: table_margin_m,
-        })
+        Ok(Self { obstacles, min_link_height_m: table_margin_m })
     }
 
     fn obstacle(o: &ObjectGeometry, margin: f64) -> Option<Obstacle> {
@@ -201,11 +177,7 @@ impl CollisionScene {
                 let he = h.add_scalar(margin);
                 let c = Cuboid::new(Vector::new(he.x, he.y, he.z));
                 let (s, co) = o.yaw_rad.sin_cos();
-                let half = Vector3::new(
-                    co.abs() * he.x + s.abs() * he.y,
-                    s.abs() * he.x + co.abs() * he.y,
-                    he.z,
-                );
+                let half = Vector3::new(co.abs() * he.x + s.abs() * he.y, s.abs() * he.x + co.abs() * he.y, he.z);
                 (ObstacleShape::Cuboid(c), o.world_from_object(), half)
             }
             Shape::Cylinder => {
@@ -214,16 +186,9 @@ impl CollisionScene {
                 // parry's cylinder axis is y: rotate it onto world z.
                 let world_from_shape = Se3::from_parts(
                     nalgebra::Translation3::from(o.center),
-                    nalgebra::UnitQuaternion::from_axis_angle(
-                        &Vector3::x_axis(),
-                        std::f64::consts::FRAC_PI_2,
-                    ),
+                    nalgebra::UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::FRAC_PI_2),
                 );
-                (
-                    ObstacleShape::Cylinder(Cylinder::new(hz, r)),
-                    world_from_shape,
-                    Vector3::new(r, r, hz),
-                )
+                (ObstacleShape::Cylinder(Cylinder::new(hz, r)), world_from_shape, Vector3::new(r, r, hz))
             }
         };
         Some(Obstacle {
@@ -255,10 +220,7 @@ struct WorldCapsule {
 
 impl WorldCapsule {
     fn aabb_overlaps(&self, min: &Vector3<f64>, max: &Vector3<f64>) -> bool {
-        (0..3).all(|i| {
-            self.a[i].min(self.b[i]) - self.r <= max[i]
-                && self.a[i].max(self.b[i]) + self.r >= min[i]
-        })
+        (0..3).all(|i| self.a[i].min(self.b[i]) - self.r <= max[i] && self.a[i].max(self.b[i]) + self.r >= min[i])
     }
     fn parry(&self) -> Capsule {
         Capsule::new(vec_of(&self.a), vec_of(&self.b), self.r)
@@ -314,13 +276,7 @@ impl ArmCollisionModel {
             let idx = if c.link == chain.root_link() {
                 None
             } else {
-                Some(
-                    chain
-                        .link_index(&c.link)
-                        .ok_or_else(|| PlanError::UnknownLink {
-                            link: c.link.clone(),
-                        })?,
-                )
+                Some(chain.link_index(&c.link).ok_or_else(|| PlanError::UnknownLink { link: c.link.clone() })?)
             };
             bound.push((idx, c));
         }
@@ -340,45 +296,27 @@ impl ArmCollisionModel {
                 }
             }
         }
-        Ok(Self {
-            capsules: bound,
-            self_pairs: pairs,
-            root_link: chain.root_link().to_string(),
-        })
+        Ok(Self { capsules: bound, self_pairs: pairs, root_link: chain.root_link().to_string() })
     }
 
     fn world_capsules(&self, links: &[Se3]) -> Vec<WorldCapsule> {
         self.capsules
             .iter()
             .map(|(idx, c)| {
-                let t = idx
-                    .and_then(|i| links.get(i))
-                    .copied()
-                    .unwrap_or_else(Se3::identity);
-                WorldCapsule {
-                    a: t * Point3::from(c.a_in_link),
-                    b: t * Point3::from(c.b_in_link),
-                    r: c.radius_m,
-                }
+                let t = idx.and_then(|i| links.get(i)).copied().unwrap_or_else(Se3::identity);
+                WorldCapsule { a: t * Point3::from(c.a_in_link), b: t * Point3::from(c.b_in_link), r: c.radius_m }
             })
             .collect()
     }
 
     /// The first contact of configuration `q` in `scene`, or `None` when it is free.
-    pub fn first_contact(
-        &self,
-        chain: &ArmChain,
-        q: &JointVector,
-        scene: &CollisionScene,
-    ) -> Option<Contact> {
+    pub fn first_contact(&self, chain: &ArmChain, q: &JointVector, scene: &CollisionScene) -> Option<Contact> {
         let links = chain.forward_all(q);
         let caps = self.world_capsules(&links);
         // Table (cheapest) first.
         for (wc, (_, c)) in caps.iter().zip(self.capsules.iter()) {
             if c.link != self.root_link && wc.a.z.min(wc.b.z) - wc.r < scene.min_link_height_m {
-                return Some(Contact::Table {
-                    link: c.link.clone(),
-                });
+                return Some(Contact::Table { link: c.link.clone() });
             }
         }
         let identity = Pose::IDENTITY;
@@ -387,15 +325,11 @@ impl ArmCollisionModel {
                 if !wc.aabb_overlaps(&o.aabb_min, &o.aabb_max) {
                     continue;
                 }
-                let hit =
-                    intersection_test(&identity, &wc.parry(), &o.world_pose, o.shape.as_shape())
-                        .map(|r| r.intersecting)
-                        .unwrap_or(true);
+                let hit = intersection_test(&identity, &wc.parry(), &o.world_pose, o.shape.as_shape())
+                    .map(|r| r.intersecting)
+                    .unwrap_or(true);
                 if hit {
-                    return Some(Contact::Object {
-                        link: c.link.clone(),
-                        object: k,
-                    });
+                    return Some(Contact::Object { link: c.link.clone(), object: k });
                 }
             }
         }
@@ -408,20 +342,11 @@ impl ArmCollisionModel {
             if !b.aabb_overlaps(&min, &max) {
                 continue;
             }
-            let hit = intersection_test(&identity, &a.parry(), &identity, &b.parry())
-                .map(|r| r.intersecting)
-                .unwrap_or(true);
+            let hit =
+                intersection_test(&identity, &a.parry(), &identity, &b.parry()).map(|r| r.intersecting).unwrap_or(true);
             if hit {
-                let name = |k: usize| {
-                    self.capsules
-                        .get(k)
-                        .map(|(_, c)| c.link.clone())
-                        .unwrap_or_default()
-                };
-                return Some(Contact::SelfCollision {
-                    link_a: name(i),
-                    link_b: name(j),
-                });
+                let name = |k: usize| self.capsules.get(k).map(|(_, c)| c.link.clone()).unwrap_or_default();
+                return Some(Contact::SelfCollision { link_a: name(i), link_b: name(j) });
             }
         }
         None
@@ -435,12 +360,7 @@ impl ArmCollisionModel {
     /// Smallest distance from the hand capsules (hand body and open fingers) placed at
     /// `world_from_hand` to the objects of `scene`, metres (negative-free: 0 when touching);
     /// `f64::INFINITY` for an empty scene.
-    pub fn hand_clearance(
-        &self,
-        world_from_hand: &Se3,
-        hand_link: &str,
-        scene: &CollisionScene,
-    ) -> f64 {
+    pub fn hand_clearance(&self, world_from_hand: &Se3, hand_link: &str, scene: &CollisionScene) -> f64 {
         let identity = Pose::IDENTITY;
         let mut best = f64::INFINITY;
         for (_, c) in self.capsules.iter().filter(|(_, c)| c.link == hand_link) {
@@ -450,9 +370,7 @@ impl ArmCollisionModel {
                 c.radius_m,
             );
             for o in &scene.obstacles {
-                if let Ok(d) =
-                    parry3d_f64::query::distance(&identity, &cap, &o.world_pose, o.shape.as_shape())
-                {
+                if let Ok(d) = parry3d_f64::query::distance(&identity, &cap, &o.world_pose, o.shape.as_shape()) {
                     best = best.min(d.distance);
                 }
             }

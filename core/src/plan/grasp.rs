@@ -150,16 +150,8 @@ pub(crate) fn grasp_directions(
     let pi = std::f64::consts::PI;
     let both = |yaw: f64, width_m: f64, short_side: bool| {
         [
-            GraspDirection {
-                yaw_rad: wrap_angle(yaw),
-                width_m,
-                short_side,
-            },
-            GraspDirection {
-                yaw_rad: wrap_angle(yaw + pi),
-                width_m,
-                short_side,
-            },
+            GraspDirection { yaw_rad: wrap_angle(yaw), width_m, short_side },
+            GraspDirection { yaw_rad: wrap_angle(yaw + pi), width_m, short_side },
         ]
     };
     let mut out: Vec<GraspDirection> = match object.shape {
@@ -167,11 +159,7 @@ pub(crate) fn grasp_directions(
             // Closing along the object's x axis needs hand yaw = object yaw + π/2; along y, = yaw.
             let across_x = both(object.yaw_rad + pi / 2.0, 2.0 * h.x, h.x <= h.y);
             let across_y = both(object.yaw_rad, 2.0 * h.y, h.x > h.y);
-            let (short, long) = if h.x <= h.y {
-                (across_x, across_y)
-            } else {
-                (across_y, across_x)
-            };
+            let (short, long) = if h.x <= h.y { (across_x, across_y) } else { (across_y, across_x) };
             let mut v = short.to_vec();
             if config.allow_long_side {
                 v.extend(long);
@@ -181,17 +169,13 @@ pub(crate) fn grasp_directions(
         Shape::Cylinder => {
             let n = config.cylinder_yaw_count.max(1);
             let width = 2.0 * object.radius();
-            (0..n)
-                .flat_map(|k| both(current_yaw_rad + pi * k as f64 / n as f64, width, true))
-                .collect()
+            (0..n).flat_map(|k| both(current_yaw_rad + pi * k as f64 / n as f64, width, true)).collect()
         }
     };
     out.retain(|d| d.width_m + config.min_opening_clearance_m <= config.max_opening_m);
     // Closest to the current hand yaw first (stable for ties).
     out.sort_by(|a, b| {
-        wrap_angle(a.yaw_rad - current_yaw_rad)
-            .abs()
-            .total_cmp(&wrap_angle(b.yaw_rad - current_yaw_rad).abs())
+        wrap_angle(a.yaw_rad - current_yaw_rad).abs().total_cmp(&wrap_angle(b.yaw_rad - current_yaw_rad).abs())
     });
     out
 }
@@ -210,11 +194,7 @@ pub(crate) fn narrowest_width(object: &ObjectGeometry) -> f64 {
 /// neighbours; both at least `min_tcp_height_m`.
 pub(crate) fn grasp_heights(object: &ObjectGeometry, config: &GraspConfig) -> Vec<f64> {
     let top = object.center.z + object.half_extents.z;
-    let deep = object
-        .center
-        .z
-        .max(top - config.max_grasp_depth_m)
-        .max(config.min_tcp_height_m);
+    let deep = object.center.z.max(top - config.max_grasp_depth_m).max(config.min_tcp_height_m);
     let shallow = (top - config.shallow_grasp_depth_m).max(config.min_tcp_height_m);
     if shallow > deep + 1e-3 {
         vec![deep, shallow]
@@ -243,10 +223,7 @@ mod tests {
             assert!((t.rotation * Vector3::z() - Vector3::new(0.0, 0.0, -1.0)).norm() < 1e-12);
             assert!(wrap_angle(hand_yaw_of(&t) - yaw).abs() < 1e-12);
             // Closing axis (hand y) = (sin yaw, −cos yaw, 0).
-            assert!(
-                (t.rotation * Vector3::y() - Vector3::new(yaw.sin(), -yaw.cos(), 0.0)).norm()
-                    < 1e-12
-            );
+            assert!((t.rotation * Vector3::y() - Vector3::new(yaw.sin(), -yaw.cos(), 0.0)).norm() < 1e-12);
         }
     }
 
@@ -264,27 +241,14 @@ mod tests {
             assert_eq!(dirs.len(), 4);
             for d in dirs {
                 let closing = top_down_pose(Vector3::zeros(), d.yaw_rad).rotation * Vector3::y();
-                let expected = if d.short_side {
-                    2.0 * hx.min(hy)
-                } else {
-                    2.0 * hx.max(hy)
-                };
+                let expected = if d.short_side { 2.0 * hx.min(hy) } else { 2.0 * hx.max(hy) };
                 assert!((d.width_m - expected).abs() < 1e-12);
                 // Short-side grasps close along the short axis, long-side ones across it.
                 let along = closing.dot(&short).abs();
-                assert!(if d.short_side {
-                    along > 1.0 - 1e-12
-                } else {
-                    along < 1e-12
-                });
+                assert!(if d.short_side { along > 1.0 - 1e-12 } else { along < 1e-12 });
             }
-            let only_short = GraspConfig {
-                allow_long_side: false,
-                ..GraspConfig::default()
-            };
-            assert!(grasp_directions(&b, 0.0, &only_short)
-                .iter()
-                .all(|d| d.short_side));
+            let only_short = GraspConfig { allow_long_side: false, ..GraspConfig::default() };
+            assert!(grasp_directions(&b, 0.0, &only_short).iter().all(|d| d.short_side));
         }
     }
 
@@ -292,10 +256,7 @@ mod tests {
     fn candidates_are_ordered_by_yaw_change_and_height_is_clamped() {
         let c = GraspConfig::default();
         let b = block(0.0, 0.02, 0.05, 0.03);
-        let only_short = GraspConfig {
-            allow_long_side: false,
-            ..GraspConfig::default()
-        };
+        let only_short = GraspConfig { allow_long_side: false, ..GraspConfig::default() };
         let dirs = grasp_directions(&b, 1.4, &only_short);
         // Short side along x → hand yaw π/2 or −π/2; from 1.4 rad the first is π/2.
         assert!((dirs[0].yaw_rad - std::f64::consts::FRAC_PI_2).abs() < 1e-12);
@@ -303,10 +264,7 @@ mod tests {
         let hs = grasp_heights(&b, &c);
         assert!((hs[0] - 0.035).abs() < 1e-12 && (hs[1] - 0.048).abs() < 1e-12);
         // 2 cm tall: centroid 1 cm, raised to the minimum TCP height; no distinct shallow grasp.
-        assert_eq!(
-            grasp_heights(&block(0.0, 0.02, 0.02, 0.01), &c),
-            vec![c.min_tcp_height_m]
-        );
+        assert_eq!(grasp_heights(&block(0.0, 0.02, 0.02, 0.01), &c), vec![c.min_tcp_height_m]);
         // 20 cm tall: TCP 2.5 cm below the top.
         assert!((grasp_heights(&block(0.0, 0.02, 0.02, 0.1), &c)[0] - 0.175).abs() < 1e-12);
         // 7.8 cm wide on both sides: too wide with the 4 mm minimum clearance.

@@ -114,24 +114,14 @@ fn rpy_to_quaternion(rpy: [f64; 3]) -> UnitQuaternion<f64> {
 impl ArmChain {
     /// Reads the URDF at `urdf_path` and builds the chain `root_link → tip_link`. The chain must
     /// contain exactly [`ARM_DOF`] revolute joints (fixed joints are folded in).
-    pub fn from_urdf(
-        urdf_path: &std::path::Path,
-        root_link: &str,
-        tip_link: &str,
-    ) -> Result<Self, PlanError> {
-        let robot = urdf_rs::read_file(urdf_path).map_err(|e| PlanError::Urdf {
-            path: urdf_path.display().to_string(),
-            reason: e.to_string(),
-        })?;
+    pub fn from_urdf(urdf_path: &std::path::Path, root_link: &str, tip_link: &str) -> Result<Self, PlanError> {
+        let robot = urdf_rs::read_file(urdf_path)
+            .map_err(|e| PlanError::Urdf { path: urdf_path.display().to_string(), reason: e.to_string() })?;
         Self::from_robot(&robot, root_link, tip_link)
     }
 
     /// Builds the chain from an already parsed URDF (see [`ArmChain::from_urdf`]).
-    pub fn from_robot(
-        robot: &urdf_rs::Robot,
-        root_link: &str,
-        tip_link: &str,
-    ) -> Result<Self, PlanError> {
+    pub fn from_robot(robot: &urdf_rs::Robot, root_link: &str, tip_link: &str) -> Result<Self, PlanError> {
         // Walk from the tip up to the root through each link's parent joint.
         let mut reversed: Vec<&urdf_rs::Joint> = Vec::new();
         let mut link = tip_link.to_string();
@@ -140,36 +130,27 @@ impl ArmChain {
                 .joints
                 .iter()
                 .find(|j| j.child.link == link)
-                .ok_or_else(|| PlanError::NoChain {
-                    root: root_link.to_string(),
-                    tip: tip_link.to_string(),
-                })?;
+                .ok_or_else(|| PlanError::NoChain { root: root_link.to_string(), tip: tip_link.to_string() })?;
             reversed.push(joint);
             link = joint.parent.link.clone();
             if reversed.len() > robot.joints.len() {
-                return Err(PlanError::NoChain {
-                    root: root_link.to_string(),
-                    tip: tip_link.to_string(),
-                });
+                return Err(PlanError::NoChain { root: root_link.to_string(), tip: tip_link.to_string() });
             }
         }
         let mut elements = Vec::new();
         let mut joints = Vec::new();
         for joint in reversed.iter().rev() {
             let o = &joint.origin;
-            let parent_from_joint = Se3::from_parts(
-                Translation3::new(o.xyz[0], o.xyz[1], o.xyz[2]),
-                rpy_to_quaternion(*o.rpy),
-            );
+            let parent_from_joint =
+                Se3::from_parts(Translation3::new(o.xyz[0], o.xyz[1], o.xyz[2]), rpy_to_quaternion(*o.rpy));
             let axis = match joint.joint_type {
                 urdf_rs::JointType::Fixed => None,
                 urdf_rs::JointType::Revolute => {
                     let a = Vector3::new(joint.axis.xyz[0], joint.axis.xyz[1], joint.axis.xyz[2]);
-                    let axis =
-                        Unit::try_new(a, 1e-9).ok_or_else(|| PlanError::UnsupportedJoint {
-                            joint: joint.name.clone(),
-                            kind: "zero axis".into(),
-                        })?;
+                    let axis = Unit::try_new(a, 1e-9).ok_or_else(|| PlanError::UnsupportedJoint {
+                        joint: joint.name.clone(),
+                        kind: "zero axis".into(),
+                    })?;
                     joints.push(JointInfo {
                         name: joint.name.clone(),
                         lower_rad: joint.limit.lower,
@@ -179,30 +160,15 @@ impl ArmChain {
                     Some((axis, joints.len() - 1))
                 }
                 ref other => {
-                    return Err(PlanError::UnsupportedJoint {
-                        joint: joint.name.clone(),
-                        kind: format!("{other:?}"),
-                    })
+                    return Err(PlanError::UnsupportedJoint { joint: joint.name.clone(), kind: format!("{other:?}") })
                 }
             };
-            elements.push(ChainElement {
-                child_link: joint.child.link.clone(),
-                parent_from_joint,
-                axis,
-            });
+            elements.push(ChainElement { child_link: joint.child.link.clone(), parent_from_joint, axis });
         }
         if joints.len() != ARM_DOF {
-            return Err(PlanError::WrongDof {
-                expected: ARM_DOF,
-                actual: joints.len(),
-            });
+            return Err(PlanError::WrongDof { expected: ARM_DOF, actual: joints.len() });
         }
-        Ok(Self {
-            elements,
-            joints,
-            root_link: root_link.to_string(),
-            tip_link: tip_link.to_string(),
-        })
+        Ok(Self { elements, joints, root_link: root_link.to_string(), tip_link: tip_link.to_string() })
     }
 
     /// The actuated joints in chain order.
@@ -222,10 +188,7 @@ impl ArmChain {
 
     /// Names of the links whose poses [`ArmChain::forward_all`] returns, in order.
     pub fn link_names(&self) -> Vec<&str> {
-        self.elements
-            .iter()
-            .map(|e| e.child_link.as_str())
-            .collect()
+        self.elements.iter().map(|e| e.child_link.as_str()).collect()
     }
 
     /// Index into [`ArmChain::forward_all`]'s output of the link called `name`.
@@ -268,10 +231,7 @@ impl ArmChain {
             world_from_link *= e.parent_from_joint;
             if let Some((axis, i)) = &e.axis {
                 if let Some(slot) = axes.get_mut(*i) {
-                    *slot = (
-                        world_from_link.rotation * axis.into_inner(),
-                        world_from_link.translation.vector,
-                    );
+                    *slot = (world_from_link.rotation * axis.into_inner(), world_from_link.translation.vector);
                 }
                 world_from_link *= UnitQuaternion::from_axis_angle(axis, q[*i]);
             }
@@ -288,10 +248,7 @@ impl ArmChain {
 
     /// Whether `q` is within the joint limits (inclusive).
     pub fn within_limits(&self, q: &JointVector) -> bool {
-        self.joints
-            .iter()
-            .zip(q.iter())
-            .all(|(j, v)| *v >= j.lower_rad && *v <= j.upper_rad)
+        self.joints.iter().zip(q.iter()).all(|(j, v)| *v >= j.lower_rad && *v <= j.upper_rad)
     }
 
     /// Clamps `q` into the joint limits shrunk by `margin_rad`.
@@ -299,11 +256,7 @@ impl ArmChain {
         for (v, j) in q.iter_mut().zip(self.joints.iter()) {
             let lo = j.lower_rad + margin_rad;
             let hi = j.upper_rad - margin_rad;
-            *v = if lo <= hi {
-                v.clamp(lo, hi)
-            } else {
-                (j.lower_rad + j.upper_rad) / 2.0
-            };
+            *v = if lo <= hi { v.clamp(lo, hi) } else { (j.lower_rad + j.upper_rad) / 2.0 };
         }
     }
 
@@ -311,11 +264,7 @@ impl ArmChain {
     pub fn random_configuration(&self, rng: &mut impl Rng) -> JointVector {
         let mut q = [0.0; ARM_DOF];
         for (v, j) in q.iter_mut().zip(self.joints.iter()) {
-            *v = if j.upper_rad > j.lower_rad {
-                rng.random_range(j.lower_rad..j.upper_rad)
-            } else {
-                j.lower_rad
-            };
+            *v = if j.upper_rad > j.lower_rad { rng.random_range(j.lower_rad..j.upper_rad) } else { j.lower_rad };
         }
         q
     }
@@ -357,13 +306,8 @@ impl ArmChain {
         let mut best = (f64::INFINITY, f64::INFINITY);
         let mut rejected = 0;
         for seed_index in 0..=config.random_restarts {
-            let start = if seed_index == 0 {
-                *seed
-            } else {
-                self.random_configuration(&mut rng)
-            };
-            let (sol, pos_err, rot_err) =
-                self.solve_from(world_from_tip_target, start, seed_index, config);
+            let start = if seed_index == 0 { *seed } else { self.random_configuration(&mut rng) };
+            let (sol, pos_err, rot_err) = self.solve_from(world_from_tip_target, start, seed_index, config);
             if pos_err + rot_err < best.0 + best.1 {
                 best = (pos_err, rot_err);
             }
@@ -375,10 +319,7 @@ impl ArmChain {
             }
         }
         if rejected > 0 {
-            return Err(PlanError::IkRejected {
-                seeds: config.random_restarts + 1,
-                rejected,
-            });
+            return Err(PlanError::IkRejected { seeds: config.random_restarts + 1, rejected });
         }
         Err(PlanError::IkNotConverged {
             seeds: config.random_restarts + 1,
@@ -409,8 +350,7 @@ impl ArmChain {
             let e = Self::pose_error(target, &current);
             pos_err = e.fixed_rows::<3>(0).norm();
             rot_err = e.fixed_rows::<3>(3).norm();
-            if pos_err <= config.position_tolerance_m && rot_err <= config.orientation_tolerance_rad
-            {
+            if pos_err <= config.position_tolerance_m && rot_err <= config.orientation_tolerance_rad {
                 let sol = IkSolution {
                     q,
                     position_error_m: pos_err,
@@ -427,11 +367,7 @@ impl ArmChain {
             let Some(chol) = jjt.cholesky() else { break };
             let dq = jac.transpose() * chol.solve(&e);
             let norm = dq.amax();
-            let scale = if norm > config.max_step_rad {
-                config.max_step_rad / norm
-            } else {
-                1.0
-            };
+            let scale = if norm > config.max_step_rad { config.max_step_rad / norm } else { 1.0 };
             for (v, d) in q.iter_mut().zip(dq.iter()) {
                 *v += scale * d;
             }

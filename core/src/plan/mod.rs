@@ -296,28 +296,15 @@ impl Planner {
     /// model.
     pub fn new(urdf_path: impl AsRef<Path>, config: PlannerConfig) -> Result<Self, PlanError> {
         let chain = ArmChain::from_urdf(urdf_path.as_ref(), &config.root_link, &config.tcp_link)?;
-        let model = ArmCollisionModel::new(
-            &chain,
-            config.capsules.clone(),
-            &config.self_collision_pairs,
-        )?;
-        let hand_index =
-            chain
-                .link_index(&config.hand_link)
-                .ok_or_else(|| PlanError::UnknownLink {
-                    link: config.hand_link.clone(),
-                })?;
+        let model = ArmCollisionModel::new(&chain, config.capsules.clone(), &config.self_collision_pairs)?;
+        let hand_index = chain
+            .link_index(&config.hand_link)
+            .ok_or_else(|| PlanError::UnknownLink { link: config.hand_link.clone() })?;
         let q0 = [0.0; ARM_DOF];
         let links = chain.forward_all(&q0);
         let world_from_hand = links.get(hand_index).copied().unwrap_or_else(Se3::identity);
         let hand_from_tcp = world_from_hand.inverse() * chain.forward(&q0);
-        Ok(Self {
-            chain,
-            model,
-            config,
-            hand_index,
-            hand_from_tcp,
-        })
+        Ok(Self { chain, model, config, hand_index, hand_from_tcp })
     }
 
     /// The kinematic chain (to the TCP).
@@ -342,30 +329,17 @@ impl Planner {
 
     /// `world_from_link` of every chain link at `q` with their names (for recording).
     pub fn link_poses(&self, q: &JointVector) -> Vec<(String, Se3)> {
-        self.chain
-            .link_names()
-            .into_iter()
-            .map(String::from)
-            .zip(self.chain.forward_all(q))
-            .collect()
+        self.chain.link_names().into_iter().map(String::from).zip(self.chain.forward_all(q)).collect()
     }
 
     /// `world_from_hand` at `q`.
     pub fn forward_hand(&self, q: &JointVector) -> Se3 {
-        self.chain
-            .forward_all(q)
-            .get(self.hand_index)
-            .copied()
-            .unwrap_or_else(Se3::identity)
+        self.chain.forward_all(q).get(self.hand_index).copied().unwrap_or_else(Se3::identity)
     }
 
     /// A collision scene of `obstacles` with the configured margins.
     pub fn scene(&self, obstacles: &[ObjectGeometry]) -> Result<CollisionScene, PlanError> {
-        CollisionScene::new(
-            obstacles,
-            self.config.object_margin_m,
-            self.config.table_margin_m,
-        )
+        CollisionScene::new(obstacles, self.config.object_margin_m, self.config.table_margin_m)
     }
 
     /// The first contact of `q` in `scene` (None = free).
@@ -374,11 +348,7 @@ impl Planner {
     }
 
     /// IK for the TCP (no collision test), first from `seed`.
-    pub fn inverse_tcp(
-        &self,
-        world_from_tcp: &Se3,
-        seed: &JointVector,
-    ) -> Result<IkSolution, PlanError> {
+    pub fn inverse_tcp(&self, world_from_tcp: &Se3, seed: &JointVector) -> Result<IkSolution, PlanError> {
         self.chain.inverse(world_from_tcp, seed, &self.config.ik)
     }
 
@@ -390,9 +360,7 @@ impl Planner {
         scene: &CollisionScene,
     ) -> Result<IkSolution, PlanError> {
         self.chain
-            .inverse_filtered(world_from_tcp, seed, &self.config.ik, |q| {
-                self.model.is_free(&self.chain, q, scene)
-            })
+            .inverse_filtered(world_from_tcp, seed, &self.config.ik, |q| self.model.is_free(&self.chain, q, scene))
     }
 
     fn check_input(&self, q: &JointVector, what: &'static str) -> Result<(), PlanError> {
@@ -402,23 +370,14 @@ impl Planner {
         for (joint, (v, j)) in q.iter().zip(self.chain.joints()).enumerate() {
             // Small tolerance: simulators report positions a hair past the limits.
             if *v < j.lower_rad - 1e-3 || *v > j.upper_rad + 1e-3 {
-                return Err(PlanError::OutsideLimits {
-                    what,
-                    joint,
-                    value_rad: *v,
-                });
+                return Err(PlanError::OutsideLimits { what, joint, value_rad: *v });
             }
         }
         Ok(())
     }
 
     fn checker<'a>(&'a self, scene: &'a CollisionScene) -> rrt::Checker<'a> {
-        rrt::Checker {
-            chain: &self.chain,
-            model: &self.model,
-            scene,
-            resolution_rad: self.config.edge_resolution_rad,
-        }
+        rrt::Checker { chain: &self.chain, model: &self.model, scene, resolution_rad: self.config.edge_resolution_rad }
     }
 
     /// A collision-free geometric path (joint waypoints, start first) in `scene`.
@@ -453,10 +412,7 @@ impl Planner {
     }
 
     /// Time-parameterises joint waypoints with the configured limits and sample period.
-    pub fn time_parameterize(
-        &self,
-        waypoints: &[JointVector],
-    ) -> Result<JointTrajectory, PlanError> {
+    pub fn time_parameterize(&self, waypoints: &[JointVector]) -> Result<JointTrajectory, PlanError> {
         trajectory::time_parameterize(waypoints, &self.config.limits, self.config.sample_dt_s)
     }
 
@@ -518,26 +474,15 @@ impl Planner {
             for d in &directions {
                 let p = nalgebra::Vector3::new(object.center.x, object.center.y, z);
                 let grasp_pose = grasp::top_down_pose(p, d.yaw_rad);
-                let up = |h: f64| {
-                    grasp::top_down_pose(p + nalgebra::Vector3::new(0.0, 0.0, h), d.yaw_rad)
-                };
+                let up = |h: f64| grasp::top_down_pose(p + nalgebra::Vector3::new(0.0, 0.0, h), d.yaw_rad);
                 let pregrasp = up(g.pregrasp_height_m);
                 let lift = up(g.lift_height_m);
                 let world_from_hand = grasp_pose * self.hand_from_tcp.inverse();
-                let clearance_m =
-                    self.model
-                        .hand_clearance(&world_from_hand, &self.config.hand_link, &scene);
-                let q_pregrasp = self
-                    .inverse_tcp_free(&pregrasp, q_current, &scene)
-                    .ok()
-                    .map(|s| s.q);
-                let q_grasp = q_pregrasp.and_then(|qp| {
-                    self.inverse_tcp_free(&grasp_pose, &qp, &scene)
-                        .ok()
-                        .map(|s| s.q)
-                });
-                let q_lift = q_grasp
-                    .and_then(|qg| self.inverse_tcp_free(&lift, &qg, &scene).ok().map(|s| s.q));
+                let clearance_m = self.model.hand_clearance(&world_from_hand, &self.config.hand_link, &scene);
+                let q_pregrasp = self.inverse_tcp_free(&pregrasp, q_current, &scene).ok().map(|s| s.q);
+                let q_grasp =
+                    q_pregrasp.and_then(|qp| self.inverse_tcp_free(&grasp_pose, &qp, &scene).ok().map(|s| s.q));
+                let q_lift = q_grasp.and_then(|qg| self.inverse_tcp_free(&lift, &qg, &scene).ok().map(|s| s.q));
                 out.push(GraspCandidate {
                     world_from_tcp_pregrasp: pregrasp,
                     world_from_tcp_grasp: grasp_pose,
@@ -555,8 +500,7 @@ impl Planner {
                 });
             }
         }
-        let yaw_change =
-            |c: &GraspCandidate| crate::geometry::wrap_angle(c.hand_yaw_rad - current_yaw).abs();
+        let yaw_change = |c: &GraspCandidate| crate::geometry::wrap_angle(c.hand_yaw_rad - current_yaw).abs();
         // Clearance beyond `clearance_enough_m` does not matter: compare capped values.
         let capped = |c: &GraspCandidate| c.clearance_m.min(g.clearance_enough_m);
         out.sort_by(|a, b| {

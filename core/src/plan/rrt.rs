@@ -10,19 +10,12 @@ use super::{PlanError, PlannerConfig};
 
 /// Euclidean distance in joint space, radians.
 pub fn joint_distance(a: &JointVector, b: &JointVector) -> f64 {
-    a.iter()
-        .zip(b.iter())
-        .map(|(x, y)| (x - y) * (x - y))
-        .sum::<f64>()
-        .sqrt()
+    a.iter().zip(b.iter()).map(|(x, y)| (x - y) * (x - y)).sum::<f64>().sqrt()
 }
 
 /// Largest absolute joint difference, radians.
 pub fn joint_max_abs_diff(a: &JointVector, b: &JointVector) -> f64 {
-    a.iter()
-        .zip(b.iter())
-        .map(|(x, y)| (x - y).abs())
-        .fold(0.0, f64::max)
+    a.iter().zip(b.iter()).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max)
 }
 
 fn lerp(a: &JointVector, b: &JointVector, t: f64) -> JointVector {
@@ -49,9 +42,7 @@ impl Checker<'_> {
     /// Whether the straight segment a → b is free, checked every `resolution_rad` of the largest
     /// joint motion (endpoints included), in bisection order so collisions are found early.
     pub fn segment_free(&self, a: &JointVector, b: &JointVector) -> bool {
-        let steps = (joint_max_abs_diff(a, b) / self.resolution_rad)
-            .ceil()
-            .max(1.0) as usize;
+        let steps = (joint_max_abs_diff(a, b) / self.resolution_rad).ceil().max(1.0) as usize;
         if !self.config_free(b) {
             return false;
         }
@@ -90,10 +81,7 @@ struct Tree {
 
 impl Tree {
     fn new(root: JointVector) -> Self {
-        Self {
-            nodes: vec![root],
-            parents: vec![0],
-        }
+        Self { nodes: vec![root], parents: vec![0] }
     }
     fn nearest(&self, q: &JointVector) -> usize {
         let mut best = (0, f64::INFINITY);
@@ -135,11 +123,7 @@ fn extend(tree: &mut Tree, target: &JointVector, step: f64, checker: &Checker) -
         return Extend::Trapped;
     };
     let d = joint_distance(&near, target);
-    let (new, reached) = if d <= step {
-        (*target, true)
-    } else {
-        (lerp(&near, target, step / d), false)
-    };
+    let (new, reached) = if d <= step { (*target, true) } else { (lerp(&near, target, step / d), false) };
     if !checker.segment_free(&near, &new) {
         return Extend::Trapped;
     }
@@ -180,10 +164,7 @@ pub(crate) fn plan_path(
     for iteration in 0..config.rrt_max_iterations {
         if let Some(limit) = config.timeout_s {
             if began.elapsed().as_secs_f64() > limit {
-                return Err(PlanError::Timeout {
-                    seconds: limit,
-                    iterations: iteration,
-                });
+                return Err(PlanError::Timeout { seconds: limit, iterations: iteration });
             }
         }
         let sample = if rng.random::<f64>() < config.rrt_goal_bias {
@@ -191,9 +172,7 @@ pub(crate) fn plan_path(
         } else {
             checker.chain.random_configuration(&mut rng)
         };
-        if let Extend::Advanced(i) | Extend::Reached(i) =
-            extend(&mut tree_a, &sample, step, checker)
-        {
+        if let Extend::Advanced(i) | Extend::Reached(i) = extend(&mut tree_a, &sample, step, checker) {
             let Some(q_new) = tree_a.nodes.get(i).copied() else {
                 continue;
             };
@@ -213,9 +192,7 @@ pub(crate) fn plan_path(
         std::mem::swap(&mut tree_a, &mut tree_b);
         a_is_start = !a_is_start;
     }
-    Err(PlanError::PlannerExhausted {
-        iterations: config.rrt_max_iterations,
-    })
+    Err(PlanError::PlannerExhausted { iterations: config.rrt_max_iterations })
 }
 
 /// Random shortcutting: repeatedly joins two random waypoints by a straight segment when it is free,

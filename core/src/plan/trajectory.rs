@@ -17,8 +17,7 @@ pub const PANDA_MAX_VELOCITY_RAD_S: JointVector = [2.175, 2.175, 2.175, 2.175, 2
 /// Franka Panda joint acceleration limits (datasheet), rad/s².
 pub const PANDA_MAX_ACCELERATION_RAD_S2: JointVector = [15.0, 7.5, 10.0, 12.5, 15.0, 20.0, 20.0];
 /// Franka Panda joint jerk limits (datasheet), rad/s³.
-pub const PANDA_MAX_JERK_RAD_S3: JointVector =
-    [7500.0, 3750.0, 5000.0, 6250.0, 7500.0, 10000.0, 10000.0];
+pub const PANDA_MAX_JERK_RAD_S3: JointVector = [7500.0, 3750.0, 5000.0, 6250.0, 7500.0, 10000.0, 10000.0];
 
 /// Kinematic limits the trajectory respects (per joint).
 #[derive(Debug, Clone, PartialEq)]
@@ -42,13 +41,9 @@ impl MotionLimits {
     }
 
     fn valid(&self) -> bool {
-        [
-            self.max_velocity_rad_s,
-            self.max_acceleration_rad_s2,
-            self.max_jerk_rad_s3,
-        ]
-        .iter()
-        .all(|l| l.iter().all(|v| v.is_finite() && *v > 0.0))
+        [self.max_velocity_rad_s, self.max_acceleration_rad_s2, self.max_jerk_rad_s3]
+            .iter()
+            .all(|l| l.iter().all(|v| v.is_finite() && *v > 0.0))
     }
 }
 
@@ -114,11 +109,7 @@ impl Segment {
 /// segment direction `u` (`min_i limit_i / |u_i|`), so every joint respects its own limits and the
 /// arm never leaves the segment. (Equivalent to Ruckig's phase synchronisation, which may fall back
 /// to time synchronisation and leave the line.)
-fn solve_move(
-    from: &JointVector,
-    to: &JointVector,
-    limits: &MotionLimits,
-) -> Result<Segment, PlanError> {
+fn solve_move(from: &JointVector, to: &JointVector, limits: &MotionLimits) -> Result<Segment, PlanError> {
     let mut direction = [0.0; ARM_DOF];
     let mut length = 0.0;
     for ((d, a), b) in direction.iter_mut().zip(from.iter()).zip(to.iter()) {
@@ -148,16 +139,9 @@ fn solve_move(
     match result {
         RuckigResult::Working | RuckigResult::Finished => {
             let duration_s = trajectory.get_duration();
-            Ok(Segment {
-                trajectory,
-                duration_s,
-                from: *from,
-                direction,
-            })
+            Ok(Segment { trajectory, duration_s, from: *from, direction })
         }
-        other => Err(PlanError::Trajectory {
-            reason: format!("ruckig: {other:?}"),
-        }),
+        other => Err(PlanError::Trajectory { reason: format!("ruckig: {other:?}") }),
     }
 }
 
@@ -171,19 +155,13 @@ pub fn time_parameterize(
     dt_s: f64,
 ) -> Result<JointTrajectory, PlanError> {
     let Some(first) = waypoints.first() else {
-        return Err(PlanError::Trajectory {
-            reason: "no waypoints".into(),
-        });
+        return Err(PlanError::Trajectory { reason: "no waypoints".into() });
     };
     if !(dt_s.is_finite() && dt_s > 0.0 && limits.valid()) {
-        return Err(PlanError::Trajectory {
-            reason: "sample period and limits must be finite and positive".into(),
-        });
+        return Err(PlanError::Trajectory { reason: "sample period and limits must be finite and positive".into() });
     }
     if waypoints.iter().any(|q| q.iter().any(|v| !v.is_finite())) {
-        return Err(PlanError::NonFinite {
-            what: "trajectory waypoint",
-        });
+        return Err(PlanError::NonFinite { what: "trajectory waypoint" });
     }
     let mut segments = Vec::with_capacity(waypoints.len().saturating_sub(1));
     for pair in waypoints.windows(2) {
@@ -203,11 +181,7 @@ pub fn time_parameterize(
     let mut seg_index = 0;
     for k in 0..=n {
         let t = (k as f64 * dt_s).min(duration_s);
-        while seg_index + 1 < segments.len()
-            && segments
-                .get(seg_index)
-                .is_some_and(|s| t > seg_start + s.duration_s)
-        {
+        while seg_index + 1 < segments.len() && segments.get(seg_index).is_some_and(|s| t > seg_start + s.duration_s) {
             seg_start += segments.get(seg_index).map_or(0.0, |s| s.duration_s);
             seg_index += 1;
         }
@@ -226,14 +200,7 @@ pub fn time_parameterize(
     if let Some(last) = velocities.last_mut() {
         *last = [0.0; ARM_DOF];
     }
-    Ok(JointTrajectory {
-        dt_s,
-        times_s,
-        positions,
-        velocities,
-        waypoints: waypoints.to_vec(),
-        duration_s,
-    })
+    Ok(JointTrajectory { dt_s, times_s, positions, velocities, waypoints: waypoints.to_vec(), duration_s })
 }
 
 #[cfg(test)]
@@ -262,14 +229,9 @@ mod tests {
                 for i in 0..ARM_DOF {
                     let u = seg.direction[i].abs();
                     assert!(u * ds.abs() <= limits.max_velocity_rad_s[i] * (1.0 + 1e-9) + 1e-12);
-                    assert!(
-                        u * dds.abs() <= limits.max_acceleration_rad_s2[i] * (1.0 + 1e-9) + 1e-12
-                    );
+                    assert!(u * dds.abs() <= limits.max_acceleration_rad_s2[i] * (1.0 + 1e-9) + 1e-12);
                     if let Some(pa) = prev_acc {
-                        assert!(
-                            u * ((dds - pa) / dt).abs()
-                                <= limits.max_jerk_rad_s3[i] * (1.0 + 1e-6) + 1e-9
-                        );
+                        assert!(u * ((dds - pa) / dt).abs() <= limits.max_jerk_rad_s3[i] * (1.0 + 1e-6) + 1e-9);
                     }
                 }
                 prev_acc = Some(dds);
@@ -282,9 +244,7 @@ mod tests {
             }
             // Time-optimal along the line: some joint reaches a limit (velocity, or else the move is
             // too short to reach it and acceleration or jerk binds).
-            let peak = (0..=n)
-                .map(|k| seg.trajectory.at_time(k as f64 * dt).1[0].abs())
-                .fold(0.0, f64::max);
+            let peak = (0..=n).map(|k| seg.trajectory.at_time(k as f64 * dt).1[0].abs()).fold(0.0, f64::max);
             let v_line = seg
                 .direction
                 .iter()
@@ -319,12 +279,7 @@ mod tests {
         let closest = t
             .positions
             .iter()
-            .map(|q| {
-                q.iter()
-                    .zip(w[1].iter())
-                    .map(|(a, b)| (a - b).abs())
-                    .fold(0.0, f64::max)
-            })
+            .map(|q| q.iter().zip(w[1].iter()).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max))
             .fold(f64::INFINITY, f64::min);
         assert!(closest < 1e-3, "waypoint missed by {closest}");
         // A single waypoint is a zero-length trajectory.
@@ -336,23 +291,11 @@ mod tests {
     #[test]
     fn bad_trajectory_inputs_are_typed_errors() {
         let limits = MotionLimits::default();
-        assert!(matches!(
-            time_parameterize(&[], &limits, 0.01),
-            Err(PlanError::Trajectory { .. })
-        ));
-        assert!(matches!(
-            time_parameterize(&[[0.0; ARM_DOF]], &limits, 0.0),
-            Err(PlanError::Trajectory { .. })
-        ));
+        assert!(matches!(time_parameterize(&[], &limits, 0.01), Err(PlanError::Trajectory { .. })));
+        assert!(matches!(time_parameterize(&[[0.0; ARM_DOF]], &limits, 0.0), Err(PlanError::Trajectory { .. })));
         let nan = [[f64::NAN; ARM_DOF], [0.0; ARM_DOF]];
-        assert!(matches!(
-            time_parameterize(&nan, &limits, 0.01),
-            Err(PlanError::NonFinite { .. })
-        ));
-        let zero = MotionLimits {
-            max_jerk_rad_s3: [0.0; ARM_DOF],
-            ..MotionLimits::default()
-        };
+        assert!(matches!(time_parameterize(&nan, &limits, 0.01), Err(PlanError::NonFinite { .. })));
+        let zero = MotionLimits { max_jerk_rad_s3: [0.0; ARM_DOF], ..MotionLimits::default() };
         assert!(matches!(
             time_parameterize(&[[0.0; ARM_DOF], [1.0; ARM_DOF]], &zero, 0.01),
             Err(PlanError::Trajectory { .. })

@@ -99,8 +99,10 @@ fn class_color(key: &str) -> rerun::Color {
 impl Recorder {
     /// Create a recording that streams to `path` (created or truncated).
     pub fn create(path: &Path, application_id: &str) -> Result<Self, RecordError> {
-        let app = rerun::ApplicationId::try_from(application_id.to_string())
-            .map_err(|e| RecordError::Create { path: path.display().to_string(), reason: format!("application id: {e}") })?;
+        let app = rerun::ApplicationId::try_from(application_id.to_string()).map_err(|e| RecordError::Create {
+            path: path.display().to_string(),
+            reason: format!("application id: {e}"),
+        })?;
         let stream = RecordingStreamBuilder::new(app)
             .save(path)
             .map_err(|e| RecordError::Create { path: path.display().to_string(), reason: e.to_string() })?;
@@ -173,8 +175,7 @@ impl Recorder {
     /// Detections as labelled 2D boxes over the image.
     pub fn log_detections(&self, detections: &[Detection]) -> Result<(), RecordError> {
         let mins: Vec<[f32; 2]> = detections.iter().map(|d| [d.bbox.min[0] as f32, d.bbox.min[1] as f32]).collect();
-        let sizes: Vec<[f32; 2]> =
-            detections.iter().map(|d| [d.bbox.width() as f32, d.bbox.height() as f32]).collect();
+        let sizes: Vec<[f32; 2]> = detections.iter().map(|d| [d.bbox.width() as f32, d.bbox.height() as f32]).collect();
         let labels: Vec<String> = detections.iter().map(|d| format!("{} {:.2}", d.label, d.score)).collect();
         let colors: Vec<rerun::Color> = detections.iter().map(|d| class_color(d.label.as_str())).collect();
         self.log(
@@ -198,10 +199,10 @@ impl Recorder {
     pub fn log_objects(&self, root: &str, objects: &[DrawnObject]) -> Result<(), RecordError> {
         let (cubes, cyls): (Vec<&DrawnObject>, Vec<&DrawnObject>) =
             objects.iter().partition(|o| o.geometry.shape == Shape::Cuboid);
-        let centers = |v: &[&DrawnObject]| -> Vec<[f32; 3]> {
-            v.iter().map(|o| v3(&Point3::from(o.geometry.center))).collect()
-        };
-        let labels = |v: &[&DrawnObject]| -> Vec<String> { v.iter().map(|o| format!("{} #{}", o.label, o.id)).collect() };
+        let centers =
+            |v: &[&DrawnObject]| -> Vec<[f32; 3]> { v.iter().map(|o| v3(&Point3::from(o.geometry.center))).collect() };
+        let labels =
+            |v: &[&DrawnObject]| -> Vec<String> { v.iter().map(|o| format!("{} #{}", o.label, o.id)).collect() };
         let colors = |v: &[&DrawnObject]| -> Vec<rerun::Color> { v.iter().map(|o| class_color(&o.label)).collect() };
         let half: Vec<[f32; 3]> = cubes
             .iter()

@@ -2,9 +2,7 @@
 //! points eliminated by the Schur complement (dense reduced camera system; fine for the ~5–10
 //! keyframes of a local window). Same residuals and Huber widths as [`super::pnp`].
 
-use nalgebra::{
-    DMatrix, DVector, Matrix3, Matrix3x6, Matrix6, Matrix6x3, Point3, Vector3, Vector6,
-};
+use nalgebra::{DMatrix, DVector, Matrix3, Matrix3x6, Matrix6, Matrix6x3, Point3, Vector3, Vector6};
 use serde::{Deserialize, Serialize};
 
 use super::pnp::{apply_increment, chi2_threshold, huber_weight, point_jacobian, residual};
@@ -24,11 +22,7 @@ pub struct BundleConfig {
 
 impl Default for BundleConfig {
     fn default() -> Self {
-        Self {
-            iterations: 10,
-            initial_lambda: 1e-3,
-            depth_baseline_m: 0.08,
-        }
+        Self { iterations: 10, initial_lambda: 1e-3, depth_baseline_m: 0.08 }
     }
 }
 
@@ -82,9 +76,7 @@ impl BundleProblem {
         self.observations
             .iter()
             .map(|o| {
-                let (Some(pose), Some(p)) =
-                    (self.camera_from_world.get(o.pose), self.points.get(o.point))
-                else {
+                let (Some(pose), Some(p)) = (self.camera_from_world.get(o.pose), self.points.get(o.point)) else {
                     return false;
                 };
                 let x = pose * p;
@@ -132,15 +124,11 @@ impl BundleProblem {
             let mut bp = vec![Vector3::<f64>::zeros(); self.points.len()];
             let mut hcp = vec![Matrix6x3::<f64>::zeros(); self.observations.len()];
             for (oi, o) in self.observations.iter().enumerate() {
-                let (Some(pose), Some(p)) =
-                    (self.camera_from_world.get(o.pose), self.points.get(o.point))
-                else {
+                let (Some(pose), Some(p)) = (self.camera_from_world.get(o.pose), self.points.get(o.point)) else {
                     continue;
                 };
                 let x = pose * p;
-                let Some((e, j, d)) =
-                    residual(camera, bf, &x.coords, o.pixel, o.depth_m, o.sigma_px)
-                else {
+                let Some((e, j, d)) = residual(camera, bf, &x.coords, o.pixel, o.depth_m, o.sigma_px) else {
                     continue;
                 };
                 let w = huber_weight(e.norm_squared(), chi2_threshold(d));
@@ -174,11 +162,7 @@ impl BundleProblem {
                 let Some(inv) = h.try_inverse() else { continue };
                 hpp_inv[pi] = inv;
                 for &oa in list {
-                    let Some(Some(va)) = self
-                        .observations
-                        .get(oa)
-                        .and_then(|o| var_index.get(o.pose))
-                    else {
+                    let Some(Some(va)) = self.observations.get(oa).and_then(|o| var_index.get(o.pose)) else {
                         continue;
                     };
                     let wa = hcp[oa] * inv;
@@ -186,11 +170,7 @@ impl BundleProblem {
                     let mut seg = rhs.fixed_rows_mut::<6>(6 * va);
                     seg -= r;
                     for &ob in list {
-                        let Some(Some(vb)) = self
-                            .observations
-                            .get(ob)
-                            .and_then(|o| var_index.get(o.pose))
-                        else {
+                        let Some(Some(vb)) = self.observations.get(ob).and_then(|o| var_index.get(o.pose)) else {
                             continue;
                         };
                         let blk = wa * hcp[ob].transpose();
@@ -222,11 +202,7 @@ impl BundleProblem {
             for (pi, list) in obs_by_point.iter().enumerate() {
                 let mut r = bp[pi];
                 for &oa in list {
-                    if let Some(Some(va)) = self
-                        .observations
-                        .get(oa)
-                        .and_then(|o| var_index.get(o.pose))
-                    {
+                    if let Some(Some(va)) = self.observations.get(oa).and_then(|o| var_index.get(o.pose)) {
                         let d = Vector6::from_iterator(dx.rows(6 * va, 6).iter().copied());
                         r -= hcp[oa].transpose() * d;
                     }
@@ -268,21 +244,12 @@ mod tests {
 
     #[test]
     fn bundle_adjustment_recovers_perturbed_poses_and_points() {
-        let cam = PinholeCamera::from_fovy(640, 480, 50f64.to_radians())
-            .unwrap_or_else(|e| panic!("{e}"));
+        let cam = PinholeCamera::from_fovy(640, 480, 50f64.to_radians()).unwrap_or_else(|e| panic!("{e}"));
         let mut rng = ChaCha8Rng::seed_from_u64(3);
         // Three cameras 10 cm apart looking down +z at points 0.5–1 m away.
-        let truth: Vec<Se3> = (0..3)
-            .map(|i| Se3::translation(0.1 * i as f64, 0.0, 0.0).inverse())
-            .collect();
+        let truth: Vec<Se3> = (0..3).map(|i| Se3::translation(0.1 * i as f64, 0.0, 0.0).inverse()).collect();
         let points: Vec<Point3<f64>> = (0..150)
-            .map(|_| {
-                Point3::new(
-                    rng.random_range(-0.2..0.4),
-                    rng.random_range(-0.2..0.2),
-                    rng.random_range(0.5..1.0),
-                )
-            })
+            .map(|_| Point3::new(rng.random_range(-0.2..0.4), rng.random_range(-0.2..0.2), rng.random_range(0.5..1.0)))
             .collect();
         let mut observations = Vec::new();
         for (pi, pose) in truth.iter().enumerate() {
@@ -306,16 +273,10 @@ mod tests {
         let mut problem = BundleProblem {
             camera_from_world: vec![truth[0], perturb * truth[1], perturb.inverse() * truth[2]],
             fixed: vec![true, false, false],
-            points: points
-                .iter()
-                .map(|p| p + nalgebra::Vector3::new(0.003, -0.003, 0.004))
-                .collect(),
+            points: points.iter().map(|p| p + nalgebra::Vector3::new(0.003, -0.003, 0.004)).collect(),
             observations,
         };
-        let cfg = BundleConfig {
-            iterations: 20,
-            ..BundleConfig::default()
-        };
+        let cfg = BundleConfig { iterations: 20, ..BundleConfig::default() };
         let before = problem.cost(&cam, &cfg);
         assert!(problem.optimize(&cam, &cfg) > 0);
         let after = problem.cost(&cam, &cfg);

@@ -14,10 +14,7 @@ pub type Descriptor = [u64; 4];
 /// Hamming distance between two descriptors (0..=256).
 #[inline]
 pub fn hamming(a: &Descriptor, b: &Descriptor) -> u32 {
-    (a[0] ^ b[0]).count_ones()
-        + (a[1] ^ b[1]).count_ones()
-        + (a[2] ^ b[2]).count_ones()
-        + (a[3] ^ b[3]).count_ones()
+    (a[0] ^ b[0]).count_ones() + (a[1] ^ b[1]).count_ones() + (a[2] ^ b[2]).count_ones() + (a[3] ^ b[3]).count_ones()
 }
 
 /// Radius of the orientation patch (intensity centroid), pixels of the level (ORB: 15).
@@ -166,10 +163,7 @@ impl OrbExtractor {
             });
         }
         if config.cell_size_px < 4 {
-            return Err(SlamError::Config {
-                field: "orb.cell_size_px",
-                reason: "must be ≥ 4".into(),
-            });
+            return Err(SlamError::Config { field: "orb.cell_size_px", reason: "must be ≥ 4".into() });
         }
         if config.fast_min_threshold == 0 || config.fast_min_threshold > config.fast_threshold {
             return Err(SlamError::Config {
@@ -180,12 +174,8 @@ impl OrbExtractor {
         let mut rng = ChaCha8Rng::seed_from_u64(config.pattern_seed);
         let draw = |rng: &mut ChaCha8Rng| loop {
             // Uniform over the disc of radius PATTERN_RADIUS_PX, rounded to whole pixels.
-            let x = rng
-                .random_range(-PATTERN_RADIUS_PX..=PATTERN_RADIUS_PX)
-                .round();
-            let y = rng
-                .random_range(-PATTERN_RADIUS_PX..=PATTERN_RADIUS_PX)
-                .round();
+            let x = rng.random_range(-PATTERN_RADIUS_PX..=PATTERN_RADIUS_PX).round();
+            let y = rng.random_range(-PATTERN_RADIUS_PX..=PATTERN_RADIUS_PX).round();
             if x * x + y * y <= PATTERN_RADIUS_PX * PATTERN_RADIUS_PX {
                 return (x as f32, y as f32);
             }
@@ -221,8 +211,7 @@ impl OrbExtractor {
         for bin in 0..ANGLE_BINS {
             let (s, c) = (std::f32::consts::TAU * bin as f32 / ANGLE_BINS as f32).sin_cos();
             for p in &pattern {
-                let r =
-                    |x: f32, y: f32| [round_i(x * c - y * s) as i8, round_i(x * s + y * c) as i8];
+                let r = |x: f32, y: f32| [round_i(x * c - y * s) as i8, round_i(x * s + y * c) as i8];
                 let (a, b) = (r(p[0], p[1]), r(p[2], p[3]));
                 rotated.push([a[0], a[1], b[0], b[1]]);
             }
@@ -249,11 +238,7 @@ impl OrbExtractor {
     pub fn extract(&mut self, image: &GreyImage) -> Result<Features, SlamError> {
         let (w, h) = (image.width as usize, image.height as usize);
         if image.data.len() != w * h {
-            return Err(SlamError::BufferLength {
-                field: "grey",
-                expected: w * h,
-                actual: image.data.len(),
-            });
+            return Err(SlamError::BufferLength { field: "grey", expected: w * h, actual: image.data.len() });
         }
         self.build_pyramid(image);
         let mut out = Features::default();
@@ -271,26 +256,13 @@ impl OrbExtractor {
     fn build_pyramid(&mut self, image: &GreyImage) {
         let (w0, h0) = (image.width as usize, image.height as usize);
         let n = self.config.n_levels;
-        let same = self.levels.len() == n
-            && self
-                .levels
-                .first()
-                .is_some_and(|l| l.width == w0 && l.height == h0);
+        let same = self.levels.len() == n && self.levels.first().is_some_and(|l| l.width == w0 && l.height == h0);
         if !same {
             self.levels = (0..n)
                 .map(|l| {
                     let s = self.config.scale_factor.powi(l as i32);
-                    let (w, h) = (
-                        ((w0 as f64) / s).round() as usize,
-                        ((h0 as f64) / s).round() as usize,
-                    );
-                    Level {
-                        width: w,
-                        height: h,
-                        scale: s as f32,
-                        image: vec![0; w * h],
-                        blurred: vec![0; w * h],
-                    }
+                    let (w, h) = (((w0 as f64) / s).round() as usize, ((h0 as f64) / s).round() as usize);
+                    Level { width: w, height: h, scale: s as f32, image: vec![0; w * h], blurred: vec![0; w * h] }
                 })
                 .collect();
             self.score_buf = vec![0; w0 * h0];
@@ -351,21 +323,12 @@ impl OrbExtractor {
                         diff[k] = i16::from(img[(i + o) as usize]) - c;
                     }
                     // Flag bit 0: bright arc, bit 1: dark arc (never both for 9 of 16).
-                    let score = if f & 1 != 0 {
-                        arc_score(&diff)
-                    } else {
-                        arc_score(&diff.map(|v| -v))
-                    };
+                    let score = if f & 1 != 0 { arc_score(&diff) } else { arc_score(&diff.map(|v| -v)) };
                     if score < t_min {
                         continue;
                     }
                     let cid = ((y - EDGE_PX) / cell) * ncx + (x - EDGE_PX) / cell;
-                    self.corners.push(Corner {
-                        x: x as u32,
-                        y: y as u32,
-                        score: score as u16,
-                        key: cid as u32,
-                    });
+                    self.corners.push(Corner { x: x as u32, y: y as u32, score: score as u16, key: cid as u32 });
                     self.score_buf[row + x] = score as u16;
                 }
                 done_to = (x0 + LANES).min(EDGE_PX + n);
@@ -378,12 +341,7 @@ impl OrbExtractor {
         // Weak corners (score below the FAST threshold) only count in cells without a strong one
         // (decided before suppression, which is then skipped for the dropped ones).
         let strong = u16::from(self.config.fast_threshold);
-        let n_cells = self
-            .corners
-            .iter()
-            .map(|c| c.key as usize + 1)
-            .max()
-            .unwrap_or(0);
+        let n_cells = self.corners.iter().map(|c| c.key as usize + 1).max().unwrap_or(0);
         let mut has_strong = vec![false; n_cells];
         for c in &self.corners {
             if c.score >= strong {
@@ -400,20 +358,9 @@ impl OrbExtractor {
             }
             let i = c.y as usize * w + c.x as usize;
             let s = c.score;
-            match (
-                buf.get(i - w - 1..i - w + 2),
-                buf.get(i - 1..i + 2),
-                buf.get(i + w - 1..i + w + 2),
-            ) {
+            match (buf.get(i - w - 1..i - w + 2), buf.get(i - 1..i + 2), buf.get(i + w - 1..i + w + 2)) {
                 (Some(a), Some(m), Some(b)) => {
-                    a[0] < s
-                        && a[1] < s
-                        && a[2] < s
-                        && m[0] < s
-                        && m[2] <= s
-                        && b[0] <= s
-                        && b[1] <= s
-                        && b[2] <= s
+                    a[0] < s && a[1] < s && a[2] < s && m[0] < s && m[2] <= s && b[0] <= s && b[1] <= s && b[2] <= s
                 }
                 _ => false,
             }
@@ -426,8 +373,7 @@ impl OrbExtractor {
         }
         if self.corners.len() > want {
             // Round-robin over cells: rank within the cell first, then the FAST score.
-            self.corners
-                .sort_unstable_by_key(|c| (c.key, u16::MAX - c.score));
+            self.corners.sort_unstable_by_key(|c| (c.key, u16::MAX - c.score));
             let mut rank = 0u32;
             let mut prev = u32::MAX;
             for c in &mut self.corners {
@@ -435,8 +381,7 @@ impl OrbExtractor {
                 prev = c.key;
                 c.key = rank;
             }
-            self.corners
-                .select_nth_unstable_by_key(want, |c| (c.key, u16::MAX - c.score, c.y, c.x));
+            self.corners.select_nth_unstable_by_key(want, |c| (c.key, u16::MAX - c.score, c.y, c.x));
             self.corners.truncate(want);
         }
         // Deterministic output order.
@@ -464,10 +409,7 @@ impl OrbExtractor {
             for v in 1..=hp {
                 let d = self.umax[v];
                 let (lo_row, hi_row) = (center - v * w, center + v * w);
-                let (Some(up), Some(dn)) = (
-                    img.get(lo_row - d..=lo_row + d),
-                    img.get(hi_row - d..=hi_row + d),
-                ) else {
+                let (Some(up), Some(dn)) = (img.get(lo_row - d..=lo_row + d), img.get(hi_row - d..=hi_row + d)) else {
                     continue;
                 };
                 let mut v_sum: i32 = 0;
@@ -480,29 +422,24 @@ impl OrbExtractor {
             }
             let angle = (m01 as f32).atan2(m10 as f32);
             // Steered pattern from the table of ANGLE_BINS rotations.
-            let bin = (round_i(angle / std::f32::consts::TAU * ANGLE_BINS as f32)
-                .rem_euclid(ANGLE_BINS as isize)) as usize;
+            let bin =
+                (round_i(angle / std::f32::consts::TAU * ANGLE_BINS as f32).rem_euclid(ANGLE_BINS as isize)) as usize;
             let blur = &level.blurred;
             let wi = w as isize;
             let mut desc = [0u64; 4];
             // The patch (radius PATTERN_RADIUS_PX ≤ EDGE_PX) lies inside the level.
             let r = PATTERN_RADIUS_PX as usize;
             let (p0, p1) = (center - r * w - r, center + r * w + r + 1);
-            if let (Some(rot), Some(patch)) = (
-                self.rotated
-                    .get(bin * DESCRIPTOR_BITS..(bin + 1) * DESCRIPTOR_BITS),
-                blur.get(p0..p1),
-            ) {
+            if let (Some(rot), Some(patch)) =
+                (self.rotated.get(bin * DESCRIPTOR_BITS..(bin + 1) * DESCRIPTOR_BITS), blur.get(p0..p1))
+            {
                 let base = (r * w + r) as isize;
                 for (word, tests) in desc.iter_mut().zip(rot.chunks_exact(64)) {
                     let mut bits = 0u64;
                     for (b, p) in tests.iter().enumerate() {
                         let i1 = (base + isize::from(p[1]) * wi + isize::from(p[0])) as usize;
                         let i2 = (base + isize::from(p[3]) * wi + isize::from(p[2])) as usize;
-                        let (a, c) = (
-                            patch.get(i1).copied().unwrap_or(0),
-                            patch.get(i2).copied().unwrap_or(0),
-                        );
+                        let (a, c) = (patch.get(i1).copied().unwrap_or(0), patch.get(i2).copied().unwrap_or(0));
                         bits |= u64::from(a < c) << b;
                     }
                     *word = bits;
@@ -548,18 +485,11 @@ fn segment_test_lanes(img: &[u8], start: usize, offsets25: &[isize; 25], t: u8) 
         }
         p
     };
-    let compass = [
-        load(offsets25[0]),
-        load(offsets25[4]),
-        load(offsets25[8]),
-        load(offsets25[12]),
-    ];
+    let compass = [load(offsets25[0]), load(offsets25[4]), load(offsets25[8]), load(offsets25[12])];
     let mut any = 0u8;
     for j in 0..LANES {
-        let b: [u8; 4] =
-            std::array::from_fn(|k| u8::from(compass[k][j].saturating_sub(hi[j]) != 0));
-        let d: [u8; 4] =
-            std::array::from_fn(|k| u8::from(lo[j].saturating_sub(compass[k][j]) != 0));
+        let b: [u8; 4] = std::array::from_fn(|k| u8::from(compass[k][j].saturating_sub(hi[j]) != 0));
+        let d: [u8; 4] = std::array::from_fn(|k| u8::from(lo[j].saturating_sub(compass[k][j]) != 0));
         any |= (b[0] & b[1]) | (b[1] & b[2]) | (b[2] & b[3]) | (b[3] & b[0]);
         any |= (d[0] & d[1]) | (d[1] & d[2]) | (d[2] & d[3]) | (d[3] & d[0]);
     }
@@ -636,20 +566,14 @@ fn resize_bilinear(src: &Level, dst: &mut Level) {
         let y0 = (fy as usize).min(sh.saturating_sub(2));
         let wy = ((fy - y0 as f32) * 256.0).round().min(256.0) as u16;
         let y1 = (y0 + 1).min(sh - 1);
-        let (r0, r1) = (
-            &src.image[y0 * sw..y0 * sw + sw],
-            &src.image[y1 * sw..y1 * sw + sw],
-        );
+        let (r0, r1) = (&src.image[y0 * sw..y0 * sw + sw], &src.image[y1 * sw..y1 * sw + sw]);
         // Vertical blend (vectorisable), then horizontal gather.
         for ((t, &a), &b) in tmp.iter_mut().zip(r0).zip(r1) {
             *t = u16::from(a) * (256 - wy) + u16::from(b) * wy;
         }
         let out = &mut dst.image[y * dw..y * dw + dw];
         for (o, &(x0, wx)) in out.iter_mut().zip(&cols) {
-            let (a, b) = (
-                tmp.get(x0).copied().unwrap_or(0),
-                tmp.get(x0 + 1).copied().unwrap_or(0),
-            );
+            let (a, b) = (tmp.get(x0).copied().unwrap_or(0), tmp.get(x0 + 1).copied().unwrap_or(0));
             *o = ((u32::from(a) * (256 - wx) + u32::from(b) * wx + 32768) >> 16) as u8;
         }
     }
@@ -671,16 +595,10 @@ fn box_blur(level: &mut Level, col_sums: &mut Vec<u16>) {
     let img = &level.image;
     for y in R..h - R {
         let top = &img[(y - R) * w..(y - R + 1) * w];
-        col_sums[..w]
-            .iter_mut()
-            .zip(top)
-            .for_each(|(s, &v)| *s = u16::from(v));
+        col_sums[..w].iter_mut().zip(top).for_each(|(s, &v)| *s = u16::from(v));
         for dy in 1..N {
             let row = &img[(y - R + dy) * w..(y - R + dy + 1) * w];
-            col_sums[..w]
-                .iter_mut()
-                .zip(row)
-                .for_each(|(s, &v)| *s += u16::from(v));
+            col_sums[..w].iter_mut().zip(row).for_each(|(s, &v)| *s += u16::from(v));
         }
         let m = w - 2 * R;
         let out = &mut level.blurred[y * w + R..][..m];
@@ -727,11 +645,7 @@ mod tests {
                 data[y * w + x] = v.round() as u8;
             }
         }
-        GreyImage {
-            width: img.width,
-            height: img.height,
-            data,
-        }
+        GreyImage { width: img.width, height: img.height, data }
     }
 
     /// (precision, recall over ground-truth correspondences, matches) for a warp of
@@ -745,10 +659,7 @@ mod tests {
         let (s, c) = angle_deg.to_radians().sin_cos();
         let map = |k: &Keypoint| {
             let (dx, dy) = (f64::from(k.x) - 320.0, f64::from(k.y) - 240.0);
-            (
-                (c * dx - s * dy) * scale + 320.0,
-                (s * dx + c * dy) * scale + 240.0,
-            )
+            ((c * dx - s * dy) * scale + 320.0, (s * dx + c * dy) * scale + 240.0)
         };
         let tol = 4.0;
         let close = |ka: &Keypoint, kb: &Keypoint| {
@@ -758,57 +669,25 @@ mod tests {
         // Ground-truth correspondences: a keypoint of the warped image within 4 px (x its scale)
         // of the mapped position, at the expected pyramid level ±1.
         let level_shift = (scale.ln() / 1.2f64.ln()).round() as i32;
-        let level_ok = |ka: &Keypoint, kb: &Keypoint| {
-            (i32::from(kb.level) - i32::from(ka.level) - level_shift).abs() <= 1
-        };
+        let level_ok =
+            |ka: &Keypoint, kb: &Keypoint| (i32::from(kb.level) - i32::from(ka.level) - level_shift).abs() <= 1;
         // Counted one-to-one: the smaller of the two sides' counts of keypoints with a counterpart.
-        let in_a = a
-            .keypoints
-            .iter()
-            .filter(|ka| {
-                b.keypoints
-                    .iter()
-                    .any(|kb| close(ka, kb) && level_ok(ka, kb))
-            })
-            .count();
-        let in_b = b
-            .keypoints
-            .iter()
-            .filter(|kb| {
-                a.keypoints
-                    .iter()
-                    .any(|ka| close(ka, kb) && level_ok(ka, kb))
-            })
-            .count();
+        let in_a =
+            a.keypoints.iter().filter(|ka| b.keypoints.iter().any(|kb| close(ka, kb) && level_ok(ka, kb))).count();
+        let in_b =
+            b.keypoints.iter().filter(|kb| a.keypoints.iter().any(|ka| close(ka, kb) && level_ok(ka, kb))).count();
         let repeatable = in_a.min(in_b);
-        let matches = match_brute_force(
-            &a.descriptors,
-            &a.keypoints,
-            &b.descriptors,
-            &b.keypoints,
-            &MatchConfig::default(),
-        );
-        let correct = matches
-            .iter()
-            .filter(|m| close(&a.keypoints[m.query_index], &b.keypoints[m.train_index]))
-            .count();
-        (
-            correct as f64 / matches.len().max(1) as f64,
-            correct as f64 / repeatable.max(1) as f64,
-            matches.len(),
-        )
+        let matches =
+            match_brute_force(&a.descriptors, &a.keypoints, &b.descriptors, &b.keypoints, &MatchConfig::default());
+        let correct =
+            matches.iter().filter(|m| close(&a.keypoints[m.query_index], &b.keypoints[m.train_index])).count();
+        (correct as f64 / matches.len().max(1) as f64, correct as f64 / repeatable.max(1) as f64, matches.len())
     }
 
     #[test]
     fn python_port_of_the_texture_is_bit_exact() {
         // Sums printed by experiments/bench/slam_refs.py's `shapes_texture` for seeds 0 and 7.
-        let sum = |seed| {
-            shapes_texture(640, 480, seed)
-                .data
-                .iter()
-                .map(|&v| u64::from(v))
-                .sum::<u64>()
-        };
+        let sum = |seed| shapes_texture(640, 480, seed).data.iter().map(|&v| u64::from(v)).sum::<u64>();
         assert_eq!(sum(0), 39_142_074);
         assert_eq!(sum(7), 43_270_714);
     }
@@ -818,49 +697,31 @@ mod tests {
         let img = shapes_texture(640, 480, 3);
         let f = extractor().extract(&img).unwrap_or_else(|e| panic!("{e}"));
         assert_eq!(f.keypoints.len(), f.descriptors.len());
-        assert!(
-            (950..=1000).contains(&f.keypoints.len()),
-            "{}",
-            f.keypoints.len()
-        );
+        assert!((950..=1000).contains(&f.keypoints.len()), "{}", f.keypoints.len());
         let levels: std::collections::BTreeSet<u8> = f.keypoints.iter().map(|k| k.level).collect();
         assert_eq!(levels.len(), 8);
         for k in &f.keypoints {
             let margin = EDGE_PX as f32 * k.scale - 1.0;
-            assert!(
-                k.x >= margin && k.y >= margin && k.x <= 640.0 - margin && k.y <= 480.0 - margin
-            );
+            assert!(k.x >= margin && k.y >= margin && k.x <= 640.0 - margin && k.y <= 480.0 - margin);
         }
         // Spread: every quadrant holds at least 15 % of the features.
         for (qx, qy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
-            let n = f
-                .keypoints
-                .iter()
-                .filter(|k| (k.x >= 320.0) == (qx == 1) && (k.y >= 240.0) == (qy == 1))
-                .count();
+            let n = f.keypoints.iter().filter(|k| (k.x >= 320.0) == (qx == 1) && (k.y >= 240.0) == (qy == 1)).count();
             assert!(n * 100 >= 15 * f.keypoints.len(), "quadrant {qx},{qy}: {n}");
         }
         // Deterministic.
-        assert_eq!(
-            extractor().extract(&img).unwrap_or_else(|e| panic!("{e}")),
-            f
-        );
+        assert_eq!(extractor().extract(&img).unwrap_or_else(|e| panic!("{e}")), f);
     }
 
     #[test]
     fn matches_survive_rotation_and_scale() {
         for (angle, scale) in [(30.0, 1.0), (0.0, 1.2), (30.0, 1.2)] {
             let (precision, recall, n) = warp_scores(angle, scale);
-            eprintln!(
-                "warp {angle}° x{scale}: {n} matches, precision {precision:.3}, recall {recall:.3}"
-            );
+            eprintln!("warp {angle}° x{scale}: {n} matches, precision {precision:.3}, recall {recall:.3}");
             // Recall over ground-truth correspondences ≥ 50 % (cv2.ORB_create(1000) + BFMatcher with
             // the same ratio test: 0.59–0.67 on these warps), precision ≥ 95 %.
             assert!(recall >= 0.5, "warp {angle}° x{scale}: recall {recall}");
-            assert!(
-                precision >= 0.95,
-                "warp {angle}° x{scale}: precision {precision}"
-            );
+            assert!(precision >= 0.95, "warp {angle}° x{scale}: precision {precision}");
             assert!(n >= 200);
         }
     }
@@ -892,50 +753,15 @@ mod tests {
     #[test]
     fn degenerate_images_give_no_features_or_an_error() {
         let mut orb = extractor();
-        let flat = GreyImage {
-            width: 640,
-            height: 480,
-            data: vec![90; 640 * 480],
-        };
-        assert!(orb
-            .extract(&flat)
-            .unwrap_or_else(|e| panic!("{e}"))
-            .keypoints
-            .is_empty());
+        let flat = GreyImage { width: 640, height: 480, data: vec![90; 640 * 480] };
+        assert!(orb.extract(&flat).unwrap_or_else(|e| panic!("{e}")).keypoints.is_empty());
         let tiny = shapes_texture(20, 20, 1);
-        assert!(orb
-            .extract(&tiny)
-            .unwrap_or_else(|e| panic!("{e}"))
-            .keypoints
-            .is_empty());
-        let empty = GreyImage {
-            width: 0,
-            height: 0,
-            data: vec![],
-        };
-        assert!(orb
-            .extract(&empty)
-            .unwrap_or_else(|e| panic!("{e}"))
-            .keypoints
-            .is_empty());
-        let bad = GreyImage {
-            width: 10,
-            height: 10,
-            data: vec![0; 99],
-        };
-        assert!(matches!(
-            orb.extract(&bad),
-            Err(SlamError::BufferLength { .. })
-        ));
-        assert!(OrbExtractor::new(OrbConfig {
-            scale_factor: 1.0,
-            ..OrbConfig::default()
-        })
-        .is_err());
-        assert!(OrbExtractor::new(OrbConfig {
-            n_levels: 0,
-            ..OrbConfig::default()
-        })
-        .is_err());
+        assert!(orb.extract(&tiny).unwrap_or_else(|e| panic!("{e}")).keypoints.is_empty());
+        let empty = GreyImage { width: 0, height: 0, data: vec![] };
+        assert!(orb.extract(&empty).unwrap_or_else(|e| panic!("{e}")).keypoints.is_empty());
+        let bad = GreyImage { width: 10, height: 10, data: vec![0; 99] };
+        assert!(matches!(orb.extract(&bad), Err(SlamError::BufferLength { .. })));
+        assert!(OrbExtractor::new(OrbConfig { scale_factor: 1.0, ..OrbConfig::default() }).is_err());
+        assert!(OrbExtractor::new(OrbConfig { n_levels: 0, ..OrbConfig::default() }).is_err());
     }
 }

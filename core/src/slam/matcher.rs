@@ -23,12 +23,7 @@ pub struct MatchConfig {
 
 impl Default for MatchConfig {
     fn default() -> Self {
-        Self {
-            max_distance: 64,
-            ratio: 0.8,
-            check_orientation: true,
-            orientation_bins: 30,
-        }
+        Self { max_distance: 64, ratio: 0.8, check_orientation: true, orientation_bins: 30 }
     }
 }
 
@@ -71,28 +66,15 @@ pub fn match_brute_force(
         }
         if let Some(slot) = best_for_train.get_mut(best_i) {
             if slot.is_none_or(|m| best < m.distance) {
-                *slot = Some(FeatureMatch {
-                    query_index: qi,
-                    train_index: best_i,
-                    distance: best,
-                });
+                *slot = Some(FeatureMatch { query_index: qi, train_index: best_i, distance: best });
             }
         }
     }
     let mut matches: Vec<FeatureMatch> = best_for_train.into_iter().flatten().collect();
     matches.sort_unstable_by_key(|m| m.query_index);
     if config.check_orientation {
-        let keep = orientation_consistent(
-            &matches,
-            query_keypoints,
-            train_keypoints,
-            config.orientation_bins,
-        );
-        matches = matches
-            .into_iter()
-            .zip(keep)
-            .filter_map(|(m, k)| k.then_some(m))
-            .collect();
+        let keep = orientation_consistent(&matches, query_keypoints, train_keypoints, config.orientation_bins);
+        matches = matches.into_iter().zip(keep).filter_map(|(m, k)| k.then_some(m)).collect();
     }
     matches
 }
@@ -121,16 +103,8 @@ pub fn orientation_consistent(
     let mut order: Vec<usize> = (0..bins).collect();
     order.sort_by_key(|&b| (std::cmp::Reverse(hist[b]), b));
     let top = hist[order[0]];
-    let kept: Vec<usize> = order
-        .iter()
-        .take(3)
-        .copied()
-        .filter(|&b| hist[b] > 0 && hist[b] * 10 > top)
-        .collect();
-    bin_of
-        .iter()
-        .map(|b| b.is_some_and(|b| kept.contains(&b)))
-        .collect()
+    let kept: Vec<usize> = order.iter().take(3).copied().filter(|&b| hist[b] > 0 && hist[b] * 10 > top).collect();
+    bin_of.iter().map(|b| b.is_some_and(|b| kept.contains(&b))).collect()
 }
 
 /// A uniform grid over level-0 pixels holding keypoint indices, for radius searches.
@@ -155,23 +129,11 @@ impl KeypointGrid {
                 cells[cy * cols + cx].push(i as u32);
             }
         }
-        Self {
-            cell_px,
-            cols,
-            rows,
-            cells,
-        }
+        Self { cell_px, cols, rows, cells }
     }
 
     /// Indices of keypoints within `radius_px` of `(u, v)` (appended to `out`, which is cleared).
-    pub fn within(
-        &self,
-        keypoints: &[Keypoint],
-        u: f32,
-        v: f32,
-        radius_px: f32,
-        out: &mut Vec<u32>,
-    ) {
+    pub fn within(&self, keypoints: &[Keypoint], u: f32, v: f32, radius_px: f32, out: &mut Vec<u32>) {
         out.clear();
         if !(u.is_finite() && v.is_finite()) {
             return;
@@ -200,42 +162,23 @@ mod tests {
     use super::*;
 
     fn kp(x: f32, y: f32, angle_rad: f32) -> Keypoint {
-        Keypoint {
-            x,
-            y,
-            level: 0,
-            scale: 1.0,
-            angle_rad,
-            score: 10,
-        }
+        Keypoint { x, y, level: 0, scale: 1.0, angle_rad, score: 10 }
     }
 
     #[test]
     fn grid_radius_search_equals_brute_force() {
-        let kps: Vec<Keypoint> = (0..400)
-            .map(|i| {
-                kp(
-                    (i * 37 % 640) as f32 + 0.5,
-                    (i * 53 % 480) as f32 + 0.25,
-                    0.0,
-                )
-            })
-            .collect();
+        let kps: Vec<Keypoint> =
+            (0..400).map(|i| kp((i * 37 % 640) as f32 + 0.5, (i * 53 % 480) as f32 + 0.25, 0.0)).collect();
         let grid = KeypointGrid::new(&kps, 640, 480, 16.0);
         let mut out = Vec::new();
-        for (u, v, r) in [
-            (100.0, 100.0, 30.0),
-            (0.0, 0.0, 50.0),
-            (639.0, 479.0, 12.0),
-            (-40.0, 10.0, 45.0),
-            (320.0, 240.0, 1000.0),
-        ] {
+        for (u, v, r) in
+            [(100.0, 100.0, 30.0), (0.0, 0.0, 50.0), (639.0, 479.0, 12.0), (-40.0, 10.0, 45.0), (320.0, 240.0, 1000.0)]
+        {
             grid.within(&kps, u, v, r, &mut out);
             let mut got: Vec<u32> = out.clone();
             got.sort_unstable();
-            let want: Vec<u32> = (0..kps.len() as u32)
-                .filter(|&i| (kps[i as usize].x - u).hypot(kps[i as usize].y - v) <= r)
-                .collect();
+            let want: Vec<u32> =
+                (0..kps.len() as u32).filter(|&i| (kps[i as usize].x - u).hypot(kps[i as usize].y - v) <= r).collect();
             assert_eq!(got, want, "query ({u}, {v}, {r})");
         }
         grid.within(&kps, f32::NAN, 3.0, 10.0, &mut out);
@@ -246,17 +189,10 @@ mod tests {
     fn orientation_check_drops_the_odd_rotation() {
         // Ten matches rotate by ~30°, one by 180°: the latter is dropped.
         let q: Vec<Keypoint> = (0..11).map(|i| kp(i as f32, 0.0, 0.1)).collect();
-        let mut t: Vec<Keypoint> = (0..11)
-            .map(|i| kp(i as f32, 0.0, 0.1 + 30f32.to_radians()))
-            .collect();
+        let mut t: Vec<Keypoint> = (0..11).map(|i| kp(i as f32, 0.0, 0.1 + 30f32.to_radians())).collect();
         t[10].angle_rad = 0.1 + std::f32::consts::PI;
-        let m: Vec<FeatureMatch> = (0..11)
-            .map(|i| FeatureMatch {
-                query_index: i,
-                train_index: i,
-                distance: 0,
-            })
-            .collect();
+        let m: Vec<FeatureMatch> =
+            (0..11).map(|i| FeatureMatch { query_index: i, train_index: i, distance: 0 }).collect();
         let keep = orientation_consistent(&m, &q, &t, 30);
         assert_eq!(keep.iter().filter(|&&k| k).count(), 10);
         assert!(!keep[10]);
@@ -269,20 +205,11 @@ mod tests {
         let train = vec![d(0b1111), d(0xFFFF_0001)];
         let kq = vec![kp(0.0, 0.0, 0.0); 3];
         let kt = vec![kp(0.0, 0.0, 0.0); 2];
-        let cfg = MatchConfig {
-            check_orientation: false,
-            ..MatchConfig::default()
-        };
+        let cfg = MatchConfig { check_orientation: false, ..MatchConfig::default() };
         let m = match_brute_force(&query, &kq, &train, &kt, &cfg);
         // Query 0 and 2 both want train 0 at distance 0: only the first is kept; query 1 → train 1.
         assert_eq!(m.len(), 2);
-        assert_eq!(
-            (m[0].query_index, m[0].train_index, m[0].distance),
-            (0, 0, 0)
-        );
-        assert_eq!(
-            (m[1].query_index, m[1].train_index, m[1].distance),
-            (1, 1, 1)
-        );
+        assert_eq!((m[0].query_index, m[0].train_index, m[0].distance), (0, 0, 0));
+        assert_eq!((m[1].query_index, m[1].train_index, m[1].distance), (1, 1, 1));
     }
 }

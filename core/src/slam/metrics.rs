@@ -21,16 +21,10 @@ pub struct Rpe {
 
 fn check(estimated: &[Se3], ground_truth: &[Se3], min_len: usize) -> Result<(), SlamError> {
     if estimated.len() != ground_truth.len() {
-        return Err(SlamError::TrajectoryLength {
-            estimated: estimated.len(),
-            ground_truth: ground_truth.len(),
-        });
+        return Err(SlamError::TrajectoryLength { estimated: estimated.len(), ground_truth: ground_truth.len() });
     }
     if estimated.len() < min_len {
-        return Err(SlamError::TooFewPoses {
-            required: min_len,
-            actual: estimated.len(),
-        });
+        return Err(SlamError::TooFewPoses { required: min_len, actual: estimated.len() });
     }
     Ok(())
 }
@@ -58,10 +52,7 @@ pub fn rpe(estimated: &[Se3], ground_truth: &[Se3]) -> Result<Rpe, SlamError> {
         st += e.translation.vector.norm_squared();
         sr += e.rotation.angle().to_degrees().powi(2);
     }
-    Ok(Rpe {
-        trans_m: (st / n as f64).sqrt(),
-        rot_deg: (sr / n as f64).sqrt(),
-    })
+    Ok(Rpe { trans_m: (st / n as f64).sqrt(), rot_deg: (sr / n as f64).sqrt() })
 }
 
 #[cfg(test)]
@@ -79,16 +70,10 @@ mod tests {
     #[test]
     fn ate_of_a_constant_offset_is_the_offset() {
         let gt: Vec<Se3> = (0..5).map(|i| pose(0.1 * i as f64, 0.0)).collect();
-        let est: Vec<Se3> = gt
-            .iter()
-            .map(|g| Se3::translation(0.0, 0.003, 0.004) * g)
-            .collect();
+        let est: Vec<Se3> = gt.iter().map(|g| Se3::translation(0.0, 0.003, 0.004) * g).collect();
         assert!((ate_rmse_m(&est, &gt).unwrap_or(f64::NAN) - 0.005).abs() < 1e-12);
         // A constant offset has no relative error.
-        let r = rpe(&est, &gt).unwrap_or(Rpe {
-            trans_m: f64::NAN,
-            rot_deg: f64::NAN,
-        });
+        let r = rpe(&est, &gt).unwrap_or(Rpe { trans_m: f64::NAN, rot_deg: f64::NAN });
         assert!(r.trans_m < 1e-12 && r.rot_deg < 1e-9);
     }
 
@@ -98,30 +83,18 @@ mod tests {
         let est = vec![pose(0.0, 0.0), pose(0.02, 2.0)];
         // sqrt((0 + 0.02²) / 2)
         assert!((ate_rmse_m(&est, &gt).unwrap_or(f64::NAN) - 0.02 / 2f64.sqrt()).abs() < 1e-12);
-        let r = rpe(&est, &gt).unwrap_or(Rpe {
-            trans_m: f64::NAN,
-            rot_deg: f64::NAN,
-        });
+        let r = rpe(&est, &gt).unwrap_or(Rpe { trans_m: f64::NAN, rot_deg: f64::NAN });
         assert!((r.trans_m - 0.02).abs() < 1e-12);
         assert!((r.rot_deg - 2.0).abs() < 1e-9);
     }
 
     #[test]
     fn mismatched_or_short_trajectories_are_errors() {
-        assert!(matches!(
-            ate_rmse_m(&[pose(0.0, 0.0)], &[]),
-            Err(SlamError::TrajectoryLength { .. })
-        ));
-        assert!(matches!(
-            ate_rmse_m(&[], &[]),
-            Err(SlamError::TooFewPoses { .. })
-        ));
+        assert!(matches!(ate_rmse_m(&[pose(0.0, 0.0)], &[]), Err(SlamError::TrajectoryLength { .. })));
+        assert!(matches!(ate_rmse_m(&[], &[]), Err(SlamError::TooFewPoses { .. })));
         assert!(matches!(
             rpe(&[pose(0.0, 0.0)], &[pose(0.0, 0.0)]),
-            Err(SlamError::TooFewPoses {
-                required: 2,
-                actual: 1
-            })
+            Err(SlamError::TooFewPoses { required: 2, actual: 1 })
         ));
     }
 }

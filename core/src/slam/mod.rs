@@ -105,12 +105,9 @@ pub use features::{hamming, Descriptor, Features, Keypoint, OrbConfig, OrbExtrac
 pub use matcher::{match_brute_force, FeatureMatch, KeypointGrid, MatchConfig};
 pub use metrics::{ate_rmse_m, rpe, Rpe};
 pub use noise::KinematicNoiseConfig;
-pub use pnp::{
-    refine_pose, solve_pnp_ransac, Correspondence, PoseEstimate, PoseRefineConfig, RansacConfig,
-};
+pub use pnp::{refine_pose, solve_pnp_ransac, Correspondence, PoseEstimate, PoseRefineConfig, RansacConfig};
 pub use tracker::{
-    LostReason, ObservedPoint, PoseSource, TrackInput, TrackOutput, Tracker, TrackerConfig,
-    TrackingState,
+    LostReason, ObservedPoint, PoseSource, TrackInput, TrackOutput, Tracker, TrackerConfig, TrackingState,
 };
 
 use crate::geometry::Se3;
@@ -219,6 +216,5 @@ pub enum SlamError {
 
 /// Whether every entry of a pose is finite.
 pub fn is_finite_pose(pose: &Se3) -> bool {
-    pose.translation.vector.iter().all(|v| v.is_finite())
-        && pose.rotation.coords.iter().all(|v| v.is_finite())
+    pose.translation.vector.iter().all(|v| v.is_finite()) && pose.rotation.coords.iter().all(|v| v.is_finite())
 }

@@ -30,26 +30,14 @@ pub struct KinematicNoiseConfig {
 
 impl Default for KinematicNoiseConfig {
     fn default() -> Self {
-        Self {
-            bias_trans_m: 0.01,
-            bias_rot_deg: 1.0,
-            jitter_trans_m: 0.0005,
-            jitter_rot_deg: 0.05,
-            seed: 1,
-        }
+        Self { bias_trans_m: 0.01, bias_rot_deg: 1.0, jitter_trans_m: 0.0005, jitter_rot_deg: 0.05, seed: 1 }
     }
 }
 
 impl KinematicNoiseConfig {
     /// No noise at all.
     pub fn none() -> Self {
-        Self {
-            bias_trans_m: 0.0,
-            bias_rot_deg: 0.0,
-            jitter_trans_m: 0.0,
-            jitter_rot_deg: 0.0,
-            seed: 0,
-        }
+        Self { bias_trans_m: 0.0, bias_rot_deg: 0.0, jitter_trans_m: 0.0, jitter_rot_deg: 0.0, seed: 0 }
     }
 
     /// The camera-frame bias of view `view_index`.
@@ -64,10 +52,8 @@ impl KinematicNoiseConfig {
     /// The camera-frame jitter of frame `frame_index`.
     pub fn jitter(&self, frame_index: u64) -> Se3 {
         let mut rng = stream(self.seed, 0x7177, frame_index);
-        let t =
-            Vector3::new(gauss(&mut rng), gauss(&mut rng), gauss(&mut rng)) * self.jitter_trans_m;
-        let w = Vector3::new(gauss(&mut rng), gauss(&mut rng), gauss(&mut rng))
-            * self.jitter_rot_deg.to_radians();
+        let t = Vector3::new(gauss(&mut rng), gauss(&mut rng), gauss(&mut rng)) * self.jitter_trans_m;
+        let w = Vector3::new(gauss(&mut rng), gauss(&mut rng), gauss(&mut rng)) * self.jitter_rot_deg.to_radians();
         Se3::from_parts(Translation3::from(t), UnitQuaternion::from_scaled_axis(w))
     }
 
@@ -121,15 +107,9 @@ mod tests {
 
     #[test]
     fn jitter_statistics_match_the_configured_sigma() {
-        let c = KinematicNoiseConfig {
-            jitter_trans_m: 0.001,
-            ..KinematicNoiseConfig::default()
-        };
+        let c = KinematicNoiseConfig { jitter_trans_m: 0.001, ..KinematicNoiseConfig::default() };
         let n = 4000;
-        let var: f64 = (0..n)
-            .map(|f| c.jitter(f).translation.vector.norm_squared())
-            .sum::<f64>()
-            / (3 * n) as f64;
+        let var: f64 = (0..n).map(|f| c.jitter(f).translation.vector.norm_squared()).sum::<f64>() / (3 * n) as f64;
         // Per-axis standard deviation within 5 % of 1 mm (4000 x 3 samples).
         assert!((var.sqrt() - 0.001).abs() < 5e-5, "sigma {}", var.sqrt());
     }

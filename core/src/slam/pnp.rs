@@ -53,11 +53,7 @@ pub struct PoseRefineConfig {
 
 impl Default for PoseRefineConfig {
     fn default() -> Self {
-        Self {
-            depth_baseline_m: 0.08,
-            iterations: 10,
-            rounds: 4,
-        }
+        Self { depth_baseline_m: 0.08, iterations: 10, rounds: 4 }
     }
 }
 
@@ -79,13 +75,7 @@ pub struct RansacConfig {
 
 impl Default for RansacConfig {
     fn default() -> Self {
-        Self {
-            max_iterations: 200,
-            confidence: 0.999,
-            min_inliers: 15,
-            minimal_iterations: 8,
-            seed: 7,
-        }
+        Self { max_iterations: 200, confidence: 0.999, min_inliers: 15, minimal_iterations: 8, seed: 7 }
     }
 }
 
@@ -169,10 +159,7 @@ pub(crate) fn huber_weight(chi2: f64, delta2: f64) -> f64 {
 pub(crate) fn apply_increment(camera_from_world: &Se3, delta: &Vector6<f64>) -> Se3 {
     let omega = Vector3::new(delta[0], delta[1], delta[2]);
     let v = Vector3::new(delta[3], delta[4], delta[5]);
-    let inc = Se3::from_parts(
-        nalgebra::Translation3::from(v),
-        nalgebra::UnitQuaternion::from_scaled_axis(omega),
-    );
+    let inc = Se3::from_parts(nalgebra::Translation3::from(v), nalgebra::UnitQuaternion::from_scaled_axis(omega));
     inc * camera_from_world
 }
 
@@ -180,9 +167,7 @@ pub(crate) fn apply_increment(camera_from_world: &Se3, delta: &Vector6<f64>) -> 
 #[inline]
 pub(crate) fn point_jacobian(p_in_camera: &Vector3<f64>) -> nalgebra::Matrix3x6<f64> {
     let (x, y, z) = (p_in_camera.x, p_in_camera.y, p_in_camera.z);
-    nalgebra::Matrix3x6::new(
-        0.0, z, -y, 1.0, 0.0, 0.0, -z, 0.0, x, 0.0, 1.0, 0.0, y, -x, 0.0, 0.0, 0.0, 1.0,
-    )
+    nalgebra::Matrix3x6::new(0.0, z, -y, 1.0, 0.0, 0.0, -z, 0.0, x, 0.0, 1.0, 0.0, y, -x, 0.0, 0.0, 0.0, 1.0)
 }
 
 /// Gauss-Newton on the selected correspondences (Huber if `robust`), from `camera_from_world`.
@@ -205,17 +190,11 @@ fn gauss_newton(
         for &i in &idx {
             let Some(c) = corr.get(i) else { continue };
             let x = pose * c.p_in_world;
-            let Some((e, j, has_depth)) =
-                residual(camera, bf, &x.coords, c.pixel, c.depth_m, c.sigma_px)
-            else {
+            let Some((e, j, has_depth)) = residual(camera, bf, &x.coords, c.pixel, c.depth_m, c.sigma_px) else {
                 continue;
             };
             let jj = j * point_jacobian(&x.coords);
-            let w = if robust {
-                huber_weight(e.norm_squared(), chi2_threshold(has_depth))
-            } else {
-                1.0
-            };
+            let w = if robust { huber_weight(e.norm_squared(), chi2_threshold(has_depth)) } else { 1.0 };
             h += jj.transpose() * jj * w;
             b -= jj.transpose() * e * w;
         }
@@ -237,12 +216,7 @@ fn gauss_newton(
 
 /// Squared whitened residual of each correspondence under `camera_from_world` (∞ behind camera)
 /// and whether it has depth.
-fn chi2_all(
-    corr: &[Correspondence],
-    camera: &PinholeCamera,
-    bf: f64,
-    camera_from_world: &Se3,
-) -> Vec<(f64, bool)> {
+fn chi2_all(corr: &[Correspondence], camera: &PinholeCamera, bf: f64, camera_from_world: &Se3) -> Vec<(f64, bool)> {
     corr.iter()
         .map(|c| {
             let x = camera_from_world * c.p_in_world;
@@ -256,10 +230,7 @@ fn chi2_all(
 
 fn check_inputs(corr: &[Correspondence], prior: &Se3, required: usize) -> Result<(), SlamError> {
     if corr.len() < required {
-        return Err(SlamError::TooFewCorrespondences {
-            required,
-            actual: corr.len(),
-        });
+        return Err(SlamError::TooFewCorrespondences { required, actual: corr.len() });
     }
     if !super::is_finite_pose(prior) {
         return Err(SlamError::NonFinitePose { field: "prior" });
@@ -289,25 +260,15 @@ pub fn refine_pose(
     let mut pose = world_from_camera.inverse();
     let mut inliers = vec![true; corr.len()];
     for _ in 0..config.rounds.max(1) {
-        let mut sel = inliers
-            .iter()
-            .enumerate()
-            .filter_map(|(i, &k)| k.then_some(i));
-        pose = gauss_newton(corr, &mut sel, camera, bf, pose, config.iterations, true).ok_or(
-            SlamError::Degenerate {
-                stage: "pose refinement",
-            },
-        )?;
+        let mut sel = inliers.iter().enumerate().filter_map(|(i, &k)| k.then_some(i));
+        pose = gauss_newton(corr, &mut sel, camera, bf, pose, config.iterations, true)
+            .ok_or(SlamError::Degenerate { stage: "pose refinement" })?;
         for (flag, (chi2, has_depth)) in inliers.iter_mut().zip(chi2_all(corr, camera, bf, &pose)) {
             *flag = chi2 <= chi2_threshold(has_depth);
         }
     }
     let n_inliers = inliers.iter().filter(|&&k| k).count();
-    Ok(PoseEstimate {
-        world_from_camera: pose.inverse(),
-        inliers,
-        n_inliers,
-    })
+    Ok(PoseEstimate { world_from_camera: pose.inverse(), inliers, n_inliers })
 }
 
 /// RANSAC over prior-seeded minimal sets (see the module docs), then [`refine_pose`] on the best
@@ -323,12 +284,7 @@ pub fn solve_pnp_ransac(
     check_inputs(corr, prior_world_from_camera, 3)?;
     let bf = camera.fx * refine.depth_baseline_m;
     let prior = prior_world_from_camera.inverse();
-    let count = |pose: &Se3| {
-        chi2_all(corr, camera, bf, pose)
-            .iter()
-            .filter(|(c, d)| *c <= chi2_threshold(*d))
-            .count()
-    };
+    let count = |pose: &Se3| chi2_all(corr, camera, bf, pose).iter().filter(|(c, d)| *c <= chi2_threshold(*d)).count();
     let mut best_pose = prior;
     let mut best_count = count(&prior);
     let mut rng = ChaCha8Rng::seed_from_u64(ransac.seed);
@@ -347,15 +303,7 @@ pub fn solve_pnp_ransac(
             c = rng.random_range(0..n);
         }
         let mut sel = [a, b, c].into_iter();
-        let Some(pose) = gauss_newton(
-            corr,
-            &mut sel,
-            camera,
-            bf,
-            prior,
-            ransac.minimal_iterations,
-            false,
-        ) else {
+        let Some(pose) = gauss_newton(corr, &mut sel, camera, bf, prior, ransac.minimal_iterations, false) else {
             continue;
         };
         let k = count(&pose);
@@ -367,45 +315,24 @@ pub fn solve_pnp_ransac(
             needed = if p_good >= 1.0 - 1e-12 {
                 0
             } else {
-                ((1.0 - ransac.confidence).ln() / (1.0 - p_good).ln())
-                    .ceil()
-                    .max(1.0) as usize
+                ((1.0 - ransac.confidence).ln() / (1.0 - p_good).ln()).ceil().max(1.0) as usize
             };
         }
     }
     if best_count < ransac.min_inliers.max(3) {
-        return Err(SlamError::TooFewInliers {
-            required: ransac.min_inliers,
-            actual: best_count,
-        });
+        return Err(SlamError::TooFewInliers { required: ransac.min_inliers, actual: best_count });
     }
-    let inliers: Vec<bool> = chi2_all(corr, camera, bf, &best_pose)
-        .iter()
-        .map(|(c, d)| *c <= chi2_threshold(*d))
-        .collect();
-    let subset: Vec<Correspondence> = corr
-        .iter()
-        .zip(&inliers)
-        .filter_map(|(c, &k)| k.then_some(*c))
-        .collect();
+    let inliers: Vec<bool> =
+        chi2_all(corr, camera, bf, &best_pose).iter().map(|(c, d)| *c <= chi2_threshold(*d)).collect();
+    let subset: Vec<Correspondence> = corr.iter().zip(&inliers).filter_map(|(c, &k)| k.then_some(*c)).collect();
     let refined = refine_pose(&subset, camera, &best_pose.inverse(), refine)?;
     let pose = refined.world_from_camera.inverse();
-    let inliers: Vec<bool> = chi2_all(corr, camera, bf, &pose)
-        .iter()
-        .map(|(c, d)| *c <= chi2_threshold(*d))
-        .collect();
+    let inliers: Vec<bool> = chi2_all(corr, camera, bf, &pose).iter().map(|(c, d)| *c <= chi2_threshold(*d)).collect();
     let n_inliers = inliers.iter().filter(|&&k| k).count();
     if n_inliers < ransac.min_inliers {
-        return Err(SlamError::TooFewInliers {
-            required: ransac.min_inliers,
-            actual: n_inliers,
-        });
+        return Err(SlamError::TooFewInliers { required: ransac.min_inliers, actual: n_inliers });
     }
-    Ok(PoseEstimate {
-        world_from_camera: refined.world_from_camera,
-        inliers,
-        n_inliers,
-    })
+    Ok(PoseEstimate { world_from_camera: refined.world_from_camera, inliers, n_inliers })
 }
 
 #[cfg(test)]
@@ -428,10 +355,8 @@ mod tests {
     fn scene(seed: u64, outlier_fraction: f64, with_depth: bool) -> (Se3, Vec<Correspondence>) {
         let cam = camera();
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
-        let world_from_camera = Se3::from_parts(
-            Translation3::new(0.3, -0.2, 0.5),
-            UnitQuaternion::from_euler_angles(2.8, 0.1, -0.4),
-        );
+        let world_from_camera =
+            Se3::from_parts(Translation3::new(0.3, -0.2, 0.5), UnitQuaternion::from_euler_angles(2.8, 0.1, -0.4));
         let n = 300;
         let n_out = (outlier_fraction * n as f64) as usize;
         let corr = (0..n)
@@ -441,22 +366,11 @@ mod tests {
                 let p_in_camera = cam.unproject(u, v, z);
                 let p_in_world = world_from_camera * p_in_camera;
                 let (pixel, depth) = if i < n_out {
-                    (
-                        [rng.random_range(0.0..640.0), rng.random_range(0.0..480.0)],
-                        rng.random_range(0.3..1.2),
-                    )
+                    ([rng.random_range(0.0..640.0), rng.random_range(0.0..480.0)], rng.random_range(0.3..1.2))
                 } else {
-                    (
-                        [u + 0.3 * gauss(&mut rng), v + 0.3 * gauss(&mut rng)],
-                        z + 0.001 * gauss(&mut rng),
-                    )
+                    ([u + 0.3 * gauss(&mut rng), v + 0.3 * gauss(&mut rng)], z + 0.001 * gauss(&mut rng))
                 };
-                Correspondence {
-                    p_in_world,
-                    pixel,
-                    depth_m: with_depth.then_some(depth),
-                    sigma_px: 1.0,
-                }
+                Correspondence { p_in_world, pixel, depth_m: with_depth.then_some(depth), sigma_px: 1.0 }
             })
             .collect();
         (world_from_camera, corr)
@@ -481,25 +395,16 @@ mod tests {
                 &corr,
                 &camera(),
                 &prior,
-                &RansacConfig {
-                    seed,
-                    ..RansacConfig::default()
-                },
+                &RansacConfig { seed, ..RansacConfig::default() },
                 &PoseRefineConfig::default(),
             )
             .unwrap_or_else(|e| panic!("{e}"));
             let (dt, dr) = errors(&truth, &est.world_from_camera);
-            assert!(
-                dt < 0.001 && dr < 0.1,
-                "seed {seed} depth {with_depth}: {dt} m, {dr}°"
-            );
+            assert!(dt < 0.001 && dr < 0.1, "seed {seed} depth {with_depth}: {dt} m, {dr}°");
             // Outliers are flagged: at most 3 % of them slip through, at least 95 % of inliers kept.
             let false_in = est.inliers[..90].iter().filter(|&&k| k).count();
             let true_in = est.inliers[90..].iter().filter(|&&k| k).count();
-            assert!(
-                false_in <= 3 && true_in >= 200,
-                "{false_in} outliers accepted, {true_in} inliers kept"
-            );
+            assert!(false_in <= 3 && true_in >= 200, "{false_in} outliers accepted, {true_in} inliers kept");
         }
     }
 
@@ -507,8 +412,7 @@ mod tests {
     fn refinement_converges_from_the_prior_on_clean_data() {
         let (truth, corr) = scene(5, 0.0, true);
         let prior = truth * Se3::translation(0.01, 0.0, -0.01);
-        let est = refine_pose(&corr, &camera(), &prior, &PoseRefineConfig::default())
-            .unwrap_or_else(|e| panic!("{e}"));
+        let est = refine_pose(&corr, &camera(), &prior, &PoseRefineConfig::default()).unwrap_or_else(|e| panic!("{e}"));
         let (dt, dr) = errors(&truth, &est.world_from_camera);
         assert!(dt < 5e-4 && dr < 0.05, "{dt} m, {dr}°");
     }
@@ -520,28 +424,16 @@ mod tests {
         let (r, p) = (RansacConfig::default(), PoseRefineConfig::default());
         assert!(matches!(
             solve_pnp_ransac(&corr[..2], &cam, &truth, &r, &p),
-            Err(SlamError::TooFewCorrespondences {
-                required: 3,
-                actual: 2
-            })
+            Err(SlamError::TooFewCorrespondences { required: 3, actual: 2 })
         ));
         let mut bad = corr.clone();
         bad[4].pixel[0] = f64::NAN;
-        assert_eq!(
-            solve_pnp_ransac(&bad, &cam, &truth, &r, &p),
-            Err(SlamError::BadCorrespondence { index: 4 })
-        );
+        assert_eq!(solve_pnp_ransac(&bad, &cam, &truth, &r, &p), Err(SlamError::BadCorrespondence { index: 4 }));
         let mut nan_prior = truth;
         nan_prior.translation.vector.y = f64::INFINITY;
-        assert!(matches!(
-            solve_pnp_ransac(&corr, &cam, &nan_prior, &r, &p),
-            Err(SlamError::NonFinitePose { .. })
-        ));
+        assert!(matches!(solve_pnp_ransac(&corr, &cam, &nan_prior, &r, &p), Err(SlamError::NonFinitePose { .. })));
         // Pure noise: no consensus.
         let (_, noise) = scene(7, 1.0, false);
-        assert!(matches!(
-            solve_pnp_ransac(&noise, &cam, &truth, &r, &p),
-            Err(SlamError::TooFewInliers { .. })
-        ));
+        assert!(matches!(solve_pnp_ransac(&noise, &cam, &truth, &r, &p), Err(SlamError::TooFewInliers { .. })));
     }
 }

@@ -43,11 +43,7 @@ pub fn shapes_texture(width: u32, height: u32, seed: u64) -> GreyImage {
     let background = (64 + r() % 128) as u8;
     let mut data = vec![background; w * h];
     if w == 0 || h == 0 {
-        return GreyImage {
-            width,
-            height,
-            data,
-        };
+        return GreyImage { width, height, data };
     }
     let n_shapes = w * h / SHAPES_AREA_PER_SHAPE_PX;
     for _ in 0..n_shapes {
@@ -77,11 +73,7 @@ pub fn shapes_texture(width: u32, height: u32, seed: u64) -> GreyImage {
             }
         }
     }
-    GreyImage {
-        width,
-        height,
-        data,
-    }
+    GreyImage { width, height, data }
 }
 
 /// An axis-aligned textured box standing in a [`TabletopScene`].
@@ -122,11 +114,7 @@ impl TabletopScene {
             mk(0.40, -0.12, 0.025, 0.025, 0.06, 389.0),
             mk(0.62, 0.12, 0.04, 0.06, 0.02, 521.0),
         ];
-        Self {
-            texture,
-            texel_m: 0.001,
-            boxes,
-        }
+        Self { texture, texel_m: 0.001, boxes }
     }
 
     fn sample(&self, s: f64, t: f64) -> f32 {
@@ -138,13 +126,7 @@ impl TabletopScene {
         let (a, b) = ((s - fs) as f32, (t - ft) as f32);
         let at = |x: i64, y: i64| -> f32 {
             let (x, y) = (x.rem_euclid(w), y.rem_euclid(h));
-            f32::from(
-                self.texture
-                    .data
-                    .get((y * w + x) as usize)
-                    .copied()
-                    .unwrap_or(0),
-            )
+            f32::from(self.texture.data.get((y * w + x) as usize).copied().unwrap_or(0))
         };
         let (x0, y0) = (fs as i64, ft as i64);
         let top = at(x0, y0) * (1.0 - a) + at(x0 + 1, y0) * a;
@@ -154,11 +136,7 @@ impl TabletopScene {
 
     /// Ray-cast a grey image and a depth image (metres along the optical axis; 0 where the ray
     /// escapes) seen from `world_from_camera` (OpenCV camera axes).
-    pub fn render(
-        &self,
-        camera: &PinholeCamera,
-        world_from_camera: &Se3,
-    ) -> (GreyImage, DepthImage) {
+    pub fn render(&self, camera: &PinholeCamera, world_from_camera: &Se3) -> (GreyImage, DepthImage) {
         let (w, h) = (camera.width as usize, camera.height as usize);
         let mut grey = vec![0u8; w * h];
         let mut depth = vec![0f32; w * h];
@@ -168,11 +146,8 @@ impl TabletopScene {
         for v in 0..h {
             for u in 0..w {
                 // Ray with unit z in the camera frame: the ray parameter is the depth.
-                let d_in_camera = Vector3::new(
-                    (u as f64 - camera.cx) / camera.fx,
-                    (v as f64 - camera.cy) / camera.fy,
-                    1.0,
-                );
+                let d_in_camera =
+                    Vector3::new((u as f64 - camera.cx) / camera.fx, (v as f64 - camera.cy) / camera.fy, 1.0);
                 let d = rot * d_in_camera;
                 let mut best_t = f64::INFINITY;
                 let mut best_st = [0.0, 0.0];
@@ -194,33 +169,19 @@ impl TabletopScene {
                                 _ => (p.x, p.y),
                             };
                             best_t = t;
-                            best_st = [
-                                s * inv_texel + b.texture_offset[0],
-                                tt * inv_texel + b.texture_offset[1],
-                            ];
+                            best_st = [s * inv_texel + b.texture_offset[0], tt * inv_texel + b.texture_offset[1]];
                         }
                     }
                 }
                 if best_t.is_finite() {
-                    grey[v * w + u] = self
-                        .sample(best_st[0], best_st[1])
-                        .round()
-                        .clamp(0.0, 255.0) as u8;
+                    grey[v * w + u] = self.sample(best_st[0], best_st[1]).round().clamp(0.0, 255.0) as u8;
                     depth[v * w + u] = best_t as f32;
                 }
             }
         }
         (
-            GreyImage {
-                width: camera.width,
-                height: camera.height,
-                data: grey,
-            },
-            DepthImage {
-                width: camera.width,
-                height: camera.height,
-                data: depth,
-            },
+            GreyImage { width: camera.width, height: camera.height, data: grey },
+            DepthImage { width: camera.width, height: camera.height, data: depth },
         )
     }
 }
@@ -256,16 +217,10 @@ fn ray_box(origin: &Vector3<f64>, d: &Vector3<f64>, b: &SceneBox) -> Option<(f64
 /// close to world −z as possible).
 pub fn look_at(eye: Point3<f64>, target: Point3<f64>) -> Se3 {
     let z = (target - eye).normalize();
-    let up = if z.cross(&Vector3::z()).norm() < 1e-6 {
-        Vector3::x()
-    } else {
-        Vector3::z()
-    };
+    let up = if z.cross(&Vector3::z()).norm() < 1e-6 { Vector3::x() } else { Vector3::z() };
     let x = z.cross(&up).normalize();
     let y = z.cross(&x);
     let m = nalgebra::Matrix3::from_columns(&[x, y, z]);
-    let rotation = nalgebra::UnitQuaternion::from_rotation_matrix(
-        &nalgebra::Rotation3::from_matrix_unchecked(m),
-    );
+    let rotation = nalgebra::UnitQuaternion::from_rotation_matrix(&nalgebra::Rotation3::from_matrix_unchecked(m));
     Se3::from_parts(nalgebra::Translation3::from(eye.coords), rotation)
 }

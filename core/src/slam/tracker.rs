@@ -218,11 +218,7 @@ impl TrackOutput {
     /// The "local object" point cloud of the paper (Sec. III-B): the observed map points whose
     /// pixel lies inside `bbox`.
     pub fn points_in_box(&self, bbox: &Box2) -> Vec<ObservedPoint> {
-        self.observed
-            .iter()
-            .filter(|p| bbox.contains(p.pixel[0], p.pixel[1]))
-            .copied()
-            .collect()
+        self.observed.iter().filter(|p| bbox.contains(p.pixel[0], p.pixel[1])).copied().collect()
     }
 
     /// Whether the frame was tracked.
@@ -350,18 +346,11 @@ impl Tracker {
         ];
         for (field, v) in positive {
             if !(v.is_finite() && v > 0.0) {
-                return Err(SlamError::Config {
-                    field,
-                    reason: format!("{v} must be finite and > 0"),
-                });
+                return Err(SlamError::Config { field, reason: format!("{v} must be finite and > 0") });
             }
         }
-        if config.max_depth_m.partial_cmp(&config.min_depth_m) != Some(std::cmp::Ordering::Greater)
-        {
-            return Err(SlamError::Config {
-                field: "max_depth_m",
-                reason: "must exceed min_depth_m".into(),
-            });
+        if config.max_depth_m.partial_cmp(&config.min_depth_m) != Some(std::cmp::Ordering::Greater) {
+            return Err(SlamError::Config { field: "max_depth_m", reason: "must exceed min_depth_m".into() });
         }
         let n = config.kinematic_noise;
         for (field, v) in [
@@ -373,17 +362,11 @@ impl Tracker {
             ("bundle.depth_baseline_m", config.bundle.depth_baseline_m),
         ] {
             if !(v.is_finite() && v >= 0.0) {
-                return Err(SlamError::Config {
-                    field,
-                    reason: format!("{v} must be finite and ≥ 0"),
-                });
+                return Err(SlamError::Config { field, reason: format!("{v} must be finite and ≥ 0") });
             }
         }
         if config.local_keyframes == 0 {
-            return Err(SlamError::Config {
-                field: "local_keyframes",
-                reason: "must be ≥ 1".into(),
-            });
+            return Err(SlamError::Config { field: "local_keyframes", reason: "must be ≥ 1".into() });
         }
         let orb = OrbExtractor::new(config.orb)?;
         Ok(Self {
@@ -436,10 +419,7 @@ impl Tracker {
     /// All map points in the world frame, by id.
     pub fn map_points_in_world(&self) -> Vec<(u64, Point3<f64>)> {
         let w = self.world_from_map();
-        self.points
-            .iter()
-            .map(|(id, p)| (*id, w * p.p_in_map))
-            .collect()
+        self.points.iter().map(|(id, p)| (*id, w * p.p_in_map)).collect()
     }
 
     /// The trajectory so far, one pose per tracked call, re-expressed with the latest world ← map
@@ -469,11 +449,7 @@ impl Tracker {
         }
         let frame_index = self.frame_index;
         self.frame_index += 1;
-        let prior = self.config.kinematic_noise.perturb(
-            &input.world_from_camera_fk,
-            input.view_index,
-            frame_index,
-        );
+        let prior = self.config.kinematic_noise.perturb(&input.world_from_camera_fk, input.view_index, frame_index);
         let features = self.orb.extract(input.grey)?;
         let depth_m: Vec<Option<f64>> = features
             .keypoints
@@ -487,17 +463,8 @@ impl Tracker {
                     .filter(|d| (self.config.min_depth_m..=self.config.max_depth_m).contains(d))
             })
             .collect();
-        let grid = KeypointGrid::new(
-            &features.keypoints,
-            input.camera.width,
-            input.camera.height,
-            16.0,
-        );
-        let frame = FrameData {
-            features,
-            depth_m,
-            grid,
-        };
+        let grid = KeypointGrid::new(&features.keypoints, input.camera.width, input.camera.height, 16.0);
+        let frame = FrameData { features, depth_m, grid };
         let camera = input.camera;
         let mut out = TrackOutput {
             frame_index,
@@ -515,15 +482,9 @@ impl Tracker {
             PoseSource::Kinematics => Some(prior),
             PoseSource::GroundTruth => input.world_from_camera_gt,
         };
-        let min_features = self
-            .config
-            .min_tracked_inliers
-            .max(self.config.ransac.min_inliers);
+        let min_features = self.config.min_tracked_inliers.max(self.config.ransac.min_inliers);
         let result = if frame.features.keypoints.len() < min_features {
-            Err(LostReason::TooFewFeatures {
-                found: frame.features.keypoints.len(),
-                required: min_features,
-            })
+            Err(LostReason::TooFewFeatures { found: frame.features.keypoints.len(), required: min_features })
         } else if let Some(pose) = known {
             Ok(self.step_known_pose(&frame, camera, pose))
         } else {
@@ -619,10 +580,7 @@ impl Tracker {
         if self.points.is_empty() {
             let valid = frame.depth_m.iter().flatten().count();
             if valid < self.config.min_init_points {
-                return Err(LostReason::NoDepth {
-                    valid,
-                    required: self.config.min_init_points,
-                });
+                return Err(LostReason::NoDepth { valid, required: self.config.min_init_points });
             }
             return Ok((anchored, Vec::new(), 0));
         }
@@ -638,10 +596,7 @@ impl Tracker {
                 Err(n) => best_inliers = best_inliers.max(n),
             }
         }
-        Err(LostReason::TooFewInliers {
-            inliers: best_inliers,
-            required: self.config.min_tracked_inliers,
-        })
+        Err(LostReason::TooFewInliers { inliers: best_inliers, required: self.config.min_tracked_inliers })
     }
 
     /// Coarse projection search + RANSAC, then fine search + robust refinement. `Err(inliers)`.
@@ -651,18 +606,11 @@ impl Tracker {
         camera: &PinholeCamera,
         seed: &Se3,
     ) -> Result<(Se3, Vec<PointMatch>, usize), usize> {
-        let coarse = self.search_by_projection(
-            frame,
-            camera,
-            &seed.inverse(),
-            self.config.coarse_radius_px,
-            false,
-        );
+        let coarse = self.search_by_projection(frame, camera, &seed.inverse(), self.config.coarse_radius_px, false);
         let corr = self.correspondences(frame, &coarse);
         let mut ransac = self.config.ransac;
         ransac.seed ^= self.frame_index.wrapping_mul(0x9E37_79B9_7F4A_7C15);
-        let est = solve_pnp_ransac(&corr, camera, seed, &ransac, &self.config.refine)
-            .map_err(|_| 0usize)?;
+        let est = solve_pnp_ransac(&corr, camera, seed, &ransac, &self.config.refine).map_err(|_| 0usize)?;
         let fine = self.search_by_projection(
             frame,
             camera,
@@ -671,16 +619,13 @@ impl Tracker {
             true,
         );
         let corr = self.correspondences(frame, &fine);
-        let refined = refine_pose(&corr, camera, &est.world_from_camera, &self.config.refine)
-            .map_err(|_| est.n_inliers)?;
+        let refined =
+            refine_pose(&corr, camera, &est.world_from_camera, &self.config.refine).map_err(|_| est.n_inliers)?;
         if refined.n_inliers < self.config.min_tracked_inliers {
             return Err(refined.n_inliers);
         }
-        let inlier_matches: Vec<PointMatch> = fine
-            .iter()
-            .zip(&refined.inliers)
-            .filter_map(|(m, &k)| k.then_some(*m))
-            .collect();
+        let inlier_matches: Vec<PointMatch> =
+            fine.iter().zip(&refined.inliers).filter_map(|(m, &k)| k.then_some(*m)).collect();
         Ok((refined.world_from_camera, inlier_matches, refined.n_inliers))
     }
 
@@ -725,14 +670,8 @@ impl Tracker {
             if !camera.contains(uv) {
                 continue;
             }
-            let r = if scale_radius {
-                radius_px * scale_factor.powi(i32::from(p.level))
-            } else {
-                radius_px
-            };
-            frame
-                .grid
-                .within(kps, uv[0] as f32, uv[1] as f32, r as f32, &mut cand);
+            let r = if scale_radius { radius_px * scale_factor.powi(i32::from(p.level)) } else { radius_px };
+            frame.grid.within(kps, uv[0] as f32, uv[1] as f32, r as f32, &mut cand);
             let (mut best, mut second, mut best_i) = (u32::MAX, u32::MAX, usize::MAX);
             for &i in &cand {
                 let i = i as usize;
@@ -765,12 +704,7 @@ impl Tracker {
         best_for_kp
             .iter()
             .enumerate()
-            .filter_map(|(i, s)| {
-                s.map(|(_, id)| PointMatch {
-                    point_id: id,
-                    keypoint: i,
-                })
-            })
+            .filter_map(|(i, s)| s.map(|(_, id)| PointMatch { point_id: id, keypoint: i }))
             .collect()
     }
 
@@ -799,8 +733,7 @@ impl Tracker {
         self.frames_since_keyframe += 1;
         let need_kf = self.keyframes.is_empty()
             || self.frames_since_keyframe >= self.config.keyframe_max_interval
-            || (matches.len() as f64)
-                < self.config.keyframe_inlier_ratio * self.last_keyframe_tracked as f64;
+            || (matches.len() as f64) < self.config.keyframe_inlier_ratio * self.last_keyframe_tracked as f64;
         if !need_kf {
             return (map_from_camera, matches.to_vec(), false);
         }
@@ -868,31 +801,19 @@ impl Tracker {
                 depth_m: Some(d),
                 sigma_px: f64::from(k.scale),
             });
-            observed.push(PointMatch {
-                point_id: id,
-                keypoint: i,
-            });
+            observed.push(PointMatch { point_id: id, keypoint: i });
         }
-        self.keyframes.push(KeyFrame {
-            map_from_camera,
-            observations,
-        });
+        self.keyframes.push(KeyFrame { map_from_camera, observations });
         self.frames_since_keyframe = 0;
         self.last_keyframe_tracked = matches.len().max(
-            self.keyframes
-                .last()
-                .map_or(0, |k| k.observations.len())
-                .min(matches.len() + self.config.max_new_points),
+            self.keyframes.last().map_or(0, |k| k.observations.len()).min(matches.len() + self.config.max_new_points),
         );
         if self.config.pose_source == PoseSource::Slam && self.keyframes.len() > 1 {
             self.local_bundle_adjustment(camera);
         }
         self.cull();
         observed.retain(|m| self.points.contains_key(&m.point_id));
-        let pose = self
-            .keyframes
-            .last()
-            .map_or(map_from_camera, |k| k.map_from_camera);
+        let pose = self.keyframes.last().map_or(map_from_camera, |k| k.map_from_camera);
         (pose, observed)
     }
 
@@ -974,9 +895,7 @@ impl Tracker {
         problem.optimize(camera, &self.config.bundle);
         for (pi, &k) in kf_list.iter().enumerate() {
             if !problem.fixed[pi] {
-                if let (Some(kf), Some(p)) =
-                    (self.keyframes.get_mut(k), problem.camera_from_world.get(pi))
-                {
+                if let (Some(kf), Some(p)) = (self.keyframes.get_mut(k), problem.camera_from_world.get(pi)) {
                     kf.map_from_camera = p.inverse();
                 }
             }
@@ -1016,14 +935,10 @@ impl Tracker {
             if p.keyframes.is_empty() {
                 return false;
             }
-            if p.n_visible >= c.cull_min_visible
-                && f64::from(p.n_found) < c.cull_found_ratio * f64::from(p.n_visible)
-            {
+            if p.n_visible >= c.cull_min_visible && f64::from(p.n_found) < c.cull_found_ratio * f64::from(p.n_visible) {
                 return false;
             }
-            !(c.cull_after_keyframes > 0
-                && n_kf >= p.created_kf + 1 + c.cull_after_keyframes
-                && p.keyframes.len() < 2)
+            !(c.cull_after_keyframes > 0 && n_kf >= p.created_kf + 1 + c.cull_after_keyframes && p.keyframes.len() < 2)
         });
     }
 }
@@ -1034,10 +949,7 @@ fn check_pose(pose: &Se3, field: &'static str) -> Result<(), SlamError> {
     }
     let qn = pose.rotation.quaternion().norm();
     if (qn - 1.0).abs() > 1e-6 {
-        return Err(SlamError::NotRigid {
-            field,
-            reason: format!("rotation quaternion has norm {qn}"),
-        });
+        return Err(SlamError::NotRigid { field, reason: format!("rotation quaternion has norm {qn}") });
     }
     Ok(())
 }
@@ -1046,35 +958,15 @@ fn validate(input: &TrackInput<'_>) -> Result<(), SlamError> {
     input.camera.validate()?;
     let (w, h) = (input.camera.width, input.camera.height);
     for (field, iw, ih, len) in [
-        (
-            "grey",
-            input.grey.width,
-            input.grey.height,
-            input.grey.data.len(),
-        ),
-        (
-            "depth",
-            input.depth.width,
-            input.depth.height,
-            input.depth.data.len(),
-        ),
+        ("grey", input.grey.width, input.grey.height, input.grey.data.len()),
+        ("depth", input.depth.width, input.depth.height, input.depth.data.len()),
     ] {
         if iw != w || ih != h {
-            return Err(SlamError::ImageSize {
-                field,
-                width: w,
-                height: h,
-                actual_width: iw,
-                actual_height: ih,
-            });
+            return Err(SlamError::ImageSize { field, width: w, height: h, actual_width: iw, actual_height: ih });
         }
         let expected = w as usize * h as usize;
         if len != expected {
-            return Err(SlamError::BufferLength {
-                field,
-                expected,
-                actual: len,
-            });
+            return Err(SlamError::BufferLength { field, expected, actual: len });
         }
     }
     check_pose(&input.world_from_camera_fk, "world_from_camera_fk")
