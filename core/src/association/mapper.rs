@@ -29,12 +29,36 @@ pub struct LocalCloudConfig {
     /// Points with world z at or below this are dropped as table surface, metres (default 0.005;
     /// the table top is z = 0 by the world-frame convention; `-inf` keeps everything).
     pub min_height_m: f64,
+    /// Beyond the paper: keep only points whose depth is within this of the median depth of the
+    /// box's central half (the detected object is what the box is centred on; surfaces of other
+    /// objects or the floor behind it fall outside the gate), metres (default 0.15, the longest
+    /// benchmark object's extent; `inf` disables the gate).
+    pub depth_gate_m: f64,
 }
 
 impl Default for LocalCloudConfig {
     fn default() -> Self {
-        Self { pixel_stride: 4, max_depth_m: 3.0, min_height_m: 0.005 }
+        Self { pixel_stride: 4, max_depth_m: 3.0, min_height_m: 0.005, depth_gate_m: 0.15 }
     }
+}
+
+/// Median of the valid depths in the central half of a box (`None` if it has none).
+fn central_median_depth(frame: &Frame, u0: u32, v0: u32, u1: u32, v1: u32, stride: usize) -> Option<f64> {
+    let (du, dv) = ((u1 - u0) / 4, (v1 - v0) / 4);
+    let mut depths: Vec<f64> = Vec::new();
+    for v in ((v0 + dv)..(v1 - dv)).step_by(stride) {
+        for u in ((u0 + du)..(u1 - du)).step_by(stride) {
+            if let Some(d) = frame.depth.at(u, v) {
+                depths.push(f64::from(d));
+            }
+        }
+    }
+    if depths.is_empty() {
+        return None;
+    }
+    let mid = depths.len() / 2;
+    let (_, m, _) = depths.select_nth_unstable_by(mid, f64::total_cmp);
+    Some(*m)
 }
 
 /// Configuration of [`EnsembleMapper`].
@@ -64,12 +88,22 @@ pub fn local_objects_from_frame(frame: &Frame, config: &LocalCloudConfig) -> Vec
                 let v0 = b.min[1].clamp(0.0, h).floor() as u32;
                 let u1 = b.max[0].clamp(0.0, w).ceil() as u32;
                 let v1 = b.max[1].clamp(0.0, h).ceil() as u32;
+                let gate = if config.depth_gate_m.is_finite() && u1 > u0 && v1 > v0 {
+                    central_median_depth(frame, u0, v0, u1, v1, stride)
+                } else {
+                    None
+                };
                 for v in (v0..v1).step_by(stride) {
                     for u in (u0..u1).step_by(stride) {
                         let Some(d) = frame.depth.at(u, v) else { continue };
                         let d = f64::from(d);
                         if d > config.max_depth_m {
                             continue;
+                        }
+                        if let Some(m) = gate {
+                            if (d - m).abs() > config.depth_gate_m {
+                                continue;
+                            }
                         }
                         let p_in_world: Point3<f64> =
                             frame.world_from_camera * frame.camera.unproject(f64::from(u), f64::from(v), d);
