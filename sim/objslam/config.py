@@ -68,6 +68,17 @@ class NaiveMapperConfig:
 
 
 @dataclass(frozen=True)
+class ParamRunConfig:
+    """Parameterization knobs a run usually changes (the rest keep the core's ``ParamConfig``
+    defaults, documented in ``core/src/objects``)."""
+
+    refine_center: bool = True
+    """Let the yaw/scale refinement also move the centre (the paper refines yaw and scale only)."""
+    refine_prior_px_per_m: float = 200.0
+    """Weight of the refinement's prior on centre and scale, pixels per metre."""
+
+
+@dataclass(frozen=True)
 class EvalConfig:
     """Evaluation (mirrors ``objslam_core::eval::EvalConfig``)."""
 
@@ -119,6 +130,7 @@ class RunConfig:
     camera: CameraConfig = field(default_factory=CameraConfig)
     detector: DetectorConfig = field(default_factory=DetectorConfig)
     naive: NaiveMapperConfig = field(default_factory=NaiveMapperConfig)
+    param: ParamRunConfig = field(default_factory=ParamRunConfig)
     eval: EvalConfig = field(default_factory=EvalConfig)
     explore: ExploreRunConfig = field(default_factory=ExploreRunConfig)
     record: RecordConfig = field(default_factory=RecordConfig)

@@ -147,6 +147,12 @@ def run_episode(cfg: RunConfig, *, progress: bool = True, on_frame: Callable[[Se
                 "consolidate": cfg.consolidate,
                 "min_observations": cfg.min_observations,
                 "naive": to_dict(cfg.naive),
+                "param": {
+                    "refine": {
+                        "refine_center": cfg.param.refine_center,
+                        "prior_px_per_m": cfg.param.refine_prior_px_per_m,
+                    }
+                },
             }
         ),
         active_config_json=json.dumps(active_config(cfg)),
