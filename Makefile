@@ -7,7 +7,7 @@ RUN_ARGS ?=
 BENCHMARK_ARGS ?=
 ABLATION_ARGS ?=
 
-.PHONY: help setup run test test-rust test-py bench benchmark associate parameterize match report view lint fmt clean
+.PHONY: help setup run test test-rust test-py bench benchmark associate parameterize slam match report view lint fmt clean
 
 help: ## List the targets
 	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*## "}; {printf "  \033[1m%-12s\033[0m %s\n", $$1, $$2}'
@@ -39,6 +39,9 @@ associate: setup ## Association ablation (scenes × modes) → reports/associati
 
 parameterize: setup ## Parameterization stages (raw → iForest → lines → refined) → reports/parameterization.{md,json}
 	$(PY) experiments/ablations.py parameterize $(ABLATION_ARGS)
+
+slam: setup ## Pose accuracy: scenes × pose sources (slam, kinematics) → reports/slam.{md,json}
+	$(PY) experiments/ablations.py slam $(ABLATION_ARGS)
 
 match: ## Scene matching vs shared-object ratio (500 trials per row) → reports/scene_matching.{md,json}
 	cargo run --release -p objslam-core --example match_experiment -- --scenes scenes --out reports

@@ -11,6 +11,7 @@ use objslam_core::frame::GreyImage;
 use objslam_core::geometry::Se3;
 use objslam_core::map::EstimateStage;
 use objslam_core::pipeline::{ObjectPipeline, PipelineConfig, PipelineError};
+use objslam_core::slam::{ate_rmse_m, rpe, TrackInput, Tracker, TrackerConfig};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
@@ -45,19 +46,42 @@ fn matrix_py<'py>(py: Python<'py>, t: &Se3) -> Bound<'py, PyArray2<f64>> {
 pub struct ActiveMapperPy {
     mapper: ObjectPipeline,
     session: ActiveSession,
+    /// Visual tracking (None: the caller's pose is used as is).
+    tracker: Option<Tracker>,
+    /// Pose used for each frame and the true pose, for ATE / RPE.
+    poses_used: Vec<Se3>,
+    poses_true: Vec<Se3>,
 }
 
 #[pymethods]
 impl ActiveMapperPy {
     /// `table` = (centre x, centre y, size x, size y) of the table top at z = 0.
     #[new]
-    #[pyo3(signature = (*, mapper_config_json, active_config_json, table))]
-    fn new(mapper_config_json: &str, active_config_json: &str, table: (f64, f64, f64, f64)) -> PyResult<Self> {
+    #[pyo3(signature = (*, mapper_config_json, active_config_json, table, tracker_config_json = None))]
+    fn new(
+        mapper_config_json: &str,
+        active_config_json: &str,
+        table: (f64, f64, f64, f64),
+        tracker_config_json: Option<&str>,
+    ) -> PyResult<Self> {
+        let tracker = match tracker_config_json {
+            Some(t) => {
+                let tc: TrackerConfig = serde_json::from_str(t).map_err(|e| json_err("tracker_config", e))?;
+                Some(Tracker::new(tc).map_err(input_err)?)
+            }
+            None => None,
+        };
         let mc: PipelineConfig = serde_json::from_str(mapper_config_json).map_err(|e| json_err("mapper_config", e))?;
         let ac: ActiveConfig = serde_json::from_str(active_config_json).map_err(|e| json_err("active_config", e))?;
         let rect = TableRect { center_m: [table.0, table.1], size_m: [table.2, table.3], height_m: 0.0 };
         let session = ActiveSession::new(ac, rect).map_err(explore_err)?;
-        Ok(Self { mapper: ObjectPipeline::new(mc).map_err(pipeline_err)?, session })
+        Ok(Self {
+            mapper: ObjectPipeline::new(mc).map_err(pipeline_err)?,
+            session,
+            tracker,
+            poses_used: Vec::new(),
+            poses_true: Vec::new(),
+        })
     }
 
     /// The Init views as a list of 4x4 `world_from_camera` matrices.
@@ -67,7 +91,12 @@ impl ActiveMapperPy {
     }
 
     /// Fuse one frame into the map and the surface grids; returns per-detection object ids.
-    #[pyo3(signature = (*, index, intrinsics, depth, world_from_camera, detections, grey = None))]
+    /// With a tracker, `world_from_camera` is the forward-kinematics prior and the tracked pose is
+    /// used (`grey` required); `world_from_camera_gt` (evaluation only: ATE / RPE, and the
+    /// `ground_truth` pose source) and `view_index` (per-view calibration bias) feed the tracker.
+    #[pyo3(signature = (*, index, intrinsics, depth, world_from_camera, detections, grey = None,
+                        world_from_camera_gt = None, view_index = 0))]
+    #[allow(clippy::too_many_arguments)]
     fn update(
         &mut self,
         index: u32,
@@ -76,9 +105,30 @@ impl ActiveMapperPy {
         world_from_camera: &Bound<'_, PyAny>,
         detections: &Bound<'_, PyAny>,
         grey: Option<&Bound<'_, PyAny>>,
+        world_from_camera_gt: Option<&Bound<'_, PyAny>>,
+        view_index: u64,
     ) -> PyResult<Vec<Option<u32>>> {
         let grey = grey.map(grey_image).transpose()?;
-        let frame = frame_from_py(index, intrinsics, depth, world_from_camera, detections)?;
+        let mut frame = frame_from_py(index, intrinsics, depth, world_from_camera, detections)?;
+        let gt = world_from_camera_gt.map(|g| pose(g, "world_from_camera_gt")).transpose()?;
+        if let Some(tracker) = self.tracker.as_mut() {
+            let g = grey.as_ref().ok_or_else(|| input_err("grey: required when a tracker is configured"))?;
+            let out = tracker
+                .track(&TrackInput {
+                    grey: g,
+                    depth: &frame.depth,
+                    camera: &frame.camera,
+                    world_from_camera_fk: frame.world_from_camera,
+                    view_index,
+                    world_from_camera_gt: gt,
+                })
+                .map_err(input_err)?;
+            frame.world_from_camera = out.world_from_camera;
+        }
+        if let Some(g) = gt {
+            self.poses_used.push(frame.world_from_camera);
+            self.poses_true.push(g);
+        }
         let summary = self.mapper.update(&frame, grey.as_ref()).map_err(pipeline_err)?;
         let map = self.mapper.map();
         let observed: Vec<ObservedPoints> = summary
@@ -149,6 +199,28 @@ impl ActiveMapperPy {
             }
         }
         Ok(out)
+    }
+
+    /// The camera pose used for the last frame (4x4), or None before the first frame.
+    fn last_pose<'py>(&self, py: Python<'py>) -> Option<Bound<'py, PyArray2<f64>>> {
+        self.poses_used.last().map(|p| matrix_py(py, p))
+    }
+
+    /// Pose accuracy over the frames given a true pose: {"ate_rmse_m", "rpe_trans_m",
+    /// "rpe_rot_deg", "lost_frames"} (ATE without alignment: both trajectories are in the robot
+    /// base frame); None without true poses.
+    fn pose_metrics<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
+        if self.poses_true.len() < 2 {
+            return Ok(None);
+        }
+        let ate = ate_rmse_m(&self.poses_used, &self.poses_true).map_err(input_err)?;
+        let r = rpe(&self.poses_used, &self.poses_true).map_err(input_err)?;
+        let out = PyDict::new(py);
+        out.set_item("ate_rmse_m", ate)?;
+        out.set_item("rpe_trans_m", r.trans_m)?;
+        out.set_item("rpe_rot_deg", r.rot_deg)?;
+        out.set_item("lost_frames", self.tracker.as_ref().map_or(0, |t| t.n_lost()))?;
+        Ok(Some(out))
     }
 
     /// Views taken after Init.

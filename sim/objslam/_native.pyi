@@ -68,7 +68,14 @@ class Recorder:
     def close(self) -> None: ...
 
 class ActiveMapper:
-    def __init__(self, *, mapper_config_json: str, active_config_json: str, table: tuple[float, float, float, float]) -> None: ...
+    def __init__(
+        self,
+        *,
+        mapper_config_json: str,
+        active_config_json: str,
+        table: tuple[float, float, float, float],
+        tracker_config_json: str | None = None,
+    ) -> None: ...
     def initial_views(self) -> list[npt.NDArray[np.float64]]: ...
     def update(
         self,
@@ -79,7 +86,11 @@ class ActiveMapper:
         world_from_camera: npt.NDArray[np.float64],
         detections: Sequence[Det],
         grey: npt.NDArray[np.uint8] | None = None,
+        world_from_camera_gt: npt.NDArray[np.float64] | None = None,
+        view_index: int = 0,
     ) -> list[int | None]: ...
+    def last_pose(self) -> npt.NDArray[np.float64] | None: ...
+    def pose_metrics(self) -> dict[str, float] | None: ...
     def view_done(self, counts_as_view: bool) -> None: ...
     def next_view(
         self,

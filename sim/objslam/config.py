@@ -79,6 +79,21 @@ class ParamRunConfig:
 
 
 @dataclass(frozen=True)
+class PoseNoiseConfig:
+    """Calibration-error model of the ``kinematics`` / ``slam`` pose sources (per-view bias, per-frame
+    jitter; seeded by the run seed)."""
+
+    bias_trans_m: float = 0.01
+    """Per-view translation bias (standard deviation per axis), metres."""
+    bias_rot_deg: float = 1.0
+    """Per-view rotation bias, degrees."""
+    jitter_trans_m: float = 0.0005
+    """Per-frame translation jitter, metres."""
+    jitter_rot_deg: float = 0.05
+    """Per-frame rotation jitter, degrees."""
+
+
+@dataclass(frozen=True)
 class EvalConfig:
     """Evaluation (mirrors ``objslam_core::eval::EvalConfig``)."""
 
@@ -121,6 +136,11 @@ class RunConfig:
     ``ensemble`` (the paper's method; see the core's ``association`` module)."""
     parameterize: bool = True
     """Run object parameterization (iForest, line-alignment yaw, refinement) after association."""
+    pose_source: str = "fk"
+    """Camera pose used by the mapper: ``fk`` (exact forward kinematics of the measured joints — no
+    calibration error; the foundation's behaviour), ``kinematics`` (forward kinematics with the
+    calibration-error model of ``[pose_noise]``), ``slam`` (visual tracking seeded by that noisy
+    prior), ``ground_truth`` (oracle)."""
     consolidate: bool = True
     """Beyond the paper: fold same-label objects whose boxes overlap into one after each view (the
     statistical tests split objects seen from very different viewpoints). False = the paper's
@@ -131,6 +151,7 @@ class RunConfig:
     detector: DetectorConfig = field(default_factory=DetectorConfig)
     naive: NaiveMapperConfig = field(default_factory=NaiveMapperConfig)
     param: ParamRunConfig = field(default_factory=ParamRunConfig)
+    pose_noise: PoseNoiseConfig = field(default_factory=PoseNoiseConfig)
     eval: EvalConfig = field(default_factory=EvalConfig)
     explore: ExploreRunConfig = field(default_factory=ExploreRunConfig)
     record: RecordConfig = field(default_factory=RecordConfig)
@@ -147,6 +168,8 @@ class RunConfig:
             raise ConfigError("frame_rate_hz: must be in (0, 60]")
         if not (0 < self.max_joint_speed <= 2.5):
             raise ConfigError("max_joint_speed: must be in (0, 2.5] rad/s")
+        if self.pose_source not in POSE_SOURCES:
+            raise ConfigError(f"pose_source: unknown {self.pose_source!r}; known: {', '.join(POSE_SOURCES)}")
         if self.min_observations < 1:
             raise ConfigError("min_observations: must be ≥ 1")
         if self.explore.max_views < 0:
@@ -160,6 +183,7 @@ class RunConfig:
             raise ConfigError(str(e)) from e
 
 
+POSE_SOURCES = ("fk", "kinematics", "slam", "ground_truth")
 ASSOCIATION_MODES = ("naive", "iou", "iou_np", "iou_t", "ensemble")
 STRATEGIES = ("init", "object-driven", "random", "coverage", "expected-gain")
 

@@ -139,25 +139,7 @@ def run_episode(cfg: RunConfig, *, progress: bool = True, on_frame: Callable[[Se
 
     (run_dir / "config.toml").write_text(tomli_w.dumps(to_dict(cfg)))
     rec = _Recorder(run_dir / "run.rrd" if cfg.record.enabled else None)
-    mapper = _native.ActiveMapper(
-        mapper_config_json=json.dumps(
-            {
-                "association_mode": cfg.association_mode,
-                "parameterize": cfg.parameterize,
-                "consolidate": cfg.consolidate,
-                "min_observations": cfg.min_observations,
-                "naive": to_dict(cfg.naive),
-                "param": {
-                    "refine": {
-                        "refine_center": cfg.param.refine_center,
-                        "prior_px_per_m": cfg.param.refine_prior_px_per_m,
-                    }
-                },
-            }
-        ),
-        active_config_json=json.dumps(active_config(cfg)),
-        table=(*scene.table.center, *scene.table.size),
-    )
+    mapper = None
     t_start = time.perf_counter()
     times: dict[str, list[float]] = {s: [] for s in STAGES}
     events: list[str] = []
@@ -166,7 +148,30 @@ def run_episode(cfg: RunConfig, *, progress: bool = True, on_frame: Callable[[Se
     frames = 0
     views_done = 0
     assignments: list[tuple[int, int | None]] = []
+    view_counter = [0]
     try:
+        mapper = _native.ActiveMapper(
+            mapper_config_json=json.dumps(
+                {
+                    "association_mode": cfg.association_mode,
+                    "parameterize": cfg.parameterize,
+                    "consolidate": cfg.consolidate,
+                    "min_observations": cfg.min_observations,
+                    "naive": to_dict(cfg.naive),
+                    "param": {
+                        "refine": {
+                            "refine_center": cfg.param.refine_center,
+                            "prior_px_per_m": cfg.param.refine_prior_px_per_m,
+                        }
+                    },
+                }
+            ),
+            active_config_json=json.dumps(active_config(cfg)),
+            table=(*scene.table.center, *scene.table.size),
+            tracker_config_json=None
+            if cfg.pose_source == "fk"
+            else json.dumps({"pose_source": cfg.pose_source, "kinematic_noise": {**to_dict(cfg.pose_noise), "seed": cfg.seed}}),
+        )
         rng_sensor = np.random.default_rng([cfg.seed, 1])
         rng_detector = np.random.default_rng([cfg.seed, 2])
         world = SimWorld(scene, cfg.camera, rng_sensor)
@@ -191,15 +196,18 @@ def run_episode(cfg: RunConfig, *, progress: bool = True, on_frame: Callable[[Se
                 depth=frame.depth_m,
                 world_from_camera=frame.world_from_camera_fk,
                 detections=[d.as_tuple() for d in dets],
-                grey=grey_of(frame.rgb) if cfg.parameterize else None,
+                grey=grey_of(frame.rgb) if (cfg.parameterize or cfg.pose_source != "fk") else None,
+                world_from_camera_gt=frame.world_from_camera_gt,
+                view_index=view_counter[0],
             )
+            used_pose = mapper.last_pose()
             assignments.extend((oid, d.gt_id) for oid, d in zip(assigned, dets) if oid is not None)
             t2 = time.perf_counter()
-            est_positions.append(frame.world_from_camera_fk[:3, 3].copy())
+            est_positions.append(used_pose[:3, 3].copy())
             gt_positions.append(frame.world_from_camera_gt[:3, 3].copy())
             rec.set_frame(frame.index, frame.sim_time_s)
             rec.log_camera(
-                world_from_camera=frame.world_from_camera_fk,
+                world_from_camera=used_pose,
                 intrinsics=frame.intrinsics,
                 width=cfg.camera.width,
                 height=cfg.camera.height,
@@ -244,6 +252,7 @@ def run_episode(cfg: RunConfig, *, progress: bool = True, on_frame: Callable[[Se
                 events.append(f"{what} skipped: {e}")
                 rec.log_event(f"{what} skipped: {e}")
                 ok = False
+            view_counter[0] += 1
             if bar is not None:
                 bar.update(1)
             (run_dir / "map.json.partial").write_text(mapper.map_json())
@@ -306,6 +315,8 @@ def run_episode(cfg: RunConfig, *, progress: bool = True, on_frame: Callable[[Se
             "n_matched": evaluation["n_matched"],
             "nbv_views": mapper.views_taken(),
             "association_mode": cfg.association_mode,
+            "pose_source": cfg.pose_source,
+            **(mapper.pose_metrics() or {}),
             "association": association,
             "stages": stages,
             "stop_reason": stop_reason,
@@ -323,7 +334,8 @@ def run_episode(cfg: RunConfig, *, progress: bool = True, on_frame: Callable[[Se
     except BaseException as e:
         # Keep everything written so far; mark the folder as failed and say why.
         try:
-            (run_dir / "map.json.partial").write_text(mapper.map_json())
+            if mapper is not None:
+                (run_dir / "map.json.partial").write_text(mapper.map_json())
             rec.close()
         except Exception:  # noqa: BLE001 - best effort while already failing
             pass
