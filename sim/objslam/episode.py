@@ -93,12 +93,15 @@ def _make_run_dir(cfg: RunConfig, scene: SceneSpec) -> Path:
         runs = REPO_ROOT / runs
     now = datetime.now()
     base = runs / now.strftime("%Y-%m-%d") / f"{now.strftime('%H%M%S')}_{cfg.strategy}_{scene.name}_{cfg.seed}"
+    base.parent.mkdir(parents=True, exist_ok=True)
     d, k = base, 1
-    while d.exists():  # never reuse (and so never overwrite) a folder
-        k += 1
-        d = base.with_name(f"{base.name}-{k}")
-    d.mkdir(parents=True)
-    return d
+    while True:  # never reuse (and so never overwrite) a folder, even when workers start together
+        try:
+            d.mkdir()
+            return d
+        except FileExistsError:
+            k += 1
+            d = base.with_name(f"{base.name}-{k}")
 
 
 def _write_json(path: Path, data: Any) -> None:

@@ -29,8 +29,11 @@ pub use polygon::{convex_polygon_area, convex_polygon_intersection};
 /// A rigid transform in 3D (rotation + translation), `a_from_b` maps points in `b` to `a`.
 pub type Se3 = Isometry3<f64>;
 
-/// Tolerance used when checking that a matrix is a rotation (orthonormal, determinant +1).
-pub const RIGID_TOLERANCE: f64 = 1e-4;
+/// Tolerance used when checking that a matrix is a rotation (orthonormal, determinant +1). Poses
+/// from SAPIEN are single precision, so their rotation parts are orthonormal only to ~1e-4; larger
+/// deviations (a scale or shear of 0.1 %) are rejected. Accepted matrices are re-orthonormalised
+/// (via the nearest unit quaternion).
+pub const RIGID_TOLERANCE: f64 = 1e-3;
 
 /// Errors of the geometry module.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
