@@ -1,7 +1,7 @@
 """The exploration benchmark: scenes × strategies × seeds, in parallel worker processes.
 
 ``python experiments/benchmark.py [--scenes ...] [--strategies ...] [--seeds 0 1 2] [--workers 2]
-[--config overlay.toml] [--set k=v] [--out reports]``
+[--backend pool|ray] [--address ray://host:10001] [--config overlay.toml] [--set k=v] [--out reports]``
 
 Every episode is an ordinary run (its own run folder under ``runs/``); the aggregate is computed
 from those folders' ``metrics.json`` and written to ``<out>/exploration.json`` and
@@ -23,7 +23,7 @@ from typing import Any
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "experiments"))
 
-from sweep import Job, run_sweep, scene_files  # noqa: E402
+from sweep import BACKENDS, Job, run_sweep, scene_files  # noqa: E402
 STRATEGIES = ("object-driven", "random", "coverage", "init", "expected-gain")
 METRICS = ("iou3d", "iou2d", "cde_cm", "yae_deg")
 
@@ -149,7 +149,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--scenes", nargs="*", default=scene_files())
     ap.add_argument("--strategies", nargs="*", default=list(STRATEGIES))
     ap.add_argument("--seeds", nargs="*", type=int, default=[0, 1, 2])
-    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--workers", type=int, default=2, help="pool processes, or CPUs of a local Ray instance")
+    ap.add_argument("--backend", choices=BACKENDS, default="pool", help="pool (default) or ray: one Ray task per episode")
+    ap.add_argument("--address", default=None, help="Ray cluster address (backend ray); default: a local instance")
     ap.add_argument("--config", action="append", default=[])
     ap.add_argument("--set", action="append", default=[])
     ap.add_argument("--out", default=str(REPO / "reports"))
@@ -159,7 +161,7 @@ def main(argv: list[str] | None = None) -> int:
     ]
     command = "python experiments/benchmark.py " + " ".join(argv if argv is not None else sys.argv[1:])
     t0 = time.perf_counter()
-    rows = [_row(m) for m in run_sweep(jobs, a.workers)]
+    rows = [_row(m) for m in run_sweep(jobs, a.workers, backend=a.backend, address=a.address)]
     rows.sort(key=lambda r: (r["scene"], STRATEGIES.index(r["strategy"]) if r["strategy"] in STRATEGIES else 99, r["seed"]))
     write_reports(rows, Path(a.out), command.strip())
     print(f"{len(rows)} episodes in {time.perf_counter() - t0:.0f} s → {a.out}/exploration.md")
