@@ -145,6 +145,10 @@ class RunConfig:
     """Beyond the paper: fold same-label objects whose boxes overlap into one after each view (the
     statistical tests split objects seen from very different viewpoints). False = the paper's
     pipeline."""
+    consolidate_cloud_overlap: float = 0.5
+    """With ``consolidate``: two same-label objects whose boxes intersect are also folded when at
+    least this share of the smaller cloud lies within 1 cm of the other cloud (they see the same
+    surface). Above 1 disables this test."""
     min_observations: int = 3
     """Objects seen fewer times are left out of the map (false positives, label confusions)."""
     camera: CameraConfig = field(default_factory=CameraConfig)
@@ -170,6 +174,8 @@ class RunConfig:
             raise ConfigError("max_joint_speed: must be in (0, 2.5] rad/s")
         if self.pose_source not in POSE_SOURCES:
             raise ConfigError(f"pose_source: unknown {self.pose_source!r}; known: {', '.join(POSE_SOURCES)}")
+        if not (0.0 < self.consolidate_cloud_overlap):
+            raise ConfigError("consolidate_cloud_overlap: must be > 0 (above 1 disables the test)")
         if self.min_observations < 1:
             raise ConfigError("min_observations: must be ≥ 1")
         if self.explore.max_views < 0:

@@ -159,6 +159,7 @@ def run_episode(cfg: RunConfig, *, progress: bool = True, on_frame: Callable[[Se
                     "association_mode": cfg.association_mode,
                     "parameterize": cfg.parameterize,
                     "consolidate": cfg.consolidate,
+                    "consolidate_cloud_overlap": cfg.consolidate_cloud_overlap,
                     "min_observations": cfg.min_observations,
                     "naive": to_dict(cfg.naive),
                     "param": {

@@ -413,9 +413,15 @@ pub fn iou_top(a: &ObjectGeometry, b: &ObjectGeometry) -> f64 {
     }
 }
 
+/// Volume shared by two objects (exact for box–box with yaw and cylinder–cylinder; a cylinder
+/// against a box counts as its bounding square prism).
+pub fn intersection_volume(a: &ObjectGeometry, b: &ObjectGeometry) -> f64 {
+    footprint_intersection(a, b) * a.z_overlap(b)
+}
+
 /// 3D IoU of two objects (exact for box–box with yaw and cylinder–cylinder).
 pub fn iou3d(a: &ObjectGeometry, b: &ObjectGeometry) -> f64 {
-    let inter = footprint_intersection(a, b) * a.z_overlap(b);
+    let inter = intersection_volume(a, b);
     let va = footprint_area_for_iou(a, b) * 2.0 * a.half_extents.z;
     let vb = footprint_area_for_iou(b, a) * 2.0 * b.half_extents.z;
     let union = va + vb - inter;

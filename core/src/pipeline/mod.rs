@@ -78,14 +78,24 @@ pub struct PipelineConfig {
     /// Segments within this margin of a detection box are assigned to it, pixels.
     pub segment_box_margin_px: f64,
     /// Beyond the paper: after each refresh, fold same-label objects whose raw boxes overlap
-    /// (3D IoU ≥ `consolidate_iou` or centres within `consolidate_distance_m`) into the older one.
-    /// The statistical tests split objects seen from very different viewpoints during active
-    /// exploration; this geometric check repairs it. Off reproduces the paper's pipeline.
+    /// (3D IoU ≥ `consolidate_iou` or centres within `consolidate_distance_m`) or whose clouds
+    /// share a surface (see `consolidate_cloud_overlap`) into the older one. The statistical tests
+    /// split objects seen from very different viewpoints during active exploration; this geometric
+    /// check repairs it. Off reproduces the paper's pipeline.
     pub consolidate: bool,
     /// 3D IoU of the raw axis-aligned boxes above which two same-label objects are one.
     pub consolidate_iou: f64,
     /// Centre distance under which two same-label objects are one, metres.
     pub consolidate_distance_m: f64,
+    /// Two same-label objects whose raw boxes intersect are one when at least this share of the
+    /// smaller cloud's points lie within `consolidate_cloud_radius_m` of the other cloud: a
+    /// fragment seen from one side (a low box, a truncated view) re-observes the surface of the
+    /// object it belongs to, while a neighbour of the same class does not, even when a
+    /// contaminated box overlaps it. Above 1 disables the test.
+    pub consolidate_cloud_overlap: f64,
+    /// Neighbour radius of the cloud-overlap test, metres (about the depth noise at 0.5 m plus
+    /// the sampling step of the local clouds).
+    pub consolidate_cloud_radius_m: f64,
     /// Objects with fewer observations are kept internally but left out of the map (filters
     /// false positives and label confusions; 1 keeps everything).
     pub min_observations: usize,
@@ -105,6 +115,8 @@ impl Default for PipelineConfig {
             consolidate: true,
             consolidate_iou: 0.2,
             consolidate_distance_m: 0.03,
+            consolidate_cloud_overlap: 0.5,
+            consolidate_cloud_radius_m: 0.01,
             min_observations: 3,
         }
     }
@@ -285,7 +297,10 @@ impl ObjectPipeline {
                     }
                     let (ga, gb) = (a.geometry(), b.geometry());
                     let close = (ga.center - gb.center).norm() <= self.config.consolidate_distance_m;
-                    if close || crate::geometry::iou3d(&ga, &gb) >= self.config.consolidate_iou {
+                    if close
+                        || crate::geometry::iou3d(&ga, &gb) >= self.config.consolidate_iou
+                        || self.share_surface(a, b)
+                    {
                         fold = Some((a.id.max(b.id), a.id.min(b.id)));
                         break 'pairs;
                     }
@@ -298,6 +313,20 @@ impl ObjectPipeline {
             self.dirty.remove(&young);
             self.dirty.insert(old);
         }
+    }
+
+    /// The cloud-overlap test of `consolidate_cloud_overlap` (only for intersecting raw boxes).
+    fn share_surface(&self, a: &MapObject, b: &MapObject) -> bool {
+        let (need, r) = (self.config.consolidate_cloud_overlap, self.config.consolidate_cloud_radius_m);
+        if need > 1.0 || r <= 0.0 || crate::geometry::intersection_volume(&a.geometry(), &b.geometry()) <= 0.0 {
+            return false;
+        }
+        let (small, large) = if a.points_in_world.len() <= b.points_in_world.len() {
+            (&a.points_in_world, &b.points_in_world)
+        } else {
+            (&b.points_in_world, &a.points_in_world)
+        };
+        cloud_share_within(small, large, r) >= need
     }
 
     /// The association's objects with pipeline-level folds applied (extent = trimmed AABB of the
@@ -399,6 +428,39 @@ impl ObjectPipeline {
     }
 }
 
+/// Share of `query` points with a point of `reference` within `radius` (0 for an empty query).
+/// A hash grid of `radius` cells over `reference`; each query point checks its 27 cells.
+pub fn cloud_share_within(query: &[Point3<f64>], reference: &[Point3<f64>], radius: f64) -> f64 {
+    if query.is_empty() || reference.is_empty() || !(radius > 0.0) {
+        return 0.0;
+    }
+    let cell = |p: &Point3<f64>| -> [i64; 3] {
+        [(p.x / radius).floor() as i64, (p.y / radius).floor() as i64, (p.z / radius).floor() as i64]
+    };
+    let mut grid: std::collections::HashMap<[i64; 3], Vec<Point3<f64>>> = std::collections::HashMap::new();
+    for p in reference.iter().filter(|p| p.coords.iter().all(|v| v.is_finite())) {
+        grid.entry(cell(p)).or_default().push(*p);
+    }
+    let r2 = radius * radius;
+    let near = |q: &Point3<f64>| -> bool {
+        let c = cell(q);
+        for dx in -1..=1 {
+            for dy in -1..=1 {
+                for dz in -1..=1 {
+                    if let Some(ps) = grid.get(&[c[0] + dx, c[1] + dy, c[2] + dz]) {
+                        if ps.iter().any(|p| (p - q).norm_squared() <= r2) {
+                            return true;
+                        }
+                    }
+                }
+            }
+        }
+        false
+    };
+    let hits = query.iter().filter(|q| q.coords.iter().all(|v| v.is_finite()) && near(q)).count();
+    hits as f64 / query.len() as f64
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -435,6 +497,29 @@ mod tests {
             world_from_camera: pose,
             detections: vec![Detection { bbox: b, label: Label::Block, score: 0.9 }],
         }
+    }
+
+    /// A 10 cm square patch of points on a 5 mm lattice at height `z`, shifted by `dx` in x.
+    fn patch(dx: f64, z: f64) -> Vec<Point3<f64>> {
+        (0..20)
+            .flat_map(|i| (0..20).map(move |j| Point3::new(dx + f64::from(i) * 0.005, f64::from(j) * 0.005, z)))
+            .collect()
+    }
+
+    #[test]
+    fn cloud_share_counts_points_near_the_other_cloud() {
+        let a = patch(0.0, 0.1);
+        // The same surface re-sampled 3 mm away: every point has a neighbour within 1 cm.
+        assert_eq!(cloud_share_within(&patch(0.0, 0.103), &a, 0.01), 1.0);
+        // Shifted by 5.25 cm: the 10 overlapping columns and the one 7.5 mm beyond the edge (the next is 12.5 mm).
+        let half = cloud_share_within(&patch(0.0525, 0.1), &a, 0.01);
+        assert!((half - 11.0 / 20.0).abs() < 1e-12, "{half}");
+        // A neighbour 3 cm away shares nothing; empty or non-finite input is 0, not a panic.
+        assert_eq!(cloud_share_within(&patch(0.0, 0.13), &a, 0.01), 0.0);
+        assert_eq!(cloud_share_within(&[], &a, 0.01), 0.0);
+        assert_eq!(cloud_share_within(&a, &[], 0.01), 0.0);
+        assert_eq!(cloud_share_within(&[Point3::new(f64::NAN, 0.0, 0.0)], &a, 0.01), 0.0);
+        assert_eq!(cloud_share_within(&a, &a, f64::NAN), 0.0);
     }
 
     #[test]
