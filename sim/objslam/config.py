@@ -149,6 +149,10 @@ class RunConfig:
     """With ``consolidate``: two same-label objects whose boxes intersect are also folded when at
     least this share of the smaller cloud lies within 1 cm of the other cloud (they see the same
     surface). Above 1 disables this test."""
+    relabel_vote_ratio: float = 4.0
+    """With ``consolidate``: an object seen under another label at the place of an object with at
+    least this many times its observations is folded into it (a detector label confusion, not a
+    second object); the label is then the majority vote. 0 disables."""
     min_observations: int = 3
     """Objects seen fewer times are left out of the map (false positives, label confusions)."""
     camera: CameraConfig = field(default_factory=CameraConfig)
@@ -176,6 +180,8 @@ class RunConfig:
             raise ConfigError(f"pose_source: unknown {self.pose_source!r}; known: {', '.join(POSE_SOURCES)}")
         if not (0.0 < self.consolidate_cloud_overlap):
             raise ConfigError("consolidate_cloud_overlap: must be > 0 (above 1 disables the test)")
+        if self.relabel_vote_ratio < 0.0:
+            raise ConfigError("relabel_vote_ratio: must be ≥ 0 (0 disables the label-confusion fold)")
         if self.min_observations < 1:
             raise ConfigError("min_observations: must be ≥ 1")
         if self.explore.max_views < 0:

@@ -160,6 +160,7 @@ def run_episode(cfg: RunConfig, *, progress: bool = True, on_frame: Callable[[Se
                     "parameterize": cfg.parameterize,
                     "consolidate": cfg.consolidate,
                     "consolidate_cloud_overlap": cfg.consolidate_cloud_overlap,
+                    "relabel_vote_ratio": cfg.relabel_vote_ratio,
                     "min_observations": cfg.min_observations,
                     "naive": to_dict(cfg.naive),
                     "param": {

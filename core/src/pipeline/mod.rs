@@ -93,6 +93,15 @@ pub struct PipelineConfig {
     /// object it belongs to, while a neighbour of the same class does not, even when a
     /// contaminated box overlaps it. Above 1 disables the test.
     pub consolidate_cloud_overlap: f64,
+    /// Beyond the paper, label confusions: an object is folded into one of another label when the
+    /// other has at least this many times its observations and the two share a surface (the
+    /// cloud-overlap test) or the smaller raw box lies mostly (`relabel_containment`) inside the
+    /// other's. The detector's occasional wrong label on a well-observed object otherwise becomes a
+    /// confirmed phantom object at the same place once it has `min_observations`; after the fold
+    /// the label is the majority over all observations. 0 disables.
+    pub relabel_vote_ratio: f64,
+    /// Share of the smaller raw box's volume inside the other's for the label-confusion fold.
+    pub relabel_containment: f64,
     /// Neighbour radius of the cloud-overlap test, metres (about the depth noise at 0.5 m plus
     /// the sampling step of the local clouds).
     pub consolidate_cloud_radius_m: f64,
@@ -116,6 +125,8 @@ impl Default for PipelineConfig {
             consolidate_iou: 0.2,
             consolidate_distance_m: 0.03,
             consolidate_cloud_overlap: 0.5,
+            relabel_vote_ratio: 4.0,
+            relabel_containment: 0.5,
             consolidate_cloud_radius_m: 0.01,
             min_observations: 3,
         }
@@ -292,10 +303,14 @@ impl ObjectPipeline {
             let mut fold: Option<(u32, u32)> = None;
             'pairs: for (i, a) in map.objects.iter().enumerate() {
                 for b in &map.objects[i + 1..] {
+                    let (ga, gb) = (a.geometry(), b.geometry());
                     if a.label != b.label {
+                        if let Some(fold_pair) = self.label_confusion(a, b, &ga, &gb) {
+                            fold = Some(fold_pair);
+                            break 'pairs;
+                        }
                         continue;
                     }
-                    let (ga, gb) = (a.geometry(), b.geometry());
                     let close = (ga.center - gb.center).norm() <= self.config.consolidate_distance_m;
                     if close
                         || crate::geometry::iou3d(&ga, &gb) >= self.config.consolidate_iou
@@ -313,6 +328,33 @@ impl ObjectPipeline {
             self.dirty.remove(&young);
             self.dirty.insert(old);
         }
+    }
+
+    /// The label-confusion fold of `relabel_vote_ratio`: `(minority id, majority id)` when `a` and
+    /// `b` (different labels) are one object seen under two labels.
+    fn label_confusion(
+        &self,
+        a: &MapObject,
+        b: &MapObject,
+        ga: &ObjectGeometry,
+        gb: &ObjectGeometry,
+    ) -> Option<(u32, u32)> {
+        let ratio = self.config.relabel_vote_ratio;
+        if ratio <= 0.0 {
+            return None;
+        }
+        let (na, nb) = (a.observations.len().max(1) as f64, b.observations.len().max(1) as f64);
+        let (minor, major, g_minor, g_major) = if na * ratio <= nb {
+            (a, b, ga, gb)
+        } else if nb * ratio <= na {
+            (b, a, gb, ga)
+        } else {
+            return None;
+        };
+        let v = g_minor.volume();
+        let inside =
+            v > 0.0 && crate::geometry::intersection_volume(g_minor, g_major) >= self.config.relabel_containment * v;
+        (inside || self.share_surface(minor, major)).then_some((minor.id, major.id))
     }
 
     /// The cloud-overlap test of `consolidate_cloud_overlap` (only for intersecting raw boxes).
