@@ -260,6 +260,16 @@ impl ObjectEstimator {
         self.window.len()
     }
 
+    /// The frames currently in the window, oldest first.
+    pub fn window(&self) -> impl Iterator<Item = &LineFrame> {
+        self.window.iter()
+    }
+
+    /// The shape this estimator models.
+    pub fn shape(&self) -> Shape {
+        self.shape
+    }
+
     /// Add one frame's line evidence (segments already restricted to the object's box, e.g. by
     /// [`lsd::segments_in_box`]). The oldest frame leaves the window when it is full.
     pub fn add_frame(&mut self, mut frame: LineFrame) -> FrameUse {
@@ -395,8 +405,8 @@ impl ObjectEstimator {
             inliers: n_in,
         };
         if self.config.refine_enabled {
-            if let Some(r) = refine_yaw_scale(&lines, &frames, &self.config.refine) {
-                if r.rms_after_px <= r.rms_before_px {
+            if let Some(r) = refine_yaw_scale(&lines, &frames, &inliers, &self.config.refine) {
+                if !self.config.refine.accept_if_lower_cost || r.rms_after_px < r.rms_before_px {
                     let refined = canonical_cuboid(&r.geometry);
                     out.stages.refined = Some(refined);
                     out.geometry = refined;
