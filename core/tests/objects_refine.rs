@@ -32,10 +32,12 @@ fn records() -> Vec<Record> {
     serde_json::from_str(&text).unwrap_or_else(|e| panic!("{path}: {e}"))
 }
 
-/// The refinement as it was before hidden-edge removal and the point terms.
+/// The refinement as it was before hidden-edge removal, the robust segment residuals and the
+/// point terms.
 fn previous_refinement() -> RefineConfig {
     RefineConfig {
         visible_edges_only: false,
+        segment_huber_px: 0.0,
         point_weight_px_per_m: 0.0,
         extent_weight_px_per_m: 0.0,
         accept_if_lower_cost: false,
@@ -68,8 +70,8 @@ fn real_books_refinement_no_longer_loses_iou() {
         eprintln!("{} object {}: 3D IoU lines {l:.3}, previous refinement {o:.3}, refinement {n:.3}", r.scene, r.id);
         // The failure this fixture pins: the previous refinement lost > 0.3 of 3D IoU (measured 0.45).
         assert!(o < l - 0.3, "{}: previous refinement {o:.3} vs lines {l:.3}", r.scene);
-        // Now: at least as good as the line alignment (measured +0.13 and +0.01), within 1 mm of the
-        // true height and not worse in yaw than the 6°-sampled Alg. 2 answer.
+        // Now: at least as good as the line alignment (measured 0.886 and 0.760), within 3.5 mm of
+        // the true half-height and not worse in yaw than the 6°-sampled Alg. 2 answer.
         assert!(n >= l, "{}: refined {n:.3} < lines {l:.3}", r.scene);
         assert!((new.geometry.half_extents.z - t.half_extents.z).abs() < 0.0035, "{}: {:?}", r.scene, new.geometry);
         let yl = yaw_error_deg(&lines, t, 0.05).unwrap_or(f64::NAN);
@@ -85,22 +87,35 @@ fn estimator_keeps_the_refinement_only_when_it_lowers_the_cost() {
         let lines = new.stages.lines.unwrap_or_else(|| panic!("no lines stage"));
         let frames = r.frames.clone();
         // The estimator's inliers are not exposed; the refinement with all points agrees on the
-        // decision here (measured: the cost falls by 8 % and 11 %).
+        // decision here (the cost falls by more than 3 %).
         let res = refine_yaw_scale(&lines, &frames, &r.points_in_world, &RefineConfig::default())
             .unwrap_or_else(|| panic!("no refinement"));
         assert!(res.rms_after_px < 0.97 * res.rms_before_px, "{:?}", (res.rms_before_px, res.rms_after_px));
         assert_eq!(new.stage, EstimateStage::Refined);
     }
-    // A refinement that cannot lower the cost is not kept: segments that agree exactly with the
-    // initial cube's visible edges and points on its surface give J = 0 before, and LM cannot go
-    // below it.
+    // The acceptance cost is a sensible data cost: with segments exactly on the true cube's visible
+    // edges and points on its surface it is 0 at the truth and grows for every perturbed cube.
     let (cam, truth) = (camera(), truth());
     let frames: Vec<LineFrame> =
         eyes().iter().enumerate().map(|(i, e)| exact_frame(i as u32, *e, &cam, &truth)).collect();
     let pts = surface_points(&mut ChaCha8Rng::seed_from_u64(3), &truth, 0.0);
-    let res = refine_yaw_scale(&truth, &frames, &pts, &RefineConfig::default()).unwrap_or_else(|| panic!("none"));
-    assert!(res.rms_before_px < 1e-9, "{}", res.rms_before_px);
-    assert!(!(res.rms_after_px < res.rms_before_px) || res.rms_before_px - res.rms_after_px < 1e-9);
+    let cost_of = |g: &ObjectGeometry| {
+        refine_yaw_scale(g, &frames, &pts, &RefineConfig::default()).map_or(f64::INFINITY, |r| r.rms_before_px)
+    };
+    let at_truth = cost_of(&truth);
+    assert!(at_truth < 1e-9, "{at_truth}");
+    let perturbed = [
+        ObjectGeometry { half_extents: truth.half_extents + Vector3::new(0.01, 0.0, 0.0), ..truth },
+        ObjectGeometry { half_extents: truth.half_extents - Vector3::new(0.0, 0.005, 0.0), ..truth },
+        ObjectGeometry { half_extents: truth.half_extents + Vector3::new(0.0, 0.0, 0.01), ..truth },
+        ObjectGeometry { center: truth.center + Vector3::new(0.005, -0.005, 0.0), ..truth },
+        ObjectGeometry { yaw_rad: truth.yaw_rad + 3f64.to_radians(), ..truth },
+    ];
+    for g in &perturbed {
+        let c = cost_of(g);
+        eprintln!("perturbed cost {c:.3} px");
+        assert!(c > at_truth + 1.0, "{g:?}: cost {c:.3} px vs {at_truth:.3} at the truth");
+    }
 }
 
 fn look_at(eye: Vector3<f64>, target: Vector3<f64>) -> Se3 {
@@ -192,7 +207,7 @@ fn visible_edges_of_a_box_seen_from_above_one_side() {
 /// visible edges (jittered ± 0.8 px), four table streaks parallel to its lowest projected bottom
 /// edge, 4–14 px below it. With all 12 edges and segments only, the streaks pull the bottom edges
 /// and the box loses IoU (measured 0.72 → 0.67, 0.76 → 0.73, 0.75 → 0.71); with the visible
-/// edges, the point-to-surface and the extent terms it gains (→ 0.83, 0.78, 0.79).
+/// edges, robust residuals, the point-to-surface and the extent terms it gains (→ 0.86, 0.79, 0.80).
 #[test]
 fn synthetic_thin_book_with_streaks() {
     let cam = camera();

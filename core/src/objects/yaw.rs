@@ -15,8 +15,9 @@
 //!   best-aligned of all 12 edges would make every yaw score well (12 edges span many angles).
 //! - `e`: the paper writes `‖α(Ẑ(θ)) − α(Z_lsd)‖²` but thresholds it at ξ = 5 "degrees"; we use the
 //!   absolute undirected angle difference in degrees (the squared reading would make ξ ≈ 2.2°).
-//! - Hidden edges are not removed (all 12 cube edges are projected); an edge with an endpoint
-//!   behind the camera is skipped.
+//! - Alg. 2 does not remove hidden edges (all 12 cube edges are projected); an edge with an
+//!   endpoint behind the camera is skipped. The refinement does remove them ([`visible_edges`],
+//!   [`project_visible_edges`]; see [`super::refine`]).
 
 use nalgebra::{Point3, Vector3};
 
