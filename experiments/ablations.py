@@ -141,16 +141,22 @@ def parameterize(a: argparse.Namespace, command: str) -> int:
     ]
     results = run_sweep(jobs, a.workers)
     rows = []
+    final_stages: dict[str, dict[str, int]] = {}
     for r in results:
         if "error" in r:
             rows.append({"scene": r["scene"], "seed": r["seed"], "error": r["error"]})
             continue
+        counts = final_stages.setdefault(r["scene"], dict.fromkeys(STAGES, 0))
+        for o in json.loads((Path(r["run_dir"]) / "map.json").read_text())["objects"]:
+            counts[o["stage"]] = counts.get(o["stage"], 0) + 1
         for stage in STAGES:
             m = r["stages"][stage]
             rows.append({"scene": r["scene"], "seed": r["seed"], "stage": stage, **{k: m[k] for k in ("iou3d", "iou2d", "cde_cm", "yae_deg")}, "run_dir": r["run_dir"]})
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "parameterization.json").write_text(json.dumps({"command": command, "rows": rows}, indent=2) + "\n")
+    (out / "parameterization.json").write_text(
+        json.dumps({"command": command, "rows": rows, "final_stages": final_stages}, indent=2) + "\n"
+    )
     ok = [r for r in rows if "error" not in r]
 
     def mean(stage: str, key: str) -> float | None:
@@ -183,6 +189,21 @@ def parameterize(a: argparse.Namespace, command: str) -> int:
             v = [r["iou3d"] for r in ok if r["stage"] == stage and r["scene"] == s]
             cells.append(f(statistics.mean(v) if v else None, ".3f"))
         lines.append(f"| {stage} | " + " | ".join(cells) + " |")
+    lines += [
+        "",
+        "## Final stage of each map object",
+        "",
+        (
+            "Objects of the final maps by the stage their estimate comes from (cylinders stop at iforest; a "
+            "cuboid stays at lines when the refinement finds too few segments or does not lower its data cost)."
+        ),
+        "",
+        "| scene | " + " | ".join(STAGES) + " |",
+        "|---" * (len(STAGES) + 1) + "|",
+    ]
+    for sc in sorted(final_stages):
+        lines.append(f"| {sc} | " + " | ".join(str(final_stages[sc].get(st, 0)) for st in STAGES) + " |")
+    lines.append("| total | " + " | ".join(str(sum(c.get(st, 0) for c in final_stages.values())) for st in STAGES) + " |")
     failed = [r for r in rows if "error" in r]
     if failed:
         lines += ["", "## Failed episodes", ""] + [f"- {r['scene']} seed {r['seed']}: {r['error']}" for r in failed]

@@ -250,6 +250,11 @@ impl ActiveMapperPy {
         Ok(self.mapper.stage_map(s).to_json())
     }
 
+    /// Every confirmed object's estimator inputs (points, line frames) as JSON, for offline replay.
+    fn estimator_inputs_json(&self) -> PyResult<String> {
+        serde_json::to_string(&self.mapper.estimator_inputs()).map_err(|e| json_err("estimator_inputs", e))
+    }
+
     /// Re-run parameterization for objects observed since the last refresh.
     fn refresh_estimates(&mut self) {
         self.mapper.refresh_estimates();

@@ -144,7 +144,7 @@ fn bench_yaw(c: &mut Criterion) {
     let initial = initial.unwrap_or_else(|| panic!("no alignment"));
     let refine = RefineConfig::default();
     c.bench_function("yaw_refine_object", |b| {
-        b.iter(|| black_box(refine_yaw_scale(black_box(&initial), &frames, &refine).map(|r| r.rms_after_px)))
+        b.iter(|| black_box(refine_yaw_scale(black_box(&initial), &frames, &points, &refine).map(|r| r.rms_after_px)))
     });
 }
 

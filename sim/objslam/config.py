@@ -112,6 +112,11 @@ class RecordConfig:
     """Log images every n-th frame (poses, detections and the map are logged every frame)."""
     grids: bool = True
     """Log the surface grid cells coloured by state after every view."""
+    estimator_inputs: bool = False
+    """Write ``estimator_inputs.json`` to the run folder: every confirmed object's accumulated
+    points and line-frame window (the parameterization's inputs) plus the ground-truth objects
+    (for evaluation only), for offline replay with ``cargo run --release -p objslam-core
+    --example param_replay``."""
 
 
 @dataclass(frozen=True)

@@ -296,6 +296,9 @@ def run_episode(cfg: RunConfig, *, progress: bool = True, on_frame: Callable[[Se
         (run_dir / "map.json.partial").unlink(missing_ok=True)
         gt = gt_objects(scene, world.ground_truth())
         rec.log_objects("world/ground_truth", json.dumps(gt))
+        if cfg.record.estimator_inputs:
+            inputs = json.loads(mapper.estimator_inputs_json())
+            (run_dir / "estimator_inputs.json").write_text(json.dumps({"objects": inputs, "ground_truth": gt}))
         evaluation = json.loads(
             _native.evaluate_map(json.dumps(gt), map_json, json.dumps(to_dict(cfg.eval)))
         )

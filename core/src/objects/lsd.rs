@@ -13,7 +13,7 @@ use super::ObjectsError;
 
 /// A line segment in pixel coordinates (OpenCV's convention: pixel centres at integer + 0.5 as in
 /// `cv2.createLineSegmentDetector`).
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct LineSegment {
     /// First endpoint `(u, v)`, pixels.
     pub a: [f64; 2],

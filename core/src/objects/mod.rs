@@ -11,7 +11,9 @@
 //!    box is re-fitted to the inlier points in the object frame of that yaw
 //!    ([`yaw::oriented_extent`]: mid-range centre, half-extents along the object axes).
 //! 4. `refined`: joint Levenberg–Marquardt refinement of yaw and scale (and centre) against the
-//!    segments ([`refine`]); kept only if it lowers the RMS segment residual, else `lines` stays.
+//!    segments (visible cube edges only, Huber residuals) and the inlier points (point-to-surface
+//!    distance, extent bound) ([`refine`]); kept only if it lowers a data cost computed the same
+//!    way for the `lines` and the refined cube (no ground truth, no prior term), else `lines` stays.
 //!
 //! Cuboids are reported in a canonical form ([`yaw::canonical_cuboid`]): the longer horizontal
 //! side along the object x axis, yaw in `[−π/2, π/2)`. A box at θ with sides `(a, b)` is the box
@@ -70,7 +72,8 @@
 //!   removes only ~60 % of a 20 % uniform contamination (masking, scikit-learn alike).
 //! - Segment-to-edge association and the meaning of `e` and ξ ([`yaw`]); cube extents per
 //!   candidate yaw from the inlier points ([`yaw::oriented_extent`]).
-//! - The refinement's residual weights, gates, and centre refinement ([`refine`]).
+//! - The refinement's residual weights, gates, robust kernels, hidden-edge removal, the point terms
+//!   and the acceptance cost ([`refine`]).
 //! - Window length `t` ([`ParamConfig::window_frames`], default 10).
 
 pub mod iforest;
@@ -260,6 +263,16 @@ impl ObjectEstimator {
         self.window.len()
     }
 
+    /// The frames currently in the window, oldest first.
+    pub fn window(&self) -> impl Iterator<Item = &LineFrame> {
+        self.window.iter()
+    }
+
+    /// The shape this estimator models.
+    pub fn shape(&self) -> Shape {
+        self.shape
+    }
+
     /// Add one frame's line evidence (segments already restricted to the object's box, e.g. by
     /// [`lsd::segments_in_box`]). The oldest frame leaves the window when it is full.
     pub fn add_frame(&mut self, mut frame: LineFrame) -> FrameUse {
@@ -395,8 +408,8 @@ impl ObjectEstimator {
             inliers: n_in,
         };
         if self.config.refine_enabled {
-            if let Some(r) = refine_yaw_scale(&lines, &frames, &self.config.refine) {
-                if r.rms_after_px <= r.rms_before_px {
+            if let Some(r) = refine_yaw_scale(&lines, &frames, &inliers, &self.config.refine) {
+                if !self.config.refine.accept_if_lower_cost || r.rms_after_px < r.rms_before_px {
                     let refined = canonical_cuboid(&r.geometry);
                     out.stages.refined = Some(refined);
                     out.geometry = refined;

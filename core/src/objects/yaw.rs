@@ -15,8 +15,9 @@
 //!   best-aligned of all 12 edges would make every yaw score well (12 edges span many angles).
 //! - `e`: the paper writes `‖α(Ẑ(θ)) − α(Z_lsd)‖²` but thresholds it at ξ = 5 "degrees"; we use the
 //!   absolute undirected angle difference in degrees (the squared reading would make ξ ≈ 2.2°).
-//! - Hidden edges are not removed (all 12 cube edges are projected); an edge with an endpoint
-//!   behind the camera is skipped.
+//! - Alg. 2 does not remove hidden edges (all 12 cube edges are projected); an edge with an
+//!   endpoint behind the camera is skipped. The refinement does remove them ([`visible_edges`],
+//!   [`project_visible_edges`]; see [`super::refine`]).
 
 use nalgebra::{Point3, Vector3};
 
@@ -28,7 +29,7 @@ pub const CUBE_EDGES: [(usize, usize); 12] =
     [(0, 1), (1, 2), (2, 3), (3, 0), (4, 5), (5, 6), (6, 7), (7, 4), (0, 4), (1, 5), (2, 6), (3, 7)];
 
 /// One frame's line evidence for one object.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct LineFrame {
     /// Frame index (for bookkeeping).
     pub frame: u32,
@@ -115,6 +116,48 @@ pub fn project_edges(geometry: &ObjectGeometry, camera: &PinholeCamera, world_fr
             _ => None,
         })
         .collect()
+}
+
+/// The four corner indices of each face of [`ObjectGeometry::corners`]: bottom, top, then the
+/// side faces `k` = corners `(k, k+1, k+5, k+4)` (indices mod 4 within each ring).
+const CUBE_FACES: [[usize; 4]; 6] =
+    [[0, 1, 2, 3], [4, 5, 6, 7], [0, 1, 5, 4], [1, 2, 6, 5], [2, 3, 7, 6], [3, 0, 4, 7]];
+
+/// The two faces (indices into `CUBE_FACES`) adjacent to each edge of [`CUBE_EDGES`].
+const EDGE_FACES: [(usize, usize); 12] =
+    [(0, 2), (0, 3), (0, 4), (0, 5), (1, 2), (1, 3), (1, 4), (1, 5), (5, 2), (2, 3), (3, 4), (4, 5)];
+
+/// Which of the 12 cube edges a camera at `eye` (world) can see, ignoring other objects: an edge
+/// of a convex box is visible iff one of its two faces faces the camera (outward normal towards
+/// the eye). Silhouette edges are visible; edges between two back faces are hidden.
+pub fn visible_edges(geometry: &ObjectGeometry, eye: &Point3<f64>) -> [bool; 12] {
+    let corners = geometry.corners();
+    let centre = geometry.center;
+    let front: Vec<bool> = CUBE_FACES
+        .iter()
+        .map(|f| {
+            let fc = f.iter().map(|&i| corners[i].coords).sum::<Vector3<f64>>() / 4.0;
+            (fc - centre).dot(&(eye.coords - fc)) > 0.0
+        })
+        .collect();
+    let mut out = [false; 12];
+    for (k, (a, b)) in EDGE_FACES.iter().enumerate() {
+        out[k] = front[*a] || front[*b];
+    }
+    out
+}
+
+/// [`project_edges`] restricted to the edges visible from the camera ([`visible_edges`]).
+pub fn project_visible_edges(
+    geometry: &ObjectGeometry,
+    camera: &PinholeCamera,
+    world_from_camera: &Se3,
+) -> Vec<ProjectedEdge> {
+    let eye = Point3::from(world_from_camera.translation.vector);
+    let visible = visible_edges(geometry, &eye);
+    let mut edges = project_edges(geometry, camera, world_from_camera);
+    edges.retain(|e| visible.get(e.edge).copied().unwrap_or(false));
+    edges
 }
 
 /// Undirected angle difference of two line angles, in `[0, π/2]`.

@@ -144,6 +144,22 @@ pub struct PipelineUpdate {
     pub merges: Vec<(u32, u32)>,
 }
 
+/// The inputs of one object's estimator (for offline replay and diagnosis of the
+/// parameterization: `experiments/run.py --set record.estimator_inputs=true` writes them).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct EstimatorInput {
+    /// Map object id.
+    pub id: u32,
+    /// Majority label.
+    pub label: crate::map::Label,
+    /// Shape modelled.
+    pub shape: crate::geometry::Shape,
+    /// The object's accumulated world points (what [`ObjectEstimator::estimate`] was given).
+    pub points_in_world: Vec<Point3<f64>>,
+    /// The estimator's window of line frames, oldest first.
+    pub frames: Vec<LineFrame>,
+}
+
 enum Mapper {
     Naive(NaiveMapper),
     Ensemble(Box<Associator>),
@@ -447,6 +463,25 @@ impl ObjectPipeline {
             }
         }
         map
+    }
+
+    /// The estimator inputs of every confirmed object that has an estimator.
+    pub fn estimator_inputs(&self) -> Vec<EstimatorInput> {
+        let mut map = self.raw_map();
+        self.confirmed(&mut map);
+        map.objects
+            .into_iter()
+            .filter_map(|o| {
+                let est = self.estimators.get(&o.id)?;
+                Some(EstimatorInput {
+                    id: o.id,
+                    label: o.label,
+                    shape: est.shape(),
+                    points_in_world: o.points_in_world,
+                    frames: est.window().cloned().collect(),
+                })
+            })
+            .collect()
     }
 
     /// The map as it was after `stage` of the last estimate of each object (an object that did not
