@@ -44,7 +44,7 @@ slam: setup ## Pose accuracy: scenes × pose sources (slam, kinematics) → repo
 	$(PY) experiments/ablations.py slam $(ABLATION_ARGS)
 
 match: ## Scene matching vs shared-object ratio (500 trials per row) → reports/scene_matching.{md,json}
-	cargo run --release -p objslam-core --example match_experiment -- --scenes scenes --out reports
+	cargo run --release -p objslam-core --example match_experiment -- --scenes scenes --out reports --other-seeds 1,2,3
 
 report: ## Report of the latest run folder → reports/foundation_run.{md,json}
 	$(PY) experiments/report_run.py
