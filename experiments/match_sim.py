@@ -114,6 +114,9 @@ def pair(
         "reason": r["reason"],
         "inliers": len(r["inliers"]),
         "correct_inlier_pairs": sum(1 for p, q, _ in r["inliers"] if p in gt_p and gt_p[p] == gt_q.get(q)),
+        "wrong_inlier_pairs": sum(
+            1 for p, q, _ in r["inliers"] if p in gt_p and q in gt_q and gt_p[p] != gt_q[q]
+        ),
         "confidence": r["confidence"],
         "rms_residual_cm": None if r["rms_residual"] is None else r["rms_residual"] * 100.0,
     }
@@ -148,11 +151,13 @@ def markdown(pairs: list[dict[str, Any]], command: str) -> str:
             "`objslam.match_maps(prior, query)` with the default `MatchConfig`. Errors against the known similarity; "
             "translation error = ‖t_est − t_true‖ / s_true (prior-map metres, at the robot base); success = < 5° and "
             "< 5 cm. *correct* = inlier pairs whose two objects are matched to the same ground-truth object by "
-            "each run's evaluation; *shared GT* = ground-truth objects found in both maps."
+            "each run's evaluation, *wrong* = both matched to different ones (the rest involve a map object the "
+            "evaluation left unmatched: a duplicate or fragment of an object, or a false detection); "
+            "*shared GT* = ground-truth objects found in both maps."
         ),
         "",
         (
-            "| scene | prior + query objects | shared GT | matched | inliers (correct) | rot err (°) | trans err (cm) "
+            "| scene | prior + query objects | shared GT | matched | inliers (correct / wrong) | rot err (°) | trans err (cm) "
             "| scale err (%) | rms residual (cm) | confidence | success |"
         ),
         "|---|---|---|---|---|---|---|---|---|---|---|",
@@ -160,7 +165,7 @@ def markdown(pairs: list[dict[str, Any]], command: str) -> str:
     for p in pairs:
         lines.append(
             f"| {p['scene']} | {p['prior_objects']}+{p['query_objects']} | {p['shared_gt_objects']} | "
-            f"{'yes' if p['matched'] else 'no: ' + str(p['reason'])} | {p['inliers']} ({p['correct_inlier_pairs']}) | "
+            f"{'yes' if p['matched'] else 'no: ' + str(p['reason'])} | {p['inliers']} ({p['correct_inlier_pairs']} / {p['wrong_inlier_pairs']}) | "
             f"{_f(p['rotation_error_deg'], '.2f')} | {_f(p['translation_error_cm'], '.2f')} | "
             f"{_f(p['scale_error_pct'], '.2f')} | {_f(p['rms_residual_cm'], '.2f')} | {p['confidence']:.2f} | "
             f"{'yes' if p['success'] else 'no'} |"
@@ -202,7 +207,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{name}:", flush=True)
         p = pair(scene, i, a.seed, a.config_json, previous.get(name))
         print(
-            f"  matched={p['matched']} inliers={p['inliers']} ({p['correct_inlier_pairs']} correct) "
+            f"  matched={p['matched']} inliers={p['inliers']} ({p['correct_inlier_pairs']} correct, "
+            f"{p['wrong_inlier_pairs']} wrong) "
             f"rot={_f(p['rotation_error_deg'], '.2f')} deg trans={_f(p['translation_error_cm'], '.2f')} cm",
             flush=True,
         )
