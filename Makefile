@@ -6,8 +6,9 @@ CARGO_FEATURES := --features rerun
 RUN_ARGS ?=
 BENCHMARK_ARGS ?=
 ABLATION_ARGS ?=
+MATCH_SIM_ARGS ?=
 
-.PHONY: help setup run test test-rust test-py bench benchmark associate parameterize slam match report view lint fmt clean
+.PHONY: help setup run test test-rust test-py bench benchmark associate parameterize slam match match-sim report view lint fmt clean
 
 help: ## List the targets
 	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*## "}; {printf "  \033[1m%-12s\033[0m %s\n", $$1, $$2}'
@@ -44,7 +45,10 @@ slam: setup ## Pose accuracy: scenes × pose sources (slam, kinematics) → repo
 	$(PY) experiments/ablations.py slam $(ABLATION_ARGS)
 
 match: ## Scene matching vs shared-object ratio (500 trials per row) → reports/scene_matching.{md,json}
-	cargo run --release -p objslam-core --example match_experiment -- --scenes scenes --out reports
+	cargo run --release -p objslam-core --example match_experiment -- --scenes scenes --out reports --other-seeds 1,2,3
+
+match-sim: setup ## Scene matching, part (b): maps of two simulator runs per scene (7 scenes × 2 Init episodes) → sim_pairs in reports/scene_matching.{md,json}
+	$(PY) experiments/match_sim.py $(MATCH_SIM_ARGS)
 
 report: ## Report of the latest run folder → reports/foundation_run.{md,json}
 	$(PY) experiments/report_run.py

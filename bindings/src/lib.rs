@@ -14,6 +14,7 @@ use objslam_core::map::{Label, MapError, ObjectMap};
 use objslam_core::naive::{NaiveConfig, NaiveMapper};
 use objslam_core::record::{DrawnObject, RecordError, Recorder};
 mod active;
+mod topo;
 
 use pyo3::create_exception;
 use pyo3::exceptions::{PyTypeError, PyValueError};
@@ -36,7 +37,7 @@ fn geometry_err(e: GeometryError) -> PyErr {
     input_err(e)
 }
 
-fn map_err(e: MapError) -> PyErr {
+pub(crate) fn map_err(e: MapError) -> PyErr {
     match e {
         MapError::UnknownLabel(_) => input_err(e),
         _ => MapFileError::new_err(e.to_string()),
@@ -440,6 +441,8 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(load_map, m)?)?;
     m.add_function(wrap_pyfunction!(save_map, m)?)?;
     m.add_function(wrap_pyfunction!(map_objects_json, m)?)?;
+    m.add_function(wrap_pyfunction!(topo::match_maps, m)?)?;
+    m.add_function(wrap_pyfunction!(topo::relocalise, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }

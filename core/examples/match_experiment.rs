@@ -6,7 +6,9 @@
 //! cargo run --release -p objslam-core --example match_experiment -- --scenes scenes --out reports
 //! ```
 //! Options: `--trials N` (default 500 per row), `--seed S` (default 2026), `--full-rotation`
-//! (random 3D rotation and the 7-DoF model instead of the gravity-aligned one). Set `MATCH_DEBUG=1`
+//! (random 3D rotation and the 7-DoF model instead of the gravity-aligned one), `--config-json J`
+//! (a partial `MatchConfig` as JSON; unnamed fields keep their defaults), `--other-seeds 1,2,3`
+//! (the main protocol again with these seeds, successes only). Set `MATCH_DEBUG=1`
 //! to print every failed trial with its inlier pairs (diagnosis only).
 //!
 //! Protocol, per trial (seeded by seed, row and trial index; scenes taken round-robin):
@@ -35,7 +37,7 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use nalgebra::{Similarity3, Translation3, UnitQuaternion, Vector3};
 use objslam_core::map::Label;
-use objslam_core::topo::{match_maps, MatchConfig, MatchResult, ScaleSource, TopoNode, TransformModel};
+use objslam_core::topo::{fit_pairs, match_maps, MatchConfig, MatchResult, ScaleSource, TopoNode, TransformModel};
 use rand::seq::SliceRandom;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -178,6 +180,8 @@ fn random_rotation(rng: &mut ChaCha8Rng, full: bool) -> UnitQuaternion<f64> {
 
 struct TrialOutcome {
     success: bool,
+    /// Success of the same final estimate given the true correspondences (the noise floor).
+    success_known_pairs: bool,
     success_paper_scale: bool,
     matched: bool,
     rot_err_deg: f64,
@@ -256,6 +260,14 @@ fn trial(
     let paper = match_maps(&prior, &query, paper_config);
     let ok = |e: Option<(f64, f64)>| e.is_some_and(|(r, t)| r < ROT_OK_DEG && t < TRANS_OK_M);
     let err = errors(&result, &truth);
+    let true_pairs: Vec<(usize, usize)> =
+        (0..prior.len()).filter_map(|i| query_ids.iter().position(|&id| id == prior_ids[i]).map(|j| (i, j))).collect();
+    let known = fit_pairs(&prior, &query, &true_pairs, config).map(|f| {
+        let est = f.query_from_prior;
+        let rot = est.isometry.rotation.angle_to(&truth.isometry.rotation).to_degrees();
+        let trans = (est.isometry.translation.vector - truth.isometry.translation.vector).norm() / truth.scaling();
+        (rot, trans)
+    });
     let (mut inliers, mut wrong, mut su, mut sr) = (0, 0, f64::NAN, f64::NAN);
     if let Some(m) = result.as_match() {
         inliers = m.inliers.len();
@@ -274,6 +286,24 @@ fn trial(
             result.stats()
         );
         if let Some(m) = result.as_match() {
+            let est = m.query_from_prior;
+            for &(i, j) in &true_pairs {
+                if m.inliers.iter().any(|p| p.prior == i) {
+                    continue;
+                }
+                let (a, b) = (&prior[i], &query[j]);
+                let r = (est.transform_point(&a.center.into()).coords - b.center).norm() / est.scaling();
+                let r_true = (truth.transform_point(&a.center.into()).coords - b.center).norm() / truth.scaling();
+                eprintln!(
+                    "    MISSING {:?} res={:.3} res_truth={r_true:.3} size_ratio={:.3} yaw_diff={:.1} extents_p={:?} extents_q/s={:?}",
+                    a.label,
+                    r,
+                    b.size() / (est.scaling() * a.size()),
+                    (b.yaw_rad - a.yaw_rad - est.isometry.rotation.scaled_axis().z).to_degrees(),
+                    a.sorted_extents(),
+                    b.sorted_extents().map(|e| e / est.scaling())
+                );
+            }
             for pair in &m.inliers {
                 let (a, b) = (&prior[pair.prior], &query[pair.query]);
                 let back = truth.inverse().transform_point(&b.center.into()).coords;
@@ -287,6 +317,7 @@ fn trial(
     }
     TrialOutcome {
         success: ok(err),
+        success_known_pairs: ok(known),
         success_paper_scale: ok(errors(&paper, &truth)),
         matched: result.as_match().is_some(),
         rot_err_deg: err.map_or(f64::NAN, |e| e.0),
@@ -312,6 +343,8 @@ struct Row {
     successes: usize,
     success_rate: f64,
     success_rate_paper_scale: f64,
+    /// Successes of the same final estimate given the true correspondences (the noise floor).
+    successes_known_pairs: usize,
     no_match: usize,
     wrong_transform: usize,
     failures_with_only_correct_pairs: usize,
@@ -336,9 +369,54 @@ struct Report {
     rows: Vec<Row>,
     /// Sensitivity: the same trials with noise on the query map only.
     rows_query_noise_only: Vec<Row>,
-    sim_pairs: Vec<serde_json::Value>,
+    /// The main protocol with other seeds (`--other-seeds`): successes per row.
+    rows_other_seeds: Vec<SeedRows>,
+    /// Part (b), written by `experiments/match_sim.py` and kept as found here.
+    sim_pairs: serde_json::Value,
     protocol: serde_json::Value,
     command: String,
+    /// Other `sim_pairs_*` keys of the existing report (part (b)'s protocol and command), kept.
+    #[serde(flatten)]
+    sim_extra: serde_json::Map<String, serde_json::Value>,
+}
+
+/// Successes per [`PLAN`] row for one seed.
+#[derive(Serialize)]
+struct SeedRows {
+    seed: u64,
+    successes: Vec<usize>,
+    successes_known_pairs: Vec<usize>,
+}
+
+/// Markers of the part-(b) section in `scene_matching.md` (written by `experiments/match_sim.py`).
+const SIM_BEGIN: &str = "<!-- sim_pairs:begin -->";
+const SIM_END: &str = "<!-- sim_pairs:end -->";
+
+/// Part (b) of an existing report: the `sim_pairs*` JSON keys and the markdown section, so that
+/// re-running part (a) does not erase it.
+fn existing_sim_part(
+    out_dir: &Path,
+) -> (serde_json::Value, serde_json::Map<String, serde_json::Value>, Option<String>) {
+    let mut sim_pairs = serde_json::Value::Array(Vec::new());
+    let mut extra = serde_json::Map::new();
+    if let Some(serde_json::Value::Object(map)) = std::fs::read_to_string(out_dir.join("scene_matching.json"))
+        .ok()
+        .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
+    {
+        for (k, v) in map {
+            if k == "sim_pairs" {
+                sim_pairs = v;
+            } else if k.starts_with("sim_pairs") {
+                extra.insert(k, v);
+            }
+        }
+    }
+    let section = std::fs::read_to_string(out_dir.join("scene_matching.md")).ok().and_then(|md| {
+        let a = md.find(SIM_BEGIN)?;
+        let b = md[a..].find(SIM_END)? + a + SIM_END.len();
+        Some(md[a..b].to_string())
+    });
+    (sim_pairs, extra, section)
 }
 
 /// Mean of an iterator (NaN when empty).
@@ -364,11 +442,11 @@ fn quantile(values: &[f64], q: f64) -> f64 {
 /// A markdown table of rows.
 fn table(rows: &[Row]) -> String {
     let mut md = String::new();
-    md.push_str("| shared | k / U | prior + query | trials | successes | success % | paper-scale success % | no match | wrong | of which correct pairs | rot err median / p95 (°) | trans err median / p95 (cm) | scale err median Umeyama / ratio (%) | wrong-pair trials | RANSAC its | confidence success / failure | time median (µs) |\n");
-    md.push_str("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+    md.push_str("| shared | k / U | prior + query | trials | successes | success % | known-pairs successes | paper-scale success % | no match | wrong | of which correct pairs | rot err median / p95 (°) | trans err median / p95 (cm) | scale err median Umeyama / ratio (%) | wrong-pair trials | RANSAC its | confidence success / failure | time median (µs) |\n");
+    md.push_str("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
     for r in rows {
         md.push_str(&format!(
-            "| {:.0} % | {}/{} | {}+{} | {} | {} | {:.1} | {:.1} | {} | {} | {} | {:.2} / {:.2} | {:.2} / {:.2} | {:.2} / {:.2} | {} | {:.1} | {:.2} / {:.2} | {:.1} |\n",
+            "| {:.0} % | {}/{} | {}+{} | {} | {} | {:.1} | {} | {:.1} | {} | {} | {} | {:.2} / {:.2} | {:.2} / {:.2} | {:.2} / {:.2} | {} | {:.1} | {:.2} / {:.2} | {:.1} |\n",
             r.shared_ratio * 100.0,
             r.shared_objects,
             r.union_objects,
@@ -377,6 +455,7 @@ fn table(rows: &[Row]) -> String {
             r.trials,
             r.successes,
             r.success_rate * 100.0,
+            r.successes_known_pairs,
             r.success_rate_paper_scale * 100.0,
             r.no_match,
             r.wrong_transform,
@@ -438,6 +517,7 @@ fn run_plan(
             successes,
             success_rate: successes as f64 / n as f64,
             success_rate_paper_scale: outcomes.iter().filter(|o| o.success_paper_scale).count() as f64 / n as f64,
+            successes_known_pairs: outcomes.iter().filter(|o| o.success_known_pairs).count(),
             no_match: n - matched.len(),
             wrong_transform: matched.iter().filter(|o| !o.success).count(),
             failures_with_only_correct_pairs: matched.iter().filter(|o| !o.success && o.wrong_inliers == 0).count(),
@@ -455,11 +535,12 @@ fn run_plan(
             match_time_us_median: quantile(&outcomes.iter().map(|o| o.time_us).collect::<Vec<_>>(), 0.5),
         };
         eprintln!(
-            "shared {:>4.0} % ({k}/{u}): {}/{} = {:.1} %  (paper scale {:.1} %)",
+            "shared {:>4.0} % ({k}/{u}): {}/{} = {:.1} %  (known pairs {}, paper scale {:.1} %)",
             ratio * 100.0,
             successes,
             n,
             row.success_rate * 100.0,
+            row.successes_known_pairs,
             row.success_rate_paper_scale * 100.0
         );
         rows.push(row);
@@ -474,6 +555,8 @@ fn main() -> Result<()> {
     let mut trials = 500usize;
     let mut seed = 2026u64;
     let mut full_rotation = false;
+    let mut config_json: Option<String> = None;
+    let mut other_seeds: Vec<u64> = Vec::new();
     let mut i = 1;
     while i < args.len() {
         let value = || args.get(i + 1).cloned().with_context(|| format!("{} needs a value", args[i]));
@@ -482,6 +565,10 @@ fn main() -> Result<()> {
             "--out" => out_dir = PathBuf::from(value()?),
             "--trials" => trials = value()?.parse()?,
             "--seed" => seed = value()?.parse()?,
+            "--config-json" => config_json = Some(value()?),
+            "--other-seeds" => {
+                other_seeds = value()?.split(',').map(|x| x.trim().parse()).collect::<Result<_, _>>()?;
+            }
             "--full-rotation" => {
                 full_rotation = true;
                 i += 1;
@@ -504,12 +591,26 @@ fn main() -> Result<()> {
     }
     let noise = Noise { on_prior: true, pos_m: 0.01, yaw_rad: 3f64.to_radians(), size_rel: 0.05 };
     let model = if full_rotation { TransformModel::Similarity3 } else { TransformModel::YawSimilarity };
-    let config = MatchConfig { model, ..MatchConfig::default() };
+    let base: MatchConfig = match &config_json {
+        Some(text) => serde_json::from_str(text).context("--config-json")?,
+        None => MatchConfig::default(),
+    };
+    let config = MatchConfig { model, ..base };
     let paper_config = MatchConfig { scale_source: ScaleSource::DistanceRatio, ..config };
     let rows = run_plan(&scenes, trials, seed, noise, full_rotation, &config, &paper_config);
     eprintln!("-- sensitivity: noise on the query map only (prior = exact ground truth)");
     let rows_query_noise_only =
         run_plan(&scenes, trials, seed, Noise { on_prior: false, ..noise }, full_rotation, &config, &paper_config);
+    let mut rows_other_seeds = Vec::new();
+    for &other in &other_seeds {
+        eprintln!("-- seed {other} (both maps noisy)");
+        let rows = run_plan(&scenes, trials, other, noise, full_rotation, &config, &paper_config);
+        rows_other_seeds.push(SeedRows {
+            seed: other,
+            successes: rows.iter().map(|r| r.successes).collect(),
+            successes_known_pairs: rows.iter().map(|r| r.successes_known_pairs).collect(),
+        });
+    }
 
     let mut command = format!(
         "cargo run --release -p objslam-core --example match_experiment -- --scenes {} --out {}",
@@ -525,6 +626,13 @@ fn main() -> Result<()> {
     if full_rotation {
         command.push_str(" --full-rotation");
     }
+    if !other_seeds.is_empty() {
+        let list: Vec<String> = other_seeds.iter().map(|s| s.to_string()).collect();
+        command.push_str(&format!(" --other-seeds {}", list.join(",")));
+    }
+    if let Some(text) = &config_json {
+        command.push_str(&format!(" --config-json '{text}'"));
+    }
     let scene_names: Vec<&str> = scenes.iter().map(|s| s.name.as_str()).collect();
     let protocol = serde_json::json!({
         "scenes": scene_names,
@@ -538,7 +646,16 @@ fn main() -> Result<()> {
         "success": "match returned, rotation error < 5 deg and |t_est - t_true| / s_true < 5 cm",
         "success_rate_paper_scale": "same, with the transform's scale from the paper's averaged distance ratios",
     });
-    let report = Report { rows, rows_query_noise_only, sim_pairs: Vec::new(), protocol, command: command.clone() };
+    let (sim_pairs, sim_extra, sim_section) = existing_sim_part(&out_dir);
+    let report = Report {
+        rows,
+        rows_query_noise_only,
+        rows_other_seeds,
+        sim_pairs,
+        protocol,
+        command: command.clone(),
+        sim_extra,
+    };
     std::fs::create_dir_all(&out_dir)?;
     let json_path = out_dir.join("scene_matching.json");
     std::fs::write(&json_path, serde_json::to_string_pretty(&report)? + "\n")?;
@@ -564,14 +681,39 @@ fn main() -> Result<()> {
         "\n## Sensitivity: noise on the query map only (prior = exact ground truth, `rows_query_noise_only`)\n\n",
     );
     md.push_str(&table(&report.rows_query_noise_only));
+    if !report.rows_other_seeds.is_empty() {
+        md.push_str(&format!(
+            "\n## Other seeds (both maps noisy, `rows_other_seeds`): successes / known-pairs successes of {trials}\n\n"
+        ));
+        md.push_str("| seed |");
+        for r in &report.rows {
+            md.push_str(&format!(" {:.0} % |", r.shared_ratio * 100.0));
+        }
+        md.push_str("\n|---|");
+        md.push_str(&"---|".repeat(report.rows.len()));
+        md.push('\n');
+        for sr in &report.rows_other_seeds {
+            md.push_str(&format!("| {} |", sr.seed));
+            for (a, b) in sr.successes.iter().zip(&sr.successes_known_pairs) {
+                md.push_str(&format!(" {a} / {b} |"));
+            }
+            md.push('\n');
+        }
+    }
     md.push_str(
-        "\nColumns: *wrong* = matched but outside the success bounds; *of which correct pairs* = those whose \
+        "\nColumns: *known-pairs successes* = successes of the same final estimate (`fit_pairs`: closed form + fused size and yaw cues) given the true correspondences instead of the matched ones, the floor set by the map noise itself; *wrong* = matched but outside the success bounds; *of which correct pairs* = those whose \
          inlier pairs were all true correspondences (precision-limited: the pose error comes from the map noise \
          alone); *wrong-pair trials* = matches with at least one false inlier pair; *paper-scale* = the same \
          matches with the scale from the paper's averaged distance ratios instead of the fused scale.\n",
     );
     md.push_str("\nPaper (Table, GT object poses): 60/55/50 % → 100 %, 44 % → 99.8 %, 38 % → 93.4 %, 33 % → 81.2 %.\n");
-    md.push_str("\n`sim_pairs` (maps from two simulator runs, part b) is not filled yet.\n");
+    md.push('\n');
+    md.push_str(&sim_section.unwrap_or_else(|| {
+        format!(
+            "{SIM_BEGIN}\n## Maps from two simulator runs (part b, `sim_pairs`)\n\nNot filled yet: run `make match-sim`.\n{SIM_END}"
+        )
+    }));
+    md.push('\n');
     let md_path = out_dir.join("scene_matching.md");
     std::fs::write(&md_path, md)?;
     eprintln!("wrote {} and {}", json_path.display(), md_path.display());

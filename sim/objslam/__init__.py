@@ -9,6 +9,8 @@ package is the body: SAPIEN scenes (:mod:`objslam.scene`, :mod:`objslam.world`),
 - :class:`RunConfig`, :func:`load_run_config`
 - :func:`run_episode`
 - :class:`NaiveMapper`, :class:`Recorder`, :func:`evaluate_map`, :func:`load_map`, :func:`save_map`
+- :func:`match_maps`, :func:`relocalise` (scene matching of two map JSONs; helpers in
+  :mod:`objslam.topo`)
 - exceptions :class:`ObjslamError` (base), :class:`InputError`, :class:`MapFileError`,
   :class:`RecordingError` raised by the core.
 """
@@ -24,6 +26,8 @@ from ._native import (
     evaluate_map,
     load_map,
     map_objects_json,
+    match_maps,
+    relocalise,
     save_map,
 )
 from .scene import SceneFileError, SceneSpec, generate_scene, load_scene
@@ -43,6 +47,8 @@ __all__ = [
     "load_map",
     "load_run_config",
     "map_objects_json",
+    "match_maps",
+    "relocalise",
     "run_episode",
     "save_map",
 ]

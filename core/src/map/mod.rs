@@ -250,7 +250,17 @@ impl ObjectMap {
         }
         let file: MapFile =
             serde_json::from_str(text).map_err(|e| MapError::Malformed { path: path.into(), reason: e.to_string() })?;
-        file.map.ok_or_else(|| MapError::Malformed { path: path.into(), reason: "no map content".into() })
+        match file.map {
+            Some(map) => Ok(map),
+            // The flattened optional map hides why it failed: parse the content alone for the
+            // message that names the missing or malformed field.
+            None => Err(MapError::Malformed {
+                path: path.into(),
+                reason: serde_json::from_str::<ObjectMap>(text)
+                    .err()
+                    .map_or_else(|| "no map content".into(), |e| e.to_string()),
+            }),
+        }
     }
 
     /// Write to a file (atomically: a temporary file renamed over the target).
@@ -306,6 +316,15 @@ mod tests {
         let text = sample_map().to_json().replace("\"version\": 1", "\"version\": 99");
         assert!(matches!(ObjectMap::from_json(&text, "f.json"), Err(MapError::Version { version: 99, .. })));
         assert!(matches!(ObjectMap::from_json("{\"format\": 3}", "f.json"), Err(MapError::Malformed { .. })));
+    }
+
+    #[test]
+    fn a_malformed_object_is_named_in_the_error() {
+        let text = r#"{"format": "objslam-map", "version": 1, "objects": [{"id": 0}], "next_id": 1}"#;
+        match ObjectMap::from_json(text, "f.json") {
+            Err(MapError::Malformed { reason, .. }) => assert!(reason.contains("missing field `label`"), "{reason}"),
+            other => panic!("{other:?}"),
+        }
     }
 
     #[test]

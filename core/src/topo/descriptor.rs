@@ -10,6 +10,7 @@ use crate::map::Label;
 
 /// Descriptor generation and comparison settings.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct DescriptorConfig {
     /// Walk depth `i`: steps per walk after the start object. Paper: "a certain depth i" (value not
     /// given). Default 3 (tabletop maps have 4–14 objects).

@@ -82,6 +82,7 @@ impl TopoEdge {
 
 /// Edge construction limits.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct TopoConfig {
     /// Maximum edge length, map units. The paper's "distance constraint". Default infinity: two
     /// maps to be matched may have different scales, and a metric limit would cut them differently;

@@ -172,6 +172,7 @@ pub fn scale_from_distance_ratios(prior: &[Vector3<f64>], query: &[Vector3<f64>]
 
 /// Expected noise of each map, used to weight the cues of [`fuse_cues`].
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct NoiseModel {
     /// Standard deviation of an object centre per axis, prior units (m). Default 0.01.
     pub position: f64,
@@ -237,33 +238,72 @@ pub fn fuse_cues(
     noise: &NoiseModel,
     yaw_cue: bool,
 ) -> Option<Similarity3<f64>> {
+    fuse_cues_weighted(transform, pairs, None, noise, yaw_cue)
+}
+
+/// Per-pair weights of [`fuse_cues_weighted`], in [0, 1] (1: the cue counts fully).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CueWeight {
+    /// Weight of the pair's centre (position cue of rotation, translation and scale).
+    pub position: f64,
+    /// Weight of the pair's yaw difference (yaw cue of the rotation).
+    pub yaw: f64,
+}
+
+impl Default for CueWeight {
+    fn default() -> Self {
+        Self { position: 1.0, yaw: 1.0 }
+    }
+}
+
+/// [`fuse_cues`] with a weight per pair and cue (`None`: all 1): weighted centroids and sums for the
+/// position cue, weighted yaw differences for the yaw cue. Weights must be finite and ≥ 0.
+pub fn fuse_cues_weighted(
+    transform: &Similarity3<f64>,
+    pairs: &[CuePair],
+    weights: Option<&[CueWeight]>,
+    noise: &NoiseModel,
+    yaw_cue: bool,
+) -> Option<Similarity3<f64>> {
     let n = pairs.len();
-    if n == 0 {
+    if n == 0 || weights.is_some_and(|w| w.len() != n) {
         return None;
     }
-    let inv_n = 1.0 / n as f64;
-    let mu_p = pairs.iter().map(|c| c.prior_center).sum::<Vector3<f64>>() * inv_n;
-    let mu_q = pairs.iter().map(|c| c.query_center).sum::<Vector3<f64>>() * inv_n;
+    let weight = |i: usize| weights.and_then(|w| w.get(i).copied()).unwrap_or_default();
+    if (0..n).any(|i| {
+        let w = weight(i);
+        !(w.position.is_finite() && w.position >= 0.0 && w.yaw.is_finite() && w.yaw >= 0.0)
+    }) {
+        return None;
+    }
+    let w_sum: f64 = (0..n).map(|i| weight(i).position).sum();
+    if w_sum <= DEGENERATE_EPS {
+        return None;
+    }
+    let mu_p = pairs.iter().enumerate().map(|(i, c)| c.prior_center * weight(i).position).sum::<Vector3<f64>>() / w_sum;
+    let mu_q = pairs.iter().enumerate().map(|(i, c)| c.query_center * weight(i).position).sum::<Vector3<f64>>() / w_sum;
     let sigma2 = noise.position * noise.position;
     let mut rotation = transform.isometry.rotation;
     if yaw_cue && noise.yaw_rad.is_finite() && noise.yaw_rad > 0.0 {
         let (mut a, mut b, mut var_xy) = (0.0, 0.0, 0.0);
-        for c in pairs {
+        for (i, c) in pairs.iter().enumerate() {
+            let w = weight(i).position;
             let (dp, dq) = (c.prior_center - mu_p, c.query_center - mu_q);
-            a += dp.x * dq.x + dp.y * dq.y;
-            b += dp.x * dq.y - dp.y * dq.x;
-            var_xy += dp.x * dp.x + dp.y * dp.y;
+            a += w * (dp.x * dq.x + dp.y * dq.y);
+            b += w * (dp.x * dq.y - dp.y * dq.x);
+            var_xy += w * (dp.x * dp.x + dp.y * dp.y);
         }
         let theta_pos = b.atan2(a);
         let w_pos = if sigma2 > 0.0 { var_xy / (2.0 * sigma2) } else { f64::INFINITY };
         let w_obj = 1.0 / (2.0 * noise.yaw_rad * noise.yaw_rad);
         let (mut sum_w, mut sum_wr) = (w_pos, 0.0);
-        for c in pairs {
+        for (i, c) in pairs.iter().enumerate() {
             let Some(period) = c.yaw_period else { continue };
             let r = wrap_period(c.query_yaw - c.prior_yaw - theta_pos, period);
             if r.is_finite() && r.abs() <= noise.yaw_gate_rad {
-                sum_w += w_obj;
-                sum_wr += w_obj * r;
+                let w = w_obj * weight(i).yaw;
+                sum_w += w;
+                sum_wr += w * r;
             }
         }
         if w_pos.is_finite() && sum_w > 0.0 && sum_w.is_finite() {
@@ -272,10 +312,11 @@ pub fn fuse_cues(
         }
     }
     let (mut num, mut den) = (0.0, 0.0);
-    for c in pairs {
+    for (i, c) in pairs.iter().enumerate() {
+        let w = weight(i).position;
         let (dp, dq) = (c.prior_center - mu_p, c.query_center - mu_q);
-        num += dq.dot(&(rotation * dp));
-        den += dp.norm_squared();
+        num += w * dq.dot(&(rotation * dp));
+        den += w * dp.norm_squared();
     }
     let mut log_s = if den > DEGENERATE_EPS && num > 0.0 { Some((num / den).ln()) } else { None };
     if noise.size_rel.is_finite() && noise.size_rel > 0.0 {
@@ -308,6 +349,84 @@ pub fn fuse_cues(
     }
     let t = mu_q - scale * (rotation * mu_p);
     t.iter().all(|v| v.is_finite()).then(|| Similarity3::from_parts(Translation3::from(t), rotation, scale))
+}
+
+/// Robust kernel of the final re-weighted fit ([`robust_fuse`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum RobustKernel {
+    /// No re-weighting: the plain [`fuse_cues`] least squares.
+    #[default]
+    None,
+    /// Huber: weight 1 up to `k`, then k / u.
+    Huber,
+    /// Cauchy: weight 1 / (1 + (u / k)²).
+    Cauchy,
+}
+
+impl RobustKernel {
+    /// IRLS weight of a normalised residual `u` ≥ 0 with kernel width `k` > 0.
+    pub fn weight(self, u: f64, k: f64) -> f64 {
+        if !(u.is_finite() && k.is_finite() && k > 0.0) {
+            return if u.is_finite() { 1.0 } else { 0.0 };
+        }
+        match self {
+            RobustKernel::None => 1.0,
+            RobustKernel::Huber => {
+                if u <= k {
+                    1.0
+                } else {
+                    k / u
+                }
+            }
+            RobustKernel::Cauchy => 1.0 / (1.0 + (u / k) * (u / k)),
+        }
+    }
+}
+
+/// Iteratively re-weighted [`fuse_cues_weighted`] (beyond the paper): after each fit, a pair's
+/// position weight comes from its residual ‖T(p) − q‖ / s normalised by the relative position noise
+/// √2 σ, and its yaw weight from its folded yaw residual normalised by √2 σ_θ, through `kernel`
+/// with width `k` (in those σ units). Stops after `iterations` fits or when the transform no longer
+/// moves. Starts from the unweighted fusion; `None` when that is degenerate.
+pub fn robust_fuse(
+    transform: &Similarity3<f64>,
+    pairs: &[CuePair],
+    noise: &NoiseModel,
+    yaw_cue: bool,
+    kernel: RobustKernel,
+    k: f64,
+    iterations: usize,
+) -> Option<Similarity3<f64>> {
+    let mut current = fuse_cues(transform, pairs, noise, yaw_cue)?;
+    if kernel == RobustKernel::None || !(noise.position.is_finite() && noise.position > 0.0) {
+        return Some(current);
+    }
+    let sigma_pos = std::f64::consts::SQRT_2 * noise.position;
+    let sigma_yaw = std::f64::consts::SQRT_2 * noise.yaw_rad;
+    let mut weights = vec![CueWeight::default(); pairs.len()];
+    for _ in 0..iterations {
+        let s = current.scaling();
+        let theta = current.isometry.rotation.scaled_axis().z;
+        for (w, c) in weights.iter_mut().zip(pairs) {
+            let r = (current.transform_point(&c.prior_center.into()).coords - c.query_center).norm() / s;
+            w.position = kernel.weight(r / sigma_pos, k);
+            w.yaw = match c.yaw_period {
+                Some(period) if sigma_yaw > 0.0 => {
+                    let d = wrap_period(c.query_yaw - c.prior_yaw - theta, period);
+                    kernel.weight(d.abs() / sigma_yaw, k)
+                }
+                _ => 1.0,
+            };
+        }
+        let Some(next) = fuse_cues_weighted(&current, pairs, Some(&weights), noise, yaw_cue) else { break };
+        let moved = (next.to_homogeneous() - current.to_homogeneous()).abs().max();
+        current = next;
+        if moved < 1e-12 {
+            break;
+        }
+    }
+    Some(current)
 }
 
 #[cfg(test)]

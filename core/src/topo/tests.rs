@@ -334,3 +334,71 @@ fn odd_inputs_never_panic() {
         }
     }
 }
+
+#[test]
+fn fit_pairs_recovers_the_truth_and_rejects_bad_indices() {
+    let prior = layout(61, 6, &MIXED);
+    let truth = yaw_transform();
+    let query = transformed(&prior, &truth);
+    let pairs: Vec<(usize, usize)> = (0..prior.len()).map(|i| (i, i)).collect();
+    for scale_source in [ScaleSource::Fused, ScaleSource::Umeyama, ScaleSource::DistanceRatio] {
+        let config = MatchConfig { scale_source, ..MatchConfig::default() };
+        let fit = fit_pairs(&prior, &query, &pairs, &config).unwrap_or_else(|| panic!("degenerate"));
+        assert!((fit.query_from_prior.to_homogeneous() - truth.to_homogeneous()).abs().max() < 1e-9);
+        assert!((fit.scale_umeyama - 1.7).abs() < 1e-9);
+    }
+    assert!(fit_pairs(&prior, &query, &[(0, 0), (1, 99)], &MatchConfig::default()).is_none());
+    assert!(fit_pairs(&prior, &query, &[(0, 0)], &MatchConfig::default()).is_none());
+}
+
+#[test]
+fn robust_fuse_is_exact_on_exact_data_and_discounts_a_gross_outlier() {
+    let nodes = layout(62, 8, &[Label::Cup, Label::Can]);
+    let truth = yaw_transform();
+    let mut query = transformed(&nodes, &truth);
+    let cues = |query: &[TopoNode]| -> Vec<CuePair> {
+        nodes
+            .iter()
+            .zip(query)
+            .map(|(a, b)| CuePair {
+                prior_center: a.center,
+                query_center: b.center,
+                prior_extents: a.sorted_extents(),
+                query_extents: b.sorted_extents(),
+                prior_yaw: a.yaw_rad,
+                query_yaw: b.yaw_rad,
+                yaw_period: None,
+            })
+            .collect()
+    };
+    let noise = NoiseModel::default();
+    for kernel in [RobustKernel::None, RobustKernel::Huber, RobustKernel::Cauchy] {
+        let t = robust_fuse(&truth, &cues(&query), &noise, true, kernel, 2.0, 5).unwrap_or_else(|| panic!("none"));
+        assert!((t.to_homogeneous() - truth.to_homogeneous()).abs().max() < 1e-9, "{kernel:?}");
+    }
+    // One centre 10 cm (prior units) off: the re-weighted fits land closer to the truth than least
+    // squares.
+    query[3].center += Vector3::new(0.1, 0.0, 0.0) * truth.scaling();
+    let err = |kernel| {
+        let t = robust_fuse(&truth, &cues(&query), &noise, false, kernel, 2.0, 10).unwrap_or_else(|| panic!("none"));
+        (t.isometry.translation.vector - truth.isometry.translation.vector).norm()
+    };
+    let (ls, huber, cauchy) = (err(RobustKernel::None), err(RobustKernel::Huber), err(RobustKernel::Cauchy));
+    assert!(huber < 0.5 * ls && cauchy < 0.5 * ls, "ls {ls} huber {huber} cauchy {cauchy}");
+}
+
+#[test]
+fn a_partial_config_json_keeps_the_defaults_and_unknown_fields_are_refused() {
+    let config: MatchConfig =
+        serde_json::from_str(r#"{"inlier_threshold": 0.08, "noise": {"yaw_rad": 0.1}, "robust_kernel": "huber"}"#)
+            .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(config.inlier_threshold, 0.08);
+    assert_eq!(config.noise.yaw_rad, 0.1);
+    assert_eq!(config.noise.position, NoiseModel::default().position);
+    assert_eq!(config.robust_kernel, RobustKernel::Huber);
+    assert_eq!(config.min_inliers, MatchConfig::default().min_inliers);
+    match serde_json::from_str::<MatchConfig>(r#"{"inlier_treshold": 0.08}"#) {
+        Ok(_) => panic!("a misspelt field was accepted"),
+        Err(err) => assert!(err.to_string().contains("inlier_treshold"), "{err}"),
+    }
+}
