@@ -16,7 +16,6 @@ import json
 from pathlib import Path
 
 import numpy as np
-
 from objslam import episode
 from objslam.config import load_run_config
 

@@ -112,6 +112,9 @@ class RecordConfig:
     """Log images every n-th frame (poses, detections and the map are logged every frame)."""
     grids: bool = True
     """Log the surface grid cells coloured by state after every view."""
+    map_points: bool = True
+    """Log the SLAM map points (``world/map/points``, world frame) every ``every_n_frames`` frames
+    (pose sources other than ``fk``, which has no tracker)."""
 
 
 @dataclass(frozen=True)

@@ -451,6 +451,10 @@ pub struct Tracker {
     last_keyframe_tracked: usize,
     lost_streak: usize,
     n_lost: usize,
+    /// Lost frames that showed too little of the scene (see [`TrackerConfig::reset_after_lost`]).
+    n_lost_hidden: usize,
+    /// Lost frames by reason (`too_few_features`, `no_depth`, `too_few_inliers`, `prior_disagreement`).
+    lost_by_reason: BTreeMap<&'static str, usize>,
     records: Vec<FrameRecord>,
 }
 
@@ -508,6 +512,8 @@ impl Tracker {
             last_keyframe_tracked: 0,
             lost_streak: 0,
             n_lost: 0,
+            n_lost_hidden: 0,
+            lost_by_reason: BTreeMap::new(),
             records: Vec::new(),
         })
     }
@@ -530,6 +536,19 @@ impl Tracker {
     /// Number of lost frames so far.
     pub fn n_lost(&self) -> usize {
         self.n_lost
+    }
+
+    /// Lost frames that showed too little of the scene to track (fewer than
+    /// [`TrackerConfig::min_init_points`] keypoints with depth: e.g. the camera facing the robot's
+    /// own links, whose pixels carry no depth). A subset of [`Self::n_lost`].
+    pub fn n_lost_scene_hidden(&self) -> usize {
+        self.n_lost_hidden
+    }
+
+    /// Lost frames by reason: `too_few_features`, `no_depth`, `too_few_inliers`,
+    /// `prior_disagreement`.
+    pub fn lost_by_reason(&self) -> &BTreeMap<&'static str, usize> {
+        &self.lost_by_reason
     }
 
     /// The current world ← map transform (identity for non-`slam` sources).
@@ -651,7 +670,16 @@ impl Tracker {
                 let shows_scene = frame.depth_m.iter().flatten().count() >= self.config.min_init_points;
                 if shows_scene {
                     self.lost_streak += 1;
+                } else {
+                    self.n_lost_hidden += 1;
                 }
+                let key = match reason {
+                    LostReason::TooFewFeatures { .. } => "too_few_features",
+                    LostReason::NoDepth { .. } => "no_depth",
+                    LostReason::TooFewInliers { .. } => "too_few_inliers",
+                    LostReason::PriorDisagreement { .. } => "prior_disagreement",
+                };
+                *self.lost_by_reason.entry(key).or_insert(0) += 1;
                 out.state = TrackingState::Lost { reason };
                 out.world_from_camera = known.unwrap_or(prior);
                 // Within the view of the last tracked frame the prior's bias is constant, so the
