@@ -10,7 +10,7 @@ use objslam_core::explore::{ExploreError, ObservedPoints, TableRect};
 use objslam_core::frame::GreyImage;
 use objslam_core::geometry::Se3;
 use objslam_core::map::EstimateStage;
-use objslam_core::pipeline::{ObjectPipeline, PipelineConfig, PipelineError};
+use objslam_core::pipeline::{MapPointObservation, ObjectPipeline, PipelineConfig, PipelineError};
 use objslam_core::slam::{ate_rmse_m, rpe, TrackInput, Tracker, TrackerConfig};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -111,6 +111,7 @@ impl ActiveMapperPy {
         let grey = grey.map(grey_image).transpose()?;
         let mut frame = frame_from_py(index, intrinsics, depth, world_from_camera, detections)?;
         let gt = world_from_camera_gt.map(|g| pose(g, "world_from_camera_gt")).transpose()?;
+        let mut map_points: Option<Vec<MapPointObservation>> = None;
         if let Some(tracker) = self.tracker.as_mut() {
             let g = grey.as_ref().ok_or_else(|| input_err("grey: required when a tracker is configured"))?;
             let out = tracker
@@ -124,12 +125,16 @@ impl ActiveMapperPy {
                 })
                 .map_err(input_err)?;
             frame.world_from_camera = out.world_from_camera;
+            map_points = Some(
+                out.observed.iter().map(|p| MapPointObservation { pixel: p.pixel, p_in_world: p.p_in_world }).collect(),
+            );
         }
         if let Some(g) = gt {
             self.poses_used.push(frame.world_from_camera);
             self.poses_true.push(g);
         }
-        let summary = self.mapper.update(&frame, grey.as_ref()).map_err(pipeline_err)?;
+        let summary =
+            self.mapper.update_with_map_points(&frame, grey.as_ref(), map_points.as_deref()).map_err(pipeline_err)?;
         let map = self.mapper.map();
         let observed: Vec<ObservedPoints> = summary
             .observed

@@ -161,6 +161,8 @@ def run_episode(cfg: RunConfig, *, progress: bool = True, on_frame: Callable[[Se
                     "parameterize": cfg.parameterize,
                     "consolidate": cfg.consolidate,
                     "min_observations": cfg.min_observations,
+                    # Only when not the default, so a core built before the option still loads.
+                    **({"object_points": cfg.object_points} if cfg.object_points != "depth" else {}),
                     "naive": to_dict(cfg.naive),
                     "param": {
                         "refine": {
