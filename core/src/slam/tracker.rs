@@ -294,6 +294,8 @@ struct ViewSums {
     /// Σ SLAM (map-frame) camera centres.
     map_center_sum: Vector3<f64>,
     n: f64,
+    /// The rotation closest to `rotation_sum / n` (updated on add).
+    mean_rotation: Option<UnitQuaternion<f64>>,
 }
 
 /// The world ← map gauge: a weighted robust least-squares fit of one rigid transform to every
@@ -307,8 +309,10 @@ struct Anchor {
     sigma_r: f64,
     /// Huber width on a view's whitened 6-DoF residual norm.
     huber: f64,
-    /// Cached estimate.
+    /// Cached estimate (also the warm start of the next fit).
     world_from_map: Se3,
+    /// Whether `world_from_map` holds a fit.
+    solved: bool,
 }
 
 impl Anchor {
@@ -319,7 +323,7 @@ impl Anchor {
         let sigma_r = (noise.bias_rot_deg.to_radians().powi(2) / 3.0 + noise.jitter_rot_deg.to_radians().powi(2))
             .sqrt()
             .max(1e-5);
-        Self { views: BTreeMap::new(), sigma_t, sigma_r, huber, world_from_map: Se3::identity() }
+        Self { views: BTreeMap::new(), sigma_t, sigma_r, huber, world_from_map: Se3::identity(), solved: false }
     }
 
     fn add(&mut self, world_from_camera_prior: &Se3, map_from_camera: &Se3, view_index: u64) {
@@ -329,12 +333,15 @@ impl Anchor {
             prior_center_sum: Vector3::zeros(),
             map_center_sum: Vector3::zeros(),
             n: 0.0,
+            mean_rotation: None,
         });
         v.rotation_sum += d.to_rotation_matrix().matrix();
         v.prior_center_sum += world_from_camera_prior.translation.vector;
         v.map_center_sum += map_from_camera.translation.vector;
         v.n += 1.0;
+        v.mean_rotation = project_rotation(&(v.rotation_sum / v.n));
         self.world_from_map = self.solve();
+        self.solved = true;
     }
 
     fn world_from_map(&self) -> Se3 {
@@ -346,10 +353,7 @@ impl Anchor {
         self.views
             .values()
             .filter(|v| v.n > 0.0)
-            .filter_map(|v| {
-                let r = project_rotation(&(v.rotation_sum / v.n))?;
-                Some((r, v.prior_center_sum / v.n, v.map_center_sum / v.n))
-            })
+            .filter_map(|v| Some((v.mean_rotation?, v.prior_center_sum / v.n, v.map_center_sum / v.n)))
             .collect()
     }
 
@@ -358,18 +362,23 @@ impl Anchor {
         if means.is_empty() {
             return Se3::identity();
         }
-        // Start: chordal mean of the view rotations, centroid of the view centres.
-        let mut rsum = Matrix3::zeros();
-        for (r, _, _) in &means {
-            rsum += r.to_rotation_matrix().matrix();
-        }
-        let Some(mut rot) = project_rotation(&rsum) else {
-            return Se3::identity();
+        // Start: the previous fit (one frame moves it little), else the chordal mean of the view
+        // rotations and the centroid of the view centres.
+        let (mut rot, mut t) = if self.solved {
+            (self.world_from_map.rotation, self.world_from_map.translation.vector)
+        } else {
+            let mut rsum = Matrix3::zeros();
+            for (r, _, _) in &means {
+                rsum += r.to_rotation_matrix().matrix();
+            }
+            let Some(rot) = project_rotation(&rsum) else {
+                return Se3::identity();
+            };
+            let n = means.len() as f64;
+            let cp: Vector3<f64> = means.iter().map(|m| m.1).sum::<Vector3<f64>>() / n;
+            let cm: Vector3<f64> = means.iter().map(|m| m.2).sum::<Vector3<f64>>() / n;
+            (rot, cp - rot * cm)
         };
-        let n = means.len() as f64;
-        let cp: Vector3<f64> = means.iter().map(|m| m.1).sum::<Vector3<f64>>() / n;
-        let cm: Vector3<f64> = means.iter().map(|m| m.2).sum::<Vector3<f64>>() / n;
-        let mut t = cp - rot * cm;
         // Gauss-Newton with Huber weights per view. Unknowns: δθ (left rotation increment), δt.
         // Residuals per view: e_t = c̄P − (R c̄M + t), e_r = log(R̄_v Rᵀ), whitened by σ_t, σ_r.
         for _ in 0..8 {
@@ -402,7 +411,7 @@ impl Anchor {
             // above linearises exp(δθ) R c̄M ≈ R c̄M + δθ × R c̄M).
             rot = dr * rot;
             t += dt;
-            if dth.norm() < 1e-10 && dt.norm() < 1e-10 {
+            if dth.norm() < 1e-9 && dt.norm() < 1e-9 {
                 break;
             }
         }
