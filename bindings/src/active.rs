@@ -10,7 +10,7 @@ use objslam_core::explore::{ExploreError, ObservedPoints, TableRect};
 use objslam_core::frame::GreyImage;
 use objslam_core::geometry::Se3;
 use objslam_core::map::EstimateStage;
-use objslam_core::pipeline::{ObjectPipeline, PipelineConfig, PipelineError};
+use objslam_core::pipeline::{MapPointObservation, ObjectPipeline, PipelineConfig, PipelineError};
 use objslam_core::slam::{ate_rmse_m, rpe, TrackInput, Tracker, TrackerConfig};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -111,6 +111,7 @@ impl ActiveMapperPy {
         let grey = grey.map(grey_image).transpose()?;
         let mut frame = frame_from_py(index, intrinsics, depth, world_from_camera, detections)?;
         let gt = world_from_camera_gt.map(|g| pose(g, "world_from_camera_gt")).transpose()?;
+        let mut map_points: Option<Vec<MapPointObservation>> = None;
         if let Some(tracker) = self.tracker.as_mut() {
             let g = grey.as_ref().ok_or_else(|| input_err("grey: required when a tracker is configured"))?;
             let out = tracker
@@ -124,12 +125,16 @@ impl ActiveMapperPy {
                 })
                 .map_err(input_err)?;
             frame.world_from_camera = out.world_from_camera;
+            map_points = Some(
+                out.observed.iter().map(|p| MapPointObservation { pixel: p.pixel, p_in_world: p.p_in_world }).collect(),
+            );
         }
         if let Some(g) = gt {
             self.poses_used.push(frame.world_from_camera);
             self.poses_true.push(g);
         }
-        let summary = self.mapper.update(&frame, grey.as_ref()).map_err(pipeline_err)?;
+        let summary =
+            self.mapper.update_with_map_points(&frame, grey.as_ref(), map_points.as_deref()).map_err(pipeline_err)?;
         let map = self.mapper.map();
         let observed: Vec<ObservedPoints> = summary
             .observed
@@ -207,8 +212,9 @@ impl ActiveMapperPy {
     }
 
     /// Pose accuracy over the frames given a true pose: {"ate_rmse_m", "rpe_trans_m",
-    /// "rpe_rot_deg", "lost_frames"} (ATE without alignment: both trajectories are in the robot
-    /// base frame); None without true poses.
+    /// "rpe_rot_deg", "lost_frames"} and, with a tracker, "ate_final_rmse_m",
+    /// "lost_frames_scene_hidden", "lost_by_reason" (ATE without alignment: both trajectories are
+    /// in the robot base frame); None without true poses.
     fn pose_metrics<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
         if self.poses_true.len() < 2 {
             return Ok(None);
@@ -220,7 +226,30 @@ impl ActiveMapperPy {
         out.set_item("rpe_trans_m", r.trans_m)?;
         out.set_item("rpe_rot_deg", r.rot_deg)?;
         out.set_item("lost_frames", self.tracker.as_ref().map_or(0, |t| t.n_lost()))?;
+        if let Some(t) = self.tracker.as_ref() {
+            // The SLAM's estimate of every frame's pose at the end of the run (re-expressed with
+            // the final world ← map gauge), absolute in the robot base frame like `ate_rmse_m`
+            // (which scores the pose each frame was mapped with, when it was tracked).
+            let traj = t.trajectory();
+            if traj.len() == self.poses_true.len() {
+                out.set_item("ate_final_rmse_m", ate_rmse_m(&traj, &self.poses_true).map_err(input_err)?)?;
+            }
+            out.set_item("lost_frames_scene_hidden", t.n_lost_scene_hidden())?;
+            let reasons = PyDict::new(py);
+            for (k, v) in t.lost_by_reason() {
+                reasons.set_item(*k, *v)?;
+            }
+            out.set_item("lost_by_reason", reasons)?;
+        }
         Ok(Some(out))
+    }
+
+    /// The SLAM map points in the world frame, (N, 3) float64; None without a tracker.
+    fn map_points<'py>(&self, py: Python<'py>) -> Option<Bound<'py, PyArray2<f64>>> {
+        let t = self.tracker.as_ref()?;
+        let pts = t.map_points_in_world();
+        let arr = numpy::ndarray::Array2::from_shape_fn((pts.len(), 3), |(r, c)| pts[r].1[c]);
+        Some(arr.to_pyarray(py))
     }
 
     /// Views taken after Init.

@@ -286,3 +286,95 @@ fn tracking_is_deterministic_and_the_tracker_is_send() {
     assert!(a.iter().all(|o| o.is_ok()));
     assert_eq!(a, b);
 }
+
+#[test]
+fn frames_that_hide_the_scene_keep_the_map_and_tracking_resumes() {
+    // 8 tracked frames, then 12 frames of another texture without depth (standing for the camera
+    // facing the robot's own links, whose pixels carry no depth), then the sequence again. The
+    // hidden frames are lost but do not count towards the map reset (reset_after_lost = 10): the
+    // map survives and the next frames track against it with the SLAM's accuracy.
+    let seq = sequence();
+    let cam = camera();
+    let noise = KinematicNoiseConfig::default();
+    let mut tracker = Tracker::new(TrackerConfig { kinematic_noise: noise, ..TrackerConfig::default() })
+        .unwrap_or_else(|e| panic!("{e}"));
+    let other = TabletopScene::tabletop(99);
+    let (hidden_grey, _) = other.render(&cam, &gt_pose(0));
+    let no_depth = DepthImage { width: 640, height: 480, data: vec![0.0; 640 * 480] };
+    let (mut est, mut truth) = (Vec::new(), Vec::new());
+    let track = |tracker: &mut Tracker, grey: &GreyImage, depth: &DepthImage, i: usize, view: u64| {
+        let gt = gt_pose(i);
+        let input = TrackInput {
+            grey,
+            depth,
+            camera: &cam,
+            world_from_camera_fk: gt,
+            view_index: view,
+            world_from_camera_gt: Some(gt),
+        };
+        tracker.track(&input).unwrap_or_else(|e| panic!("frame {i}: {e}"))
+    };
+    for i in 0..8 {
+        let (g, d) = &seq.frames[i];
+        assert!(track(&mut tracker, g, d, i, (i / FRAMES_PER_VIEW) as u64).is_ok());
+    }
+    let points_before = tracker.n_map_points();
+    for _ in 0..12 {
+        let out = track(&mut tracker, &hidden_grey, &no_depth, 8, 4);
+        assert!(matches!(out.state, TrackingState::Lost { .. }), "{:?}", out.state);
+    }
+    assert_eq!(tracker.n_lost(), 12);
+    assert_eq!(tracker.n_lost_scene_hidden(), 12);
+    assert!(tracker.n_map_points() >= points_before, "map was reset");
+    for i in 8..N_FRAMES {
+        let (g, d) = &seq.frames[i];
+        let out = track(&mut tracker, g, d, i, (i / FRAMES_PER_VIEW) as u64);
+        assert!(out.is_ok(), "frame {i}: {:?}", out.state);
+        est.push(out.world_from_camera);
+        truth.push(seq.gt[i]);
+    }
+    let ate = ate_rmse_m(&est, &truth).unwrap_or_else(|e| panic!("{e}"));
+    eprintln!("ATE after the hidden stretch {ate:.4} m");
+    assert!(ate < 0.005, "ATE {ate}");
+}
+
+#[test]
+fn a_pose_far_from_the_prior_is_rejected() {
+    // Exact priors (no noise): the gate is 3 x 2 mm. A prior shifted by 2 cm while the images
+    // show the true pose: the visual pose agrees with the map, not with the prior, and is
+    // rejected as a false consensus; a 3 mm shift passes.
+    let seq = sequence();
+    let cam = camera();
+    let cfg = TrackerConfig { kinematic_noise: KinematicNoiseConfig::none(), ..TrackerConfig::default() };
+    let mut tracker = Tracker::new(cfg).unwrap_or_else(|e| panic!("{e}"));
+    for i in 0..6 {
+        let (g, d) = &seq.frames[i];
+        let shift = match i {
+            4 => 0.003,
+            5 => 0.02,
+            _ => 0.0,
+        };
+        let input = TrackInput {
+            grey: g,
+            depth: d,
+            camera: &cam,
+            world_from_camera_fk: seq.gt[i] * Se3::translation(shift, 0.0, 0.0),
+            view_index: 0,
+            world_from_camera_gt: Some(seq.gt[i]),
+        };
+        let out = tracker.track(&input).unwrap_or_else(|e| panic!("{e}"));
+        if i == 5 {
+            assert!(
+                matches!(
+                    out.state,
+                    TrackingState::Lost { reason: LostReason::PriorDisagreement { trans_mm: 15..=25, .. } }
+                ),
+                "{:?}",
+                out.state
+            );
+        } else {
+            assert!(out.is_ok(), "frame {i}: {:?}", out.state);
+        }
+    }
+    assert_eq!(tracker.lost_by_reason().get("prior_disagreement"), Some(&1));
+}

@@ -117,6 +117,9 @@ class RecordConfig:
     points and line-frame window (the parameterization's inputs) plus the ground-truth objects
     (for evaluation only), for offline replay with ``cargo run --release -p objslam-core
     --example param_replay``."""
+    map_points: bool = True
+    """Log the SLAM map points (``world/map/points``, world frame) every ``every_n_frames`` frames
+    (pose sources other than ``fk``, which has no tracker)."""
 
 
 @dataclass(frozen=True)
@@ -146,6 +149,10 @@ class RunConfig:
     calibration error; the foundation's behaviour), ``kinematics`` (forward kinematics with the
     calibration-error model of ``[pose_noise]``), ``slam`` (visual tracking seeded by that noisy
     prior), ``ground_truth`` (oracle)."""
+    object_points: str = "depth"
+    """Local object point clouds for the association: ``depth`` (depth pixels in each box) or
+    ``slam_map`` (the SLAM map points observed in each box, the paper's Sec. III-B; needs a
+    pose source other than ``fk``, which runs no tracker)."""
     consolidate: bool = True
     """Beyond the paper: fold same-label objects whose boxes overlap into one after each view (the
     statistical tests split objects seen from very different viewpoints). False = the paper's
@@ -187,6 +194,12 @@ class RunConfig:
             raise ConfigError("consolidate_cloud_overlap: must be > 0 (above 1 disables the test)")
         if self.relabel_vote_ratio < 0.0:
             raise ConfigError("relabel_vote_ratio: must be ≥ 0 (0 disables the label-confusion fold)")
+        if self.object_points not in OBJECT_POINT_SOURCES:
+            raise ConfigError(
+                f"object_points: unknown {self.object_points!r}; known: {', '.join(OBJECT_POINT_SOURCES)}"
+            )
+        if self.object_points == "slam_map" and self.pose_source == "fk":
+            raise ConfigError("object_points: slam_map needs a tracker (pose_source kinematics, slam or ground_truth)")
         if self.min_observations < 1:
             raise ConfigError("min_observations: must be ≥ 1")
         if self.explore.max_views < 0:
@@ -201,6 +214,7 @@ class RunConfig:
 
 
 POSE_SOURCES = ("fk", "kinematics", "slam", "ground_truth")
+OBJECT_POINT_SOURCES = ("depth", "slam_map")
 ASSOCIATION_MODES = ("naive", "iou", "iou_np", "iou_t", "ensemble")
 STRATEGIES = ("init", "object-driven", "random", "coverage", "expected-gain")
 

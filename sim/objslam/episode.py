@@ -47,6 +47,7 @@ class EpisodeResult:
 
 
 #: Grid cell colours by state: unknown grey, free green, occupied red.
+MAP_POINT_COLOR = np.array([240, 200, 40], dtype=np.uint8)
 GRID_COLORS = np.array([[150, 150, 150], [60, 200, 60], [220, 50, 50]], dtype=np.uint8)
 
 
@@ -162,6 +163,8 @@ def run_episode(cfg: RunConfig, *, progress: bool = True, on_frame: Callable[[Se
                     "consolidate_cloud_overlap": cfg.consolidate_cloud_overlap,
                     "relabel_vote_ratio": cfg.relabel_vote_ratio,
                     "min_observations": cfg.min_observations,
+                    # Only when not the default, so a core built before the option still loads.
+                    **({"object_points": cfg.object_points} if cfg.object_points != "depth" else {}),
                     "naive": to_dict(cfg.naive),
                     "param": {
                         "refine": {
@@ -223,6 +226,10 @@ def run_episode(cfg: RunConfig, *, progress: bool = True, on_frame: Callable[[Se
                 if cfg.record.depth:
                     rec.log_depth(frame.depth_m)
             rec.log_detections([d.as_tuple() for d in dets])
+            if cfg.record.map_points and frame.index % cfg.record.every_n_frames == 0:
+                pts = mapper.map_points()
+                if pts is not None and len(pts):
+                    rec.log_colored_points("world/map/points", pts, np.tile(MAP_POINT_COLOR, (len(pts), 1)), 0.002)
             rec.log_trajectory("estimated", np.array(est_positions))
             rec.log_trajectory("ground_truth", np.array(gt_positions))
             rec.log_objects("world/map", mapper.objects_json())

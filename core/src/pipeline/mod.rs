@@ -21,7 +21,7 @@ use nalgebra::Point3;
 use serde::{Deserialize, Serialize};
 
 use crate::association::mapper::{local_objects_from_frame, LocalCloudConfig};
-use crate::association::{AssociationConfig, AssociationError, AssociationMode, Associator, GlobalObject};
+use crate::association::{AssociationConfig, AssociationError, AssociationMode, Associator, GlobalObject, LocalObject};
 use crate::frame::{Frame, FrameError, GreyImage};
 use crate::geometry::{se3_from_yaw, ObjectGeometry};
 use crate::map::{EstimateStage, MapObject, ObjectMap};
@@ -71,6 +71,11 @@ pub struct PipelineConfig {
     pub association: AssociationConfig,
     /// Local clouds from depth (ensemble modes).
     pub local: LocalCloudConfig,
+    /// Where the local object point clouds of the ensemble modes come from: `depth` (default:
+    /// every `local.pixel_stride`-th depth pixel in the box) or `slam_map` (the paper's Sec.
+    /// III-B: the SLAM map points observed inside the box, given by
+    /// [`ObjectPipeline::update_with_map_points`]; sparse, a few to a few hundred per box).
+    pub object_points: ObjectPointSource,
     /// Parameterization settings.
     pub param: ParamConfig,
     /// Line segment detector settings.
@@ -118,6 +123,7 @@ impl Default for PipelineConfig {
             naive: NaiveConfig::default(),
             association: AssociationConfig::default(),
             local: LocalCloudConfig::default(),
+            object_points: ObjectPointSource::Depth,
             param: ParamConfig::default(),
             lsd: LsdConfig::default(),
             segment_box_margin_px: 4.0,
@@ -131,6 +137,63 @@ impl Default for PipelineConfig {
             min_observations: 3,
         }
     }
+}
+
+/// Source of the local object point clouds ([`PipelineConfig::object_points`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ObjectPointSource {
+    /// Depth pixels inside the box.
+    #[default]
+    Depth,
+    /// SLAM map points observed inside the box (falls back to depth when none are given).
+    SlamMap,
+}
+
+/// A SLAM map point observed in the current frame: its pixel and its world position
+/// (from [`crate::slam::TrackOutput::observed`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MapPointObservation {
+    /// Pixel of the observing keypoint.
+    pub pixel: [f64; 2],
+    /// World position, metres.
+    pub p_in_world: Point3<f64>,
+}
+
+/// Local objects from SLAM map points: per detection, the observed map points whose pixel lies
+/// in the box, with the same background gate as the depth clouds (camera-frame depth within
+/// `depth_gate_m` of the box's median point depth), range and height filters.
+fn local_objects_from_map_points(
+    frame: &Frame,
+    points: &[MapPointObservation],
+    config: &LocalCloudConfig,
+) -> Vec<LocalObject> {
+    let camera_from_world = frame.world_from_camera.inverse();
+    frame
+        .detections
+        .iter()
+        .map(|det| {
+            let inside: Vec<(Point3<f64>, f64)> = points
+                .iter()
+                .filter(|p| det.bbox.contains(p.pixel[0], p.pixel[1]))
+                .filter(|p| p.p_in_world.coords.iter().all(|v| v.is_finite()))
+                .map(|p| (p.p_in_world, (camera_from_world * p.p_in_world).z))
+                .filter(|(_, z)| *z > 0.0 && *z <= config.max_depth_m)
+                .collect();
+            let mut zs: Vec<f64> = inside.iter().map(|(_, z)| *z).collect();
+            zs.sort_by(f64::total_cmp);
+            let median = zs.get(zs.len() / 2).copied();
+            let points_in_world = inside
+                .iter()
+                .filter(|(_, z)| {
+                    !config.depth_gate_m.is_finite() || median.is_none_or(|m| (z - m).abs() <= config.depth_gate_m)
+                })
+                .map(|(p, _)| *p)
+                .filter(|p| p.z > config.min_height_m)
+                .collect();
+            LocalObject { detection: *det, points_in_world }
+        })
+        .collect()
 }
 
 /// What one frame did.
@@ -222,6 +285,18 @@ impl ObjectPipeline {
     /// Fuse one frame. `grey` is needed for line segments (parameterization); without it the
     /// estimates stop at the iForest stage. An invalid frame changes nothing.
     pub fn update(&mut self, frame: &Frame, grey: Option<&GreyImage>) -> Result<PipelineUpdate, PipelineError> {
+        self.update_with_map_points(frame, grey, None)
+    }
+
+    /// [`Self::update`] with this frame's observed SLAM map points; with
+    /// [`PipelineConfig::object_points`] = `slam_map` the ensemble modes build their local object
+    /// clouds from them (the naive mode always uses depth).
+    pub fn update_with_map_points(
+        &mut self,
+        frame: &Frame,
+        grey: Option<&GreyImage>,
+        map_points: Option<&[MapPointObservation]>,
+    ) -> Result<PipelineUpdate, PipelineError> {
         frame.validate()?;
         if let Some(g) = grey {
             if g.width != frame.camera.width || g.height != frame.camera.height {
@@ -241,7 +316,12 @@ impl ObjectPipeline {
                 out.observed = s.observed;
             }
             Mapper::Ensemble(a) => {
-                let locals = local_objects_from_frame(frame, &self.config.local);
+                let locals = match (self.config.object_points, map_points) {
+                    (ObjectPointSource::SlamMap, Some(points)) => {
+                        local_objects_from_map_points(frame, points, &self.config.local)
+                    }
+                    _ => local_objects_from_frame(frame, &self.config.local),
+                };
                 let fa = a.associate_frame(frame.index, &frame.camera, &frame.world_from_camera, &locals)?;
                 for m in &fa.merges {
                     self.merged_into.insert(m.removed_id, m.kept_id);
@@ -619,6 +699,47 @@ mod tests {
             let raw = p.stage_map(EstimateStage::Raw);
             assert_eq!(raw.len(), 1);
         }
+    }
+
+    #[test]
+    fn slam_map_points_in_the_box_are_the_local_object() {
+        // 7 x 7 map points on the block top (z = 0.1) and 10 on the table (z = 0) inside the box:
+        // the local cloud is exactly the block-top points (the table ones fail the height filter).
+        let cfg = PipelineConfig { object_points: ObjectPointSource::SlamMap, ..PipelineConfig::default() };
+        let mut p = ObjectPipeline::new(cfg).unwrap_or_else(|e| panic!("{e}"));
+        for (i, x) in [0.0, 0.005, 0.01, 0.015].iter().enumerate() {
+            let f = frame(i as u32, *x);
+            let camera_from_world = f.world_from_camera.inverse();
+            let mut pts = Vec::new();
+            for a in 0..7 {
+                for b in 0..7 {
+                    let w = Point3::new(-0.042 + 0.014 * f64::from(a), -0.042 + 0.014 * f64::from(b), 0.1);
+                    if let Some(uv) = f.camera.project(&(camera_from_world * w)) {
+                        pts.push(MapPointObservation { pixel: uv, p_in_world: w });
+                    }
+                }
+            }
+            let n_top = pts.len();
+            assert_eq!(n_top, 49);
+            for k in 0..10 {
+                let w = Point3::new(-0.04 + 0.008 * f64::from(k), 0.0, 0.0);
+                let uv = [f.detections[0].bbox.min[0] + 2.0 + f64::from(k), f.detections[0].bbox.min[1] + 2.0];
+                pts.push(MapPointObservation { pixel: uv, p_in_world: w });
+            }
+            let up = p.update_with_map_points(&f, None, Some(&pts)).unwrap_or_else(|e| panic!("{e}"));
+            let id = up.assigned[0].unwrap_or_else(|| panic!("frame {i} unassigned"));
+            let obs = up.observed.get(&id).map_or(0, Vec::len);
+            assert_eq!(obs, n_top, "frame {i}");
+        }
+        p.refresh_estimates();
+        let map = p.map();
+        assert_eq!(map.len(), 1);
+        let g = map.objects[0].geometry();
+        assert!(g.center.x.abs() < 0.01 && g.center.y.abs() < 0.01, "{:?}", g.center);
+        // Without map points the slam_map option falls back to the depth cloud.
+        let up = p.update_with_map_points(&frame(4, 0.02), None, None).unwrap_or_else(|e| panic!("{e}"));
+        let id = up.assigned[0].unwrap_or_else(|| panic!("unassigned"));
+        assert!(up.observed.get(&id).map_or(0, Vec::len) > 49);
     }
 
     #[test]

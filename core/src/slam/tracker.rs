@@ -84,11 +84,25 @@ pub struct TrackerConfig {
     /// after its creation (ORB-SLAM2: 2; 0 disables).
     pub cull_after_keyframes: usize,
     /// Express the SLAM map in the world by the rigid transform that best explains all kinematic
-    /// priors so far (rotation: chordal mean; translation: centroid of camera centres), so that
-    /// per-view biases average out. If false, the map frame is the first frame's prior.
+    /// priors so far, so that per-view biases average out: one residual per view (the view's mean
+    /// prior camera centre and rotation against the SLAM's), whitened by the stated noise of
+    /// [`Self::kinematic_noise`] and Huber-weighted ([`Self::anchor_huber`]), solved by
+    /// Gauss-Newton from the chordal mean. If false, the map frame is the first frame's prior.
     pub anchor_to_prior_mean: bool,
-    /// After this many consecutive lost frames the map is dropped and re-initialised from the
-    /// prior.
+    /// Huber width of the gauge fit, on a view's whitened 6-DoF residual norm (a view whose
+    /// SLAM poses disagree with its prior by more than the stated noise counts less; a typical
+    /// view has norm ≈ √6 ≈ 2.45).
+    pub anchor_huber: f64,
+    /// Reject a tracked pose whose world pose differs from the kinematic prior by more than this
+    /// many times the prior's stated size (translation: bias + 3 jitter sigmas, at least 2 mm;
+    /// rotation: likewise, at least 0.2°): the prior is never that far off, so such a pose is a
+    /// false consensus; the frame is lost instead of corrupting the map. 0 disables.
+    pub prior_gate_sigmas: f64,
+    /// After this many consecutive lost frames *that show the scene* (at least
+    /// [`Self::min_init_points`] keypoints with depth, yet no pose consensus: the map is likely
+    /// wrong) the map is dropped and re-initialised from the prior. Frames that show too little of
+    /// the scene (e.g. the camera facing the robot's own links, whose pixels have no depth) are
+    /// lost but keep the map, so tracking resumes against it when the scene reappears.
     pub reset_after_lost: usize,
 }
 
@@ -118,7 +132,9 @@ impl Default for TrackerConfig {
             cull_min_visible: 4,
             cull_after_keyframes: 3,
             anchor_to_prior_mean: true,
-            reset_after_lost: 5,
+            anchor_huber: 3.5,
+            prior_gate_sigmas: 3.0,
+            reset_after_lost: 10,
         }
     }
 }
@@ -164,6 +180,15 @@ pub enum LostReason {
         inliers: usize,
         /// Needed.
         required: usize,
+    },
+    /// A pose was found but disagrees with the kinematic prior by more than
+    /// [`TrackerConfig::prior_gate_sigmas`] times its stated noise (a false consensus, e.g. on
+    /// repeated texture or on a wrongly placed part of the map).
+    PriorDisagreement {
+        /// Translation difference to the prior, millimetres (rounded).
+        trans_mm: u32,
+        /// Rotation difference to the prior, centidegrees (rounded).
+        rot_cdeg: u32,
     },
 }
 
@@ -259,48 +284,149 @@ struct FrameRecord {
     world_from_camera: Se3,
 }
 
-/// Running sums for the world ← map anchor (see [`TrackerConfig::anchor_to_prior_mean`]).
+/// Per-view running sums of the world ← map gauge (see [`TrackerConfig::anchor_to_prior_mean`]).
 #[derive(Debug, Clone, Copy)]
-struct Anchor {
+struct ViewSums {
+    /// Σ R(prior_i) R(map_from_camera_i)ᵀ over the view's tracked frames.
     rotation_sum: Matrix3<f64>,
+    /// Σ prior camera centres.
     prior_center_sum: Vector3<f64>,
+    /// Σ SLAM (map-frame) camera centres.
     map_center_sum: Vector3<f64>,
     n: f64,
+    /// The rotation closest to `rotation_sum / n` (updated on add).
+    mean_rotation: Option<UnitQuaternion<f64>>,
+}
+
+/// The world ← map gauge: a weighted robust least-squares fit of one rigid transform to every
+/// view's mean kinematic prior (one term per view, since the bias is per view).
+#[derive(Debug, Clone)]
+struct Anchor {
+    views: BTreeMap<u64, ViewSums>,
+    /// Per-axis standard deviation of a view's mean camera-centre prior, metres.
+    sigma_t: f64,
+    /// Per-axis standard deviation of a view's mean rotation prior, radians.
+    sigma_r: f64,
+    /// Huber width on a view's whitened 6-DoF residual norm.
+    huber: f64,
+    /// Cached estimate (also the warm start of the next fit).
+    world_from_map: Se3,
+    /// Whether `world_from_map` holds a fit.
+    solved: bool,
 }
 
 impl Anchor {
-    fn new() -> Self {
-        Self {
+    fn new(noise: &KinematicNoiseConfig, huber: f64) -> Self {
+        // A view's mean prior is off by the view's bias (uniform direction, fixed size: per-axis
+        // variance size² / 3) plus averaged jitter; the floor keeps the weights finite.
+        let sigma_t = (noise.bias_trans_m.powi(2) / 3.0 + noise.jitter_trans_m.powi(2)).sqrt().max(1e-5);
+        let sigma_r = (noise.bias_rot_deg.to_radians().powi(2) / 3.0 + noise.jitter_rot_deg.to_radians().powi(2))
+            .sqrt()
+            .max(1e-5);
+        Self { views: BTreeMap::new(), sigma_t, sigma_r, huber, world_from_map: Se3::identity(), solved: false }
+    }
+
+    fn add(&mut self, world_from_camera_prior: &Se3, map_from_camera: &Se3, view_index: u64) {
+        let d = world_from_camera_prior.rotation * map_from_camera.rotation.inverse();
+        let v = self.views.entry(view_index).or_insert(ViewSums {
             rotation_sum: Matrix3::zeros(),
             prior_center_sum: Vector3::zeros(),
             map_center_sum: Vector3::zeros(),
             n: 0.0,
-        }
-    }
-
-    fn add(&mut self, world_from_camera_prior: &Se3, map_from_camera: &Se3) {
-        let d = world_from_camera_prior * map_from_camera.inverse();
-        self.rotation_sum += d.rotation.to_rotation_matrix().matrix();
-        self.prior_center_sum += world_from_camera_prior.translation.vector;
-        self.map_center_sum += map_from_camera.translation.vector;
-        self.n += 1.0;
+            mean_rotation: None,
+        });
+        v.rotation_sum += d.to_rotation_matrix().matrix();
+        v.prior_center_sum += world_from_camera_prior.translation.vector;
+        v.map_center_sum += map_from_camera.translation.vector;
+        v.n += 1.0;
+        v.mean_rotation = project_rotation(&(v.rotation_sum / v.n));
+        self.world_from_map = self.solve();
+        self.solved = true;
     }
 
     fn world_from_map(&self) -> Se3 {
-        if self.n < 1.0 {
+        self.world_from_map
+    }
+
+    /// Per view: (mean rotation residual target R̄_v, mean prior centre, mean map centre).
+    fn view_means(&self) -> Vec<(UnitQuaternion<f64>, Vector3<f64>, Vector3<f64>)> {
+        self.views
+            .values()
+            .filter(|v| v.n > 0.0)
+            .filter_map(|v| Some((v.mean_rotation?, v.prior_center_sum / v.n, v.map_center_sum / v.n)))
+            .collect()
+    }
+
+    fn solve(&self) -> Se3 {
+        let means = self.view_means();
+        if means.is_empty() {
             return Se3::identity();
         }
-        let svd = self.rotation_sum.svd(true, true);
-        let (Some(u), Some(v_t)) = (svd.u, svd.v_t) else {
-            return Se3::identity();
+        // Start: the previous fit (one frame moves it little), else the chordal mean of the view
+        // rotations and the centroid of the view centres.
+        let (mut rot, mut t) = if self.solved {
+            (self.world_from_map.rotation, self.world_from_map.translation.vector)
+        } else {
+            let mut rsum = Matrix3::zeros();
+            for (r, _, _) in &means {
+                rsum += r.to_rotation_matrix().matrix();
+            }
+            let Some(rot) = project_rotation(&rsum) else {
+                return Se3::identity();
+            };
+            let n = means.len() as f64;
+            let cp: Vector3<f64> = means.iter().map(|m| m.1).sum::<Vector3<f64>>() / n;
+            let cm: Vector3<f64> = means.iter().map(|m| m.2).sum::<Vector3<f64>>() / n;
+            (rot, cp - rot * cm)
         };
-        let mut fix = Matrix3::identity();
-        fix[(2, 2)] = (u * v_t).determinant().signum();
-        let r = u * fix * v_t;
-        let rot = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(r));
-        let t = self.prior_center_sum / self.n - rot * (self.map_center_sum / self.n);
+        // Gauss-Newton with Huber weights per view. Unknowns: δθ (left rotation increment), δt.
+        // Residuals per view: e_t = c̄P − (R c̄M + t), e_r = log(R̄_v Rᵀ), whitened by σ_t, σ_r.
+        for _ in 0..8 {
+            let mut h = nalgebra::Matrix6::<f64>::zeros();
+            let mut b = nalgebra::Vector6::<f64>::zeros();
+            for (rv, pc, mc) in &means {
+                let rm = rot * mc;
+                let et = (pc - rm - t) / self.sigma_t;
+                let er = (rv * rot.inverse()).scaled_axis() / self.sigma_r;
+                let norm = (et.norm_squared() + er.norm_squared()).sqrt();
+                let w = if norm <= self.huber { 1.0 } else { self.huber / norm };
+                // d e_t / d δθ = [R c̄M]ₓ / σ_t, d e_t / d δt = −I / σ_t; d e_r / d δθ ≈ −I / σ_r.
+                let mut j = nalgebra::Matrix6::<f64>::zeros();
+                j.fixed_view_mut::<3, 3>(0, 0).copy_from(&(rm.cross_matrix() / self.sigma_t));
+                j.fixed_view_mut::<3, 3>(0, 3).copy_from(&(-Matrix3::identity() / self.sigma_t));
+                j.fixed_view_mut::<3, 3>(3, 0).copy_from(&(-Matrix3::identity() / self.sigma_r));
+                let mut e = nalgebra::Vector6::<f64>::zeros();
+                e.fixed_rows_mut::<3>(0).copy_from(&et);
+                e.fixed_rows_mut::<3>(3).copy_from(&er);
+                h += j.transpose() * j * w;
+                b -= j.transpose() * e * w;
+            }
+            let Some(dx) = h.cholesky().map(|c| c.solve(&b)) else {
+                break;
+            };
+            let dth = Vector3::new(dx[0], dx[1], dx[2]);
+            let dt = Vector3::new(dx[3], dx[4], dx[5]);
+            let dr = UnitQuaternion::from_scaled_axis(dth);
+            // Left increment of the rotation: R ← exp(δθ) R, t ← t + δt (the residual model
+            // above linearises exp(δθ) R c̄M ≈ R c̄M + δθ × R c̄M).
+            rot = dr * rot;
+            t += dt;
+            if dth.norm() < 1e-9 && dt.norm() < 1e-9 {
+                break;
+            }
+        }
         Se3::from_parts(Translation3::from(t), rot)
     }
+}
+
+/// The rotation closest (Frobenius) to a 3x3 matrix, or None if it is degenerate.
+fn project_rotation(m: &Matrix3<f64>) -> Option<UnitQuaternion<f64>> {
+    let svd = m.svd(true, true);
+    let (u, v_t) = (svd.u?, svd.v_t?);
+    let mut fix = Matrix3::identity();
+    fix[(2, 2)] = (u * v_t).determinant().signum();
+    let r = u * fix * v_t;
+    Some(UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(r)))
 }
 
 /// Per-frame working data.
@@ -328,11 +454,16 @@ pub struct Tracker {
     frame_index: u64,
     epoch: u32,
     anchor: Anchor,
-    last: Option<(Se3, Se3)>,
+    /// Last tracked frame: map ← camera, its prior, its view index.
+    last: Option<(Se3, Se3, u64)>,
     frames_since_keyframe: usize,
     last_keyframe_tracked: usize,
     lost_streak: usize,
     n_lost: usize,
+    /// Lost frames that showed too little of the scene (see [`TrackerConfig::reset_after_lost`]).
+    n_lost_hidden: usize,
+    /// Lost frames by reason (`too_few_features`, `no_depth`, `too_few_inliers`, `prior_disagreement`).
+    lost_by_reason: BTreeMap<&'static str, usize>,
     records: Vec<FrameRecord>,
 }
 
@@ -343,7 +474,14 @@ impl Tracker {
             ("min_depth_m", config.min_depth_m),
             ("coarse_radius_px", config.coarse_radius_px),
             ("fine_radius_px", config.fine_radius_px),
+            ("anchor_huber", config.anchor_huber),
         ];
+        if !(config.prior_gate_sigmas.is_finite() && config.prior_gate_sigmas >= 0.0) {
+            return Err(SlamError::Config {
+                field: "prior_gate_sigmas",
+                reason: format!("{} must be finite and ≥ 0", config.prior_gate_sigmas),
+            });
+        }
         for (field, v) in positive {
             if !(v.is_finite() && v > 0.0) {
                 return Err(SlamError::Config { field, reason: format!("{v} must be finite and > 0") });
@@ -377,12 +515,14 @@ impl Tracker {
             next_point_id: 0,
             frame_index: 0,
             epoch: 0,
-            anchor: Anchor::new(),
+            anchor: Anchor::new(&config.kinematic_noise, config.anchor_huber),
             last: None,
             frames_since_keyframe: 0,
             last_keyframe_tracked: 0,
             lost_streak: 0,
             n_lost: 0,
+            n_lost_hidden: 0,
+            lost_by_reason: BTreeMap::new(),
             records: Vec::new(),
         })
     }
@@ -405,6 +545,19 @@ impl Tracker {
     /// Number of lost frames so far.
     pub fn n_lost(&self) -> usize {
         self.n_lost
+    }
+
+    /// Lost frames that showed too little of the scene to track (fewer than
+    /// [`TrackerConfig::min_init_points`] keypoints with depth: e.g. the camera facing the robot's
+    /// own links, whose pixels carry no depth). A subset of [`Self::n_lost`].
+    pub fn n_lost_scene_hidden(&self) -> usize {
+        self.n_lost_hidden
+    }
+
+    /// Lost frames by reason: `too_few_features`, `no_depth`, `too_few_inliers`,
+    /// `prior_disagreement`.
+    pub fn lost_by_reason(&self) -> &BTreeMap<&'static str, usize> {
+        &self.lost_by_reason
     }
 
     /// The current world ← map transform (identity for non-`slam` sources).
@@ -494,7 +647,7 @@ impl Tracker {
             Ok((map_from_camera, matches, n_inliers)) => {
                 self.lost_streak = 0;
                 if self.config.pose_source == PoseSource::Slam {
-                    self.anchor.add(&prior, &map_from_camera);
+                    self.anchor.add(&prior, &map_from_camera, input.view_index);
                 }
                 let (map_from_camera, observed_ids, kf) =
                     self.after_tracking(&frame, camera, map_from_camera, &matches);
@@ -514,7 +667,7 @@ impl Tracker {
                         })
                     })
                     .collect();
-                self.last = Some((map_from_camera, prior));
+                self.last = Some((map_from_camera, prior, input.view_index));
                 self.records.push(FrameRecord {
                     epoch: self.epoch,
                     map_from_camera: Some(map_from_camera),
@@ -523,9 +676,31 @@ impl Tracker {
             }
             Err(reason) => {
                 self.n_lost += 1;
-                self.lost_streak += 1;
+                let shows_scene = frame.depth_m.iter().flatten().count() >= self.config.min_init_points;
+                if shows_scene {
+                    self.lost_streak += 1;
+                } else {
+                    self.n_lost_hidden += 1;
+                }
+                let key = match reason {
+                    LostReason::TooFewFeatures { .. } => "too_few_features",
+                    LostReason::NoDepth { .. } => "no_depth",
+                    LostReason::TooFewInliers { .. } => "too_few_inliers",
+                    LostReason::PriorDisagreement { .. } => "prior_disagreement",
+                };
+                *self.lost_by_reason.entry(key).or_insert(0) += 1;
                 out.state = TrackingState::Lost { reason };
                 out.world_from_camera = known.unwrap_or(prior);
+                // Within the view of the last tracked frame the prior's bias is constant, so the
+                // prior's motion since then carries the SLAM pose forward (dead reckoning; only
+                // the jitter accumulates). Across views the bias changes: the prior itself.
+                if let (PoseSource::Slam, Some((last_map, last_prior, last_view))) =
+                    (self.config.pose_source, self.last)
+                {
+                    if last_view == input.view_index {
+                        out.world_from_camera = self.world_from_map() * last_map * (last_prior.inverse() * prior);
+                    }
+                }
                 if self.lost_streak >= self.config.reset_after_lost.max(1)
                     && self.config.pose_source == PoseSource::Slam
                 {
@@ -545,7 +720,7 @@ impl Tracker {
     fn reset_map(&mut self) {
         self.points.clear();
         self.keyframes.clear();
-        self.anchor = Anchor::new();
+        self.anchor = Anchor::new(&self.config.kinematic_noise, self.config.anchor_huber);
         self.last = None;
         self.epoch += 1;
         self.lost_streak = 0;
@@ -585,18 +760,43 @@ impl Tracker {
             return Ok((anchored, Vec::new(), 0));
         }
         let mut seeds = Vec::with_capacity(2);
-        if let Some((last_map_from_camera, last_prior)) = self.last {
+        if let Some((last_map_from_camera, last_prior, _)) = self.last {
             seeds.push(last_map_from_camera * (last_prior.inverse() * prior));
         }
         seeds.push(anchored);
         let mut best_inliers = 0;
+        let mut disagreement = None;
         for seed in seeds {
             match self.estimate_from_seed(frame, camera, &seed) {
-                Ok(r) => return Ok(r),
+                Ok(r) => match self.prior_disagreement(&r.0, &anchored) {
+                    None => return Ok(r),
+                    Some(d) => disagreement = Some(d),
+                },
                 Err(n) => best_inliers = best_inliers.max(n),
             }
         }
+        if let Some(d) = disagreement {
+            return Err(d);
+        }
         Err(LostReason::TooFewInliers { inliers: best_inliers, required: self.config.min_tracked_inliers })
+    }
+
+    /// `Some(reason)` if `map_from_camera` is implausibly far from the prior (both in the map
+    /// frame) by [`TrackerConfig::prior_gate_sigmas`].
+    fn prior_disagreement(&self, map_from_camera: &Se3, prior_in_map: &Se3) -> Option<LostReason> {
+        let k = self.config.prior_gate_sigmas;
+        if k <= 0.0 {
+            return None;
+        }
+        let n = &self.config.kinematic_noise;
+        let gate_t = k * (n.bias_trans_m + 3.0 * n.jitter_trans_m).max(0.002);
+        let gate_r = k * (n.bias_rot_deg + 3.0 * n.jitter_rot_deg).max(0.2);
+        let dt = (map_from_camera.translation.vector - prior_in_map.translation.vector).norm();
+        let dr = (map_from_camera.rotation.inverse() * prior_in_map.rotation).angle().to_degrees();
+        (dt > gate_t || dr > gate_r).then(|| LostReason::PriorDisagreement {
+            trans_mm: (dt * 1e3).round().min(f64::from(u32::MAX)) as u32,
+            rot_cdeg: (dr * 100.0).round().min(f64::from(u32::MAX)) as u32,
+        })
     }
 
     /// Coarse projection search + RANSAC, then fine search + robust refinement. `Err(inliers)`.
@@ -970,4 +1170,71 @@ fn validate(input: &TrackInput<'_>) -> Result<(), SlamError> {
         }
     }
     check_pose(&input.world_from_camera_fk, "world_from_camera_fk")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::se3_from_yaw;
+
+    /// A perfectly consistent SLAM map (`map_from_camera = map_from_world · gt`) seen through
+    /// per-view biased priors, views with very unequal frame counts.
+    fn fit(n_views: u64, outlier: Option<u64>) -> (Se3, Se3, Vec<(Se3, u64)>) {
+        let noise = KinematicNoiseConfig::default(); // 1 cm / 1° per view
+        let mut anchor = Anchor::new(&noise, TrackerConfig::default().anchor_huber);
+        let map_from_world = se3_from_yaw(Vector3::new(0.3, -0.2, 0.1), 0.7);
+        let mut frames = Vec::new();
+        for v in 0..n_views {
+            // Views of 1..=25 frames on an arc over the table.
+            for f in 0..(1 + (v * 7) % 25) {
+                let a = 0.3 * v as f64 + 0.01 * f as f64;
+                let eye = nalgebra::Point3::new(0.45 + 0.25 * a.cos(), 0.25 * a.sin(), 0.4 + 0.05 * (a * 3.0).sin());
+                let gt = super::super::synthetic::look_at(eye, nalgebra::Point3::new(0.5, 0.0, 0.0));
+                let mut prior = noise.perturb(&gt, v, v * 100 + f);
+                if outlier == Some(v) {
+                    // A view whose SLAM poses are 8 cm off its prior (e.g. a bad re-localisation).
+                    prior = Se3::translation(0.08, 0.0, 0.0) * prior;
+                }
+                anchor.add(&prior, &(map_from_world * gt), v);
+                frames.push((gt, v));
+            }
+        }
+        (anchor.world_from_map(), map_from_world.inverse(), frames)
+    }
+
+    /// ATE of the camera centres expressed with the estimated world ← map.
+    fn ate(est: &Se3, frames: &[(Se3, u64)], map_from_world: &Se3) -> f64 {
+        let s: f64 = frames
+            .iter()
+            .map(|(gt, _)| ((est * map_from_world * gt).translation.vector - gt.translation.vector).norm_squared())
+            .sum();
+        (s / frames.len() as f64).sqrt()
+    }
+
+    #[test]
+    fn the_gauge_averages_per_view_biases_below_the_bias() {
+        for n_views in [4u64, 9, 16] {
+            let (est, truth, frames) = fit(n_views, None);
+            let map_from_world = truth.inverse();
+            let e = ate(&est, &frames, &map_from_world);
+            // Independent 1 cm biases: the mean of n views is off by ≈ 1 cm / √n (RMS); allow 2x.
+            let bound = 0.01 * 2.0 / (n_views as f64).sqrt();
+            eprintln!("{n_views} views: ATE {:.2} mm (bound {:.2} mm)", e * 1e3, bound * 1e3);
+            assert!(e < bound.min(0.008), "{n_views} views: ATE {e}");
+        }
+        // Many views: well below the 1 cm bias (≈ 2.5 mm expected).
+        let (est, truth, frames) = fit(16, None);
+        assert!(ate(&est, &frames, &truth.inverse()) < 0.005);
+    }
+
+    #[test]
+    fn one_wrong_view_is_down_weighted() {
+        let (clean, truth, frames) = fit(12, None);
+        let (robust, _, _) = fit(12, Some(3));
+        let mfw = truth.inverse();
+        let (e_clean, e_robust) = (ate(&clean, &frames, &mfw), ate(&robust, &frames, &mfw));
+        eprintln!("ATE clean {:.2} mm, with an 8 cm outlier view {:.2} mm", e_clean * 1e3, e_robust * 1e3);
+        // Unweighted, the outlier would move the gauge by 8 cm / 12 ≈ 6.7 mm.
+        assert!(e_robust < e_clean + 0.004, "{e_clean} -> {e_robust}");
+    }
 }

@@ -1,0 +1,117 @@
+//! Replay a capture of `experiments/slam_capture.py` through the tracker (SLAM diagnosis).
+//!
+//! `cargo run --release -p objslam-core --example slam_replay -- <capture dir> [tracker config JSON] [-v]`
+//!
+//! Prints the online ATE (each frame's pose as output when it was tracked), the final-trajectory
+//! ATE ([`Tracker::trajectory`]), the ATE after the best rigid alignment (consistency only), RPE,
+//! lost frames, and with `-v` one line per frame (features, features with depth, inliers, state,
+//! position error of the online pose).
+
+use std::path::Path;
+
+use anyhow::{anyhow, Context, Result};
+use nalgebra::{Matrix3, Matrix4, Vector3};
+use objslam_core::frame::{DepthImage, GreyImage};
+use objslam_core::geometry::{se3_from_matrix, PinholeCamera, Se3};
+use objslam_core::slam::{ate_rmse_m, rpe, TrackInput, Tracker, TrackerConfig};
+
+fn mat4(v: &serde_json::Value) -> Result<Matrix4<f64>> {
+    let a = v.as_array().ok_or_else(|| anyhow!("pose is not an array"))?;
+    let vals: Vec<f64> = a.iter().filter_map(serde_json::Value::as_f64).collect();
+    if vals.len() != 16 {
+        return Err(anyhow!("pose has {} values", vals.len()));
+    }
+    Ok(Matrix4::from_row_slice(&vals))
+}
+
+/// ATE after the best rigid alignment (Horn / Umeyama without scale) of the estimate to the truth.
+fn aligned_ate(est: &[Se3], gt: &[Se3]) -> f64 {
+    let n = est.len() as f64;
+    let ce: Vector3<f64> = est.iter().map(|p| p.translation.vector).sum::<Vector3<f64>>() / n;
+    let cg: Vector3<f64> = gt.iter().map(|p| p.translation.vector).sum::<Vector3<f64>>() / n;
+    let mut h = Matrix3::zeros();
+    for (e, g) in est.iter().zip(gt) {
+        h += (g.translation.vector - cg) * (e.translation.vector - ce).transpose();
+    }
+    let svd = h.svd(true, true);
+    let (Some(u), Some(vt)) = (svd.u, svd.v_t) else { return f64::NAN };
+    let mut d = Matrix3::identity();
+    d[(2, 2)] = (u * vt).determinant().signum();
+    let r = u * d * vt;
+    let s: f64 = est
+        .iter()
+        .zip(gt)
+        .map(|(e, g)| (r * (e.translation.vector - ce) + cg - g.translation.vector).norm_squared())
+        .sum();
+    (s / n).sqrt()
+}
+
+fn main() -> Result<()> {
+    let args: Vec<String> = std::env::args().collect();
+    let dir = Path::new(args.get(1).ok_or_else(|| anyhow!("usage: slam_replay <capture dir> [config JSON] [-v]"))?);
+    let verbose = args.iter().any(|a| a == "-v");
+    let cfg_json = args.get(2).filter(|a| *a != "-v").cloned().unwrap_or_else(|| "{}".into());
+    let config: TrackerConfig = serde_json::from_str(&cfg_json).context("tracker config")?;
+    let mut tracker = Tracker::new(config)?;
+    let lines = std::fs::read_to_string(dir.join("frames.jsonl")).context("frames.jsonl")?;
+    let (mut online, mut gts) = (Vec::new(), Vec::new());
+    let t0 = std::time::Instant::now();
+    for line in lines.lines() {
+        let rec: serde_json::Value = serde_json::from_str(line)?;
+        let i = rec["index"].as_u64().ok_or_else(|| anyhow!("index"))?;
+        let (w, h) = (rec["width"].as_u64().unwrap_or(0) as u32, rec["height"].as_u64().unwrap_or(0) as u32);
+        let k: Vec<f64> = rec["intrinsics"]
+            .as_array()
+            .map(|a| a.iter().filter_map(serde_json::Value::as_f64).collect())
+            .unwrap_or_default();
+        if k.len() != 9 {
+            return Err(anyhow!("frame {i}: intrinsics"));
+        }
+        let camera = PinholeCamera::new(w, h, k[0], k[4], k[2], k[5])?;
+        let grey = GreyImage::new(w, h, std::fs::read(dir.join(format!("grey_{i}.u8")))?)?;
+        let raw = std::fs::read(dir.join(format!("depth_{i}.f32")))?;
+        let depth =
+            DepthImage::new(w, h, raw.chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect())?;
+        let fk = se3_from_matrix(&mat4(&rec["world_from_camera_fk"])?, "fk")?;
+        let gt = se3_from_matrix(&mat4(&rec["world_from_camera_gt"])?, "gt")?;
+        let view = rec["view_index"].as_u64().unwrap_or(0);
+        let out = tracker.track(&TrackInput {
+            grey: &grey,
+            depth: &depth,
+            camera: &camera,
+            world_from_camera_fk: fk,
+            view_index: view,
+            world_from_camera_gt: Some(gt),
+        })?;
+        if verbose {
+            let err = (out.world_from_camera.translation.vector - gt.translation.vector).norm() * 1e3;
+            let perr = (out.world_from_camera_prior.translation.vector - gt.translation.vector).norm() * 1e3;
+            println!(
+                "frame {i:4} view {view:2} feat {:4} inl {:4} kf {} pts {:5} err {err:6.2} mm prior {perr:6.2} mm {:?}",
+                out.n_features,
+                out.n_inliers,
+                u8::from(out.keyframe_inserted),
+                out.n_map_points,
+                out.state
+            );
+        }
+        online.push(out.world_from_camera);
+        gts.push(gt);
+    }
+    let dt = t0.elapsed().as_secs_f64() / online.len().max(1) as f64;
+    let traj = tracker.trajectory();
+    let r = rpe(&online, &gts)?;
+    println!(
+        "frames {} lost {} | ATE online {:.2} mm, trajectory {:.2} mm, aligned online {:.2} mm, aligned trajectory {:.2} mm | RPE {:.2} mm {:.3} deg | {:.1} ms/frame",
+        online.len(),
+        tracker.n_lost(),
+        ate_rmse_m(&online, &gts)? * 1e3,
+        ate_rmse_m(&traj, &gts)? * 1e3,
+        aligned_ate(&online, &gts) * 1e3,
+        aligned_ate(&traj, &gts) * 1e3,
+        r.trans_m * 1e3,
+        r.rot_deg,
+        dt * 1e3
+    );
+    Ok(())
+}
