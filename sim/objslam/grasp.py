@@ -1,0 +1,300 @@
+"""Grasping from an object map in SAPIEN: plan with the core's planner, execute, judge from ground truth.
+
+Entry point: :func:`run_grasp_session` — a fresh :class:`~objslam.world.SimWorld` of the scene with
+the grasp physics settings, then every map object in turn: ``Planner.plan_grasp`` (from the map
+estimates only: the target's estimate, the other estimates as obstacles) → fingers open to the
+planned width → pre-grasp trajectory → approach → close → lift → hold → judge from the simulator's
+ground truth → the grasped object is set aside (removed from the scene and from the obstacles) →
+open, back to the ready configuration, next object. Results: one row per attempt (and per
+ground-truth graspable object the map gave no attempt for), written by the caller.
+
+Choices (config fields of :class:`GraspRunConfig`):
+- Success: the target's true centre ends ≥ ``lift_success_m`` (0.10 m) above where it started, after
+  the lift and a ``hold_s`` (1 s) hold with the fingers squeezing.
+- The target of an attempt in ground truth: the true object whose centre is nearest (in x, y) to the
+  map estimate's centre, within ``match_radius_m``; none → a phantom attempt (counts as missed).
+- Causes: ``no_ik`` / ``no_path`` / ``too_wide`` (planner), ``collided`` (before closing, the target
+  or another object moved more than ``disturb_m``, or the arm was blocked), ``missed`` (the fingers
+  closed without lifting the target ≥ ``slip_rise_m``), ``slipped`` (the target rose ≥ ``slip_rise_m``
+  but did not stay ≥ ``lift_success_m`` up), ``not_in_map`` (a graspable true object no map object
+  matches). Success rows have cause ``"none"``.
+- Graspable in ground truth: narrowest horizontal width ≤ the gripper's 8 cm opening minus 4 mm.
+  Map objects the planner finds too wide are attempts only when their true object is graspable.
+- No re-observation between grasps (the map is the one the exploration built).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+
+from . import _native
+from .camera import CameraConfig
+from .scene import SceneSpec, gt_objects
+from .world import GRIPPER_OPEN_M, PHYSICS_HZ, READY_QPOS, SimWorld, panda_urdf_path
+
+#: Largest graspable width (gripper 8 cm minus the planner's 4 mm minimum clearance), metres.
+MAX_GRASP_WIDTH_M = 0.076
+
+
+@dataclass
+class GraspRunConfig:
+    """Execution and judging settings of a grasp session."""
+
+    lift_success_m: float = 0.10
+    """The target must end this far above its start, metres (the issue's bar)."""
+    hold_s: float = 1.0
+    """Hold after the lift before judging, seconds."""
+    close_s: float = 0.8
+    """Time given to the fingers to close, seconds."""
+    settle_s: float = 0.3
+    """Settling after each trajectory, seconds (at most)."""
+    disturb_m: float = 0.02
+    """Before closing, an object displaced this far (x, y, z) means the arm collided, metres."""
+    slip_rise_m: float = 0.02
+    """The target rose at least this far during the lift: a failure is ``slipped``, not ``missed``."""
+    match_radius_m: float = 0.08
+    """Largest x-y distance between a map estimate and the true object it targets, metres."""
+    planner: dict[str, Any] = field(default_factory=dict)
+    """Overrides of the core planner's config (keys in ``Planner``'s stub docs)."""
+
+
+def narrowest_width(geometry: dict[str, Any]) -> float:
+    """Narrowest horizontal width of an ObjectGeometry dict, metres."""
+    h = geometry["half_extents"]
+    return 2.0 * (min(h[0], h[1]) if geometry["shape"] == "cuboid" else (h[0] + h[1]) / 2.0)
+
+
+class GraspSession:
+    """One simulated world and the planner, executing grasps of map objects."""
+
+    def __init__(self, scene: SceneSpec, camera: CameraConfig, seed: int, cfg: GraspRunConfig, rec: Any = None) -> None:
+        self.scene = scene
+        self.cfg = cfg
+        self.world = SimWorld(scene, camera, np.random.default_rng([seed, 7]), grasp_physics=True)
+        planner_cfg = {"rng_seed": int(seed) + 1, **cfg.planner}
+        self.planner = _native.Planner(str(panda_urdf_path()), json.dumps(planner_cfg))
+        self.limits = self.planner.joint_limits()
+        self.rec = rec
+        self.removed: set[int] = set()
+        self.frame = 0
+
+    # ----- low-level execution ---------------------------------------------------------------------
+    def q_arm(self) -> np.ndarray:
+        """Measured arm joints, clipped into the URDF limits (the planner rejects values outside)."""
+        q = self.world.qpos()[:7]
+        return np.clip(q, self.limits[:, 0], self.limits[:, 1])
+
+    def finger_gap_m(self) -> float:
+        """Gap between the fingers (sum of both finger joints), metres."""
+        q = self.world.qpos()
+        return float(q[7] + q[8])
+
+    def _targets(self, q_arm: np.ndarray, finger_m: float, dq_arm: np.ndarray | None = None) -> None:
+        for i, j in enumerate(self.world.joints):
+            if i < 7:
+                j.set_drive_target(float(q_arm[i]))
+                j.set_drive_velocity_target(float(dq_arm[i]) if dq_arm is not None else 0.0)
+            else:
+                j.set_drive_target(float(finger_m))
+
+    def execute(self, traj: dict[str, Any], finger_m: float, on_step: Callable[[], None] | None = None) -> float:
+        """Track a sampled joint trajectory with the PD drives (linear interpolation of the samples at
+        the physics rate, velocity feed-forward), then settle; returns the final joint error, rad."""
+        t, pos, vel = traj["times_s"], traj["positions"], traj["velocities"]
+        n = int(math.ceil(float(traj["duration_s"]) * PHYSICS_HZ))
+        for k in range(1, n + 1):
+            tk = k / PHYSICS_HZ
+            q = np.array([np.interp(tk, t, pos[:, i]) for i in range(7)])
+            dq = np.array([np.interp(tk, t, vel[:, i]) for i in range(7)])
+            self._targets(q, finger_m, dq)
+            self.world._step()
+            if on_step is not None:
+                on_step()
+        goal = pos[-1]
+        self._targets(goal, finger_m)
+        for _ in range(int(self.cfg.settle_s * PHYSICS_HZ)):
+            self.world._step()
+            if on_step is not None:
+                on_step()
+            if float(np.max(np.abs(self.world.qpos()[:7] - goal))) < 2e-3:
+                break
+        return float(np.max(np.abs(self.world.qpos()[:7] - goal)))
+
+    def hold(self, seconds: float, finger_m: float, on_step: Callable[[], None] | None = None) -> None:
+        """Keep the current arm targets and the finger target for ``seconds``."""
+        q = self.world.qpos()[:7]
+        self._targets(q, finger_m)
+        for _ in range(int(seconds * PHYSICS_HZ)):
+            self.world._step()
+            if on_step is not None:
+                on_step()
+
+    def gt_positions(self) -> dict[int, np.ndarray]:
+        """True object centres now (objects set aside excluded)."""
+        return {oid: p for oid, (p, _) in self.world.ground_truth().items() if oid not in self.removed}
+
+    def set_aside(self, oid: int) -> None:
+        """Remove a grasped object from the scene (it is 'set aside')."""
+        actor = self.world.object_actors.pop(oid)
+        self.world.scene.remove_entity(actor)
+        self.removed.add(oid)
+
+    def go_ready(self, obstacles: list[dict[str, Any]]) -> None:
+        """Open the fingers and return to the ready configuration (planned around the map objects,
+        else around the table only)."""
+        self.hold(0.3, GRIPPER_OPEN_M)
+        for obs in (obstacles, []):
+            r = self.planner.plan_to_joints(self.q_arm(), READY_QPOS[:7], json.dumps(obs))
+            if r["ok"]:
+                self.execute(r, GRIPPER_OPEN_M)
+                return
+
+    # ----- recording -------------------------------------------------------------------------------
+    def _log(self, fn: str, *args: Any) -> None:
+        if self.rec is not None:
+            getattr(self.rec, fn)(*args)
+
+    def _log_plan(self, k: int, plan: dict[str, Any]) -> None:
+        if self.rec is None:
+            return
+        self.rec.set_frame(self.frame, self.world.sim_time_s)
+        for part in ("to_pregrasp", "approach", "lift"):
+            pts = np.array([self.planner.forward_tcp(q)[:3, 3] for q in plan[part]["positions"][::5]])
+            self.rec.log_points(f"world/grasp/{k}/{part}", pts, None)
+        g = plan["world_from_tcp_grasp"]
+        o = np.repeat(g[None, :3, 3], 3, axis=0)
+        v = 0.08 * g[:3, :3].T
+        self.rec.log_arrows(f"world/grasp/{k}/frame", o, v, np.array([[255, 0, 0], [0, 255, 0], [0, 0, 255]], dtype=np.uint8))
+
+    # ----- one attempt ------------------------------------------------------------------------------
+    def attempt(self, k: int, target: dict[str, Any], neighbours: list[dict[str, Any]], gt_id: int | None) -> dict[str, Any]:
+        """Plan and execute one grasp of map object ``target``; returns the outcome record."""
+        cfg = self.cfg
+        out: dict[str, Any] = {"success": False, "cause": None, "gt_id": gt_id}
+        plan = self.planner.plan_grasp(
+            self.q_arm(), json.dumps(target["geometry"]), json.dumps([n["geometry"] for n in neighbours])
+        )
+        if not plan["ok"]:
+            out.update(cause=plan["cause"], message=plan["message"])
+            return out
+        self._log_plan(k, plan)
+        open_half = float(plan["open_width_m"]) / 2.0
+        out.update(
+            open_width_m=float(plan["open_width_m"]),
+            expected_closed_width_m=float(plan["expected_closed_width_m"]),
+            hand_yaw_rad=float(plan["hand_yaw_rad"]),
+        )
+        start = self.gt_positions()
+        # Open the fingers while moving to the pre-grasp pose.
+        err_pre = self.execute(plan["to_pregrasp"], open_half)
+        err_app = self.execute(plan["approach"], open_half)
+        now = self.gt_positions()
+        moved = {oid: float(np.linalg.norm(now[oid] - start[oid])) for oid in start}
+        collided = max(err_pre, err_app) > 0.02 or any(d > cfg.disturb_m for d in moved.values())
+        out["disturbed"] = {str(o): round(d, 4) for o, d in moved.items() if d > cfg.disturb_m}
+        # Close.
+        self.hold(cfg.close_s, 0.0)
+        out["closed_gap_m"] = self.finger_gap_m()
+        z0 = start[gt_id][2] if gt_id is not None else 0.0
+        max_rise = [0.0]
+
+        def track() -> None:
+            if gt_id is not None:
+                max_rise[0] = max(max_rise[0], float(self.gt_positions()[gt_id][2] - z0))
+
+        self.execute(plan["lift"], 0.0, track)
+        self.hold(cfg.hold_s, 0.0, track)
+        rise = float(self.gt_positions()[gt_id][2] - z0) if gt_id is not None else 0.0
+        out.update(rise_m=rise, max_rise_m=max_rise[0], held_gap_m=self.finger_gap_m())
+        if gt_id is not None and rise >= cfg.lift_success_m:
+            out.update(success=True, cause="none")
+        elif collided:
+            out["cause"] = "collided"
+        elif max_rise[0] >= cfg.slip_rise_m:
+            out["cause"] = "slipped"
+        else:
+            out["cause"] = "missed"
+        self.frame += 1
+        self._log("set_frame", self.frame, self.world.sim_time_s)
+        self._log("log_scalar", "grasp/finger_gap_m", out["closed_gap_m"])
+        return out
+
+
+def match_gt(map_objects: list[dict[str, Any]], gt: list[dict[str, Any]], radius_m: float) -> dict[int, int | None]:
+    """Map object id → the true object id it targets (nearest centre in x-y within ``radius_m``;
+    each true object at most once, closest pairs first)."""
+    pairs = []
+    for m in map_objects:
+        for g in gt:
+            d = math.dist(m["geometry"]["center"][:2], g["geometry"]["center"][:2])
+            if d <= radius_m:
+                pairs.append((d, m["id"], g["id"]))
+    out: dict[int, int | None] = {m["id"]: None for m in map_objects}
+    used: set[int] = set()
+    for _, mid, gid in sorted(pairs):
+        if out[mid] is None and gid not in used:
+            out[mid] = gid
+            used.add(gid)
+    return out
+
+
+def run_grasp_session(
+    scene: SceneSpec,
+    camera: CameraConfig,
+    seed: int,
+    map_objects: list[dict[str, Any]],
+    cfg: GraspRunConfig,
+    rec: Any = None,
+) -> list[dict[str, Any]]:
+    """Grasp every map object of ``map_objects`` (records ``{"id", "label", "geometry"}``) one after
+    another in a fresh world; returns one row per attempt (+ ``not_in_map`` rows)."""
+    session = GraspSession(scene, camera, seed, cfg, rec)
+    gt = gt_objects(scene, session.world.ground_truth())
+    gt_by_id = {g["id"]: g for g in gt}
+    graspable_gt = {g["id"] for g in gt if narrowest_width(g["geometry"]) <= MAX_GRASP_WIDTH_M}
+    if rec is not None:
+        rec.set_frame(0, session.world.sim_time_s)
+        rec.log_objects("world/ground_truth", json.dumps(gt))
+        rec.log_objects("world/map", json.dumps(map_objects))
+    match = match_gt(map_objects, gt, cfg.match_radius_m)
+    remaining = list(map_objects)
+    rows: list[dict[str, Any]] = []
+    for k, target in enumerate(map_objects):
+        gt_id = match[target["id"]]
+        neighbours = [m for m in remaining if m["id"] != target["id"]]
+        res = session.attempt(k, target, neighbours, gt_id)
+        if res["cause"] == "too_wide" and (gt_id is None or gt_id not in graspable_gt):
+            res["skipped"] = True  # too wide in the map and in truth: not an attempt
+        row = {
+            "map_id": target["id"],
+            "map_label": target["label"],
+            "object": f"gt{gt_id}" if gt_id is not None else f"map{target['id']}",
+            "class": gt_by_id[gt_id]["label"] if gt_id is not None else target["label"],
+            **res,
+        }
+        rows.append(row)
+        session._log("log_event", f"grasp {k} map {target['id']} ({target['label']}) → {row['object']}: "
+                     f"{'success' if res['success'] else res['cause']}")
+        if res["success"] and gt_id is not None:
+            session.set_aside(gt_id)
+            remaining = [m for m in remaining if m["id"] != target["id"]]
+        if "open_width_m" in res:
+            session.go_ready([m["geometry"] for m in remaining])
+    attempted = {r["gt_id"] for r in rows if r["gt_id"] is not None}
+    for gid in sorted(graspable_gt - attempted):
+        rows.append(
+            {"map_id": None, "map_label": None, "object": f"gt{gid}", "class": gt_by_id[gid]["label"],
+             "success": False, "cause": "not_in_map", "gt_id": gid}
+        )
+    return rows
+
+
+def config_dict(cfg: GraspRunConfig) -> dict[str, Any]:
+    """The config as a plain dict (for run folders)."""
+    return asdict(cfg)
