@@ -6,8 +6,9 @@ CARGO_FEATURES := --features rerun
 RUN_ARGS ?=
 BENCHMARK_ARGS ?=
 ABLATION_ARGS ?=
+GRASP_ARGS ?=
 
-.PHONY: help setup run test test-rust test-py bench benchmark associate parameterize slam match report view lint fmt clean
+.PHONY: help setup run test test-rust test-py bench benchmark associate parameterize slam grasp match report view lint fmt clean
 
 help: ## List the targets
 	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*## "}; {printf "  \033[1m%-12s\033[0m %s\n", $$1, $$2}'
@@ -42,6 +43,9 @@ parameterize: setup ## Parameterization stages (raw → iForest → lines → re
 
 slam: setup ## Pose accuracy: scenes × pose sources (slam, kinematics) → reports/slam.{md,json}
 	$(PY) experiments/ablations.py slam $(ABLATION_ARGS)
+
+grasp: setup ## Grasp success: 7 scenes × seeds × map sources (estimated, ground_truth, init_only) → reports/grasping.{md,json}
+	$(PY) experiments/grasp.py $(GRASP_ARGS)
 
 match: ## Scene matching vs shared-object ratio (500 trials per row) → reports/scene_matching.{md,json}
 	cargo run --release -p objslam-core --example match_experiment -- --scenes scenes --out reports

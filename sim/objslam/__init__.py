@@ -8,9 +8,9 @@ package is the body: SAPIEN scenes (:mod:`objslam.scene`, :mod:`objslam.world`),
 - :func:`load_scene`, :func:`generate_scene`, :class:`SceneSpec`, :class:`SceneFileError`
 - :class:`RunConfig`, :func:`load_run_config`
 - :func:`run_episode`
-- :class:`NaiveMapper`, :class:`Recorder`, :func:`evaluate_map`, :func:`load_map`, :func:`save_map`
+- :class:`NaiveMapper`, :class:`Planner` (Panda motion planning, grasps), :class:`Recorder`, :func:`evaluate_map`, :func:`load_map`, :func:`save_map`
 - exceptions :class:`ObjslamError` (base), :class:`InputError`, :class:`MapFileError`,
-  :class:`RecordingError` raised by the core.
+  :class:`RecordingError`, :class:`PlanningError` raised by the core.
 """
 
 from ._native import (
@@ -18,6 +18,8 @@ from ._native import (
     MapFileError,
     NaiveMapper,
     ObjslamError,
+    Planner,
+    PlanningError,
     Recorder,
     RecordingError,
     __version__,
@@ -33,6 +35,8 @@ __all__ = [
     "MapFileError",
     "NaiveMapper",
     "ObjslamError",
+    "Planner",
+    "PlanningError",
     "Recorder",
     "RecordingError",
     "SceneFileError",

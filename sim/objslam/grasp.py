@@ -17,10 +17,16 @@ Choices (config fields of :class:`GraspRunConfig`):
   or another object moved more than ``disturb_m``, or the arm was blocked), ``missed`` (the fingers
   closed without lifting the target ≥ ``slip_rise_m``), ``slipped`` (the target rose ≥ ``slip_rise_m``
   but did not stay ≥ ``lift_success_m`` up), ``not_in_map`` (a graspable true object no map object
-  matches). Success rows have cause ``"none"``.
+  matches), ``phantom`` (an attempt on a map object with no true object near it), ``not_found``
+  (with re-observation: the close views found no object at the map's estimate; for phantoms this
+  is the right call and the row is skipped, not an attempt). Success rows have cause ``"none"``.
 - Graspable in ground truth: narrowest horizontal width ≤ the gripper's 8 cm opening minus 4 mm.
   Map objects the planner finds too wide are attempts only when their true object is graspable.
-- No re-observation between grasps (the map is the one the exploration built).
+- Re-observation (``reobserve``, off by default): before each attempt, three close views of the
+  target (top-down and two obliques, moved by the simulator's interim IK) are fused into a fresh
+  local map by the core's pipeline (same settings as the exploration); the local object nearest the
+  map estimate is grasped, and the local objects replace the map's within ``reobserve_replace_m``
+  as obstacles. The exploration map itself is not updated.
 """
 
 from __future__ import annotations
@@ -34,9 +40,19 @@ from typing import Any
 import numpy as np
 
 from . import _native
-from .camera import CameraConfig
+from .config import RunConfig
+from .detector import SimulatedDetector
 from .scene import SceneSpec, gt_objects
-from .world import GRIPPER_OPEN_M, PHYSICS_HZ, READY_QPOS, SimWorld, panda_urdf_path
+from .world import (
+    GRIPPER_OPEN_M,
+    PHYSICS_HZ,
+    READY_QPOS,
+    MotionError,
+    SimWorld,
+    UnreachablePoseError,
+    look_at,
+    panda_urdf_path,
+)
 
 #: Largest graspable width (gripper 8 cm minus the planner's 4 mm minimum clearance), metres.
 MAX_GRASP_WIDTH_M = 0.076
@@ -60,6 +76,18 @@ class GraspRunConfig:
     """The target rose at least this far during the lift: a failure is ``slipped``, not ``missed``."""
     match_radius_m: float = 0.08
     """Largest x-y distance between a map estimate and the true object it targets, metres."""
+    reobserve: bool = False
+    """Before each attempt, look at the target from close views and re-estimate it in a fresh local
+    map (the core's pipeline, same settings as the exploration); the refined estimate is grasped."""
+    reobserve_height_m: float = 0.36
+    """Height of the top-down re-observation view above the target's estimated centre, metres."""
+    reobserve_offset_m: float = 0.20
+    """Horizontal offset of the two oblique re-observation views, metres."""
+    reobserve_match_m: float = 0.06
+    """A local-map object within this x-y distance of the map estimate is the refined target."""
+    reobserve_replace_m: float = 0.15
+    """Map objects within this x-y distance of the refined target are replaced, as obstacles, by
+    the local map's objects (the close views see that neighbourhood), metres."""
     planner: dict[str, Any] = field(default_factory=dict)
     """Overrides of the core planner's config (keys in ``Planner``'s stub docs)."""
 
@@ -73,10 +101,13 @@ def narrowest_width(geometry: dict[str, Any]) -> float:
 class GraspSession:
     """One simulated world and the planner, executing grasps of map objects."""
 
-    def __init__(self, scene: SceneSpec, camera: CameraConfig, seed: int, cfg: GraspRunConfig, rec: Any = None) -> None:
+    def __init__(self, scene: SceneSpec, run_cfg: RunConfig, cfg: GraspRunConfig, rec: Any = None) -> None:
         self.scene = scene
         self.cfg = cfg
-        self.world = SimWorld(scene, camera, np.random.default_rng([seed, 7]), grasp_physics=True)
+        self.run_cfg = run_cfg
+        seed = run_cfg.seed
+        self.world = SimWorld(scene, run_cfg.camera, np.random.default_rng([seed, 7]), grasp_physics=True)
+        self.detector = SimulatedDetector(run_cfg.detector, np.random.default_rng([seed, 8]))
         planner_cfg = {"rng_seed": int(seed) + 1, **cfg.planner}
         self.planner = _native.Planner(str(panda_urdf_path()), json.dumps(planner_cfg))
         self.limits = self.planner.joint_limits()
@@ -107,7 +138,7 @@ class GraspSession:
         """Track a sampled joint trajectory with the PD drives (linear interpolation of the samples at
         the physics rate, velocity feed-forward), then settle; returns the final joint error, rad."""
         t, pos, vel = traj["times_s"], traj["positions"], traj["velocities"]
-        n = int(math.ceil(float(traj["duration_s"]) * PHYSICS_HZ))
+        n = math.ceil(float(traj["duration_s"]) * PHYSICS_HZ)
         for k in range(1, n + 1):
             tk = k / PHYSICS_HZ
             q = np.array([np.interp(tk, t, pos[:, i]) for i in range(7)])
@@ -172,11 +203,78 @@ class GraspSession:
         v = 0.08 * g[:3, :3].T
         self.rec.log_arrows(f"world/grasp/{k}/frame", o, v, np.array([[255, 0, 0], [0, 255, 0], [0, 0, 255]], dtype=np.uint8))
 
+    # ----- re-observation ---------------------------------------------------------------------------
+    def reobserve(self, target: dict[str, Any]) -> tuple[dict[str, Any] | None, list[dict[str, Any]], int]:
+        """Close views of ``target`` (top-down, then two obliques from the robot's side) fused into a
+        fresh local map; returns the local object that refines the target (nearest centre within
+        ``reobserve_match_m``, same label first) or None, all local objects, and the frames used."""
+        from .episode import grey_of, new_mapper
+
+        cfg, rc = self.cfg, self.run_cfg
+        mapper = new_mapper(rc, self.scene)
+        c = np.array(target["geometry"]["center"], dtype=float)
+        c[2] = 0.5 * c[2]
+        side = -1.0 if c[1] > 0 else 1.0
+        eyes = [
+            c + [0.0, 0.0, cfg.reobserve_height_m],
+            c + [-cfg.reobserve_offset_m, 0.0, cfg.reobserve_height_m - 0.05],
+            c + [0.0, side * cfg.reobserve_offset_m, cfg.reobserve_height_m - 0.05],
+        ]
+        frames = 0
+        for vi, eye in enumerate(eyes):
+            view = look_at(eye, c, np.array([1.0, 0.0, 0.0]) if vi == 0 else None)
+            try:
+                for frame in self.world.move_camera_to(
+                    view, frame_rate_hz=rc.frame_rate_hz, max_joint_speed=rc.max_joint_speed, what="re-observation"
+                ):
+                    dets = self.detector.detect(frame.segmentation, self.world.actor_to_object)
+                    mapper.update(
+                        index=frames,
+                        intrinsics=frame.intrinsics,
+                        depth=frame.depth_m,
+                        world_from_camera=frame.world_from_camera_fk,
+                        detections=[d.as_tuple() for d in dets],
+                        grey=grey_of(frame.rgb) if (rc.parameterize or rc.pose_source != "fk") else None,
+                        world_from_camera_gt=frame.world_from_camera_gt,
+                        view_index=vi,
+                    )
+                    frames += 1
+            except (UnreachablePoseError, MotionError):
+                continue
+            mapper.view_done(False)
+        mapper.refresh_estimates()
+        local = json.loads(mapper.objects_json())
+        best = None
+        for o in local:
+            d = math.dist(o["geometry"]["center"][:2], target["geometry"]["center"][:2])
+            if d > cfg.reobserve_match_m:
+                continue
+            key = (o["label"] != target["label"], d)
+            if best is None or key < best[0]:
+                best = (key, o)
+        return (best[1] if best else None), local, frames
+
     # ----- one attempt ------------------------------------------------------------------------------
     def attempt(self, k: int, target: dict[str, Any], neighbours: list[dict[str, Any]], gt_id: int | None) -> dict[str, Any]:
         """Plan and execute one grasp of map object ``target``; returns the outcome record."""
         cfg = self.cfg
         out: dict[str, Any] = {"success": False, "cause": None, "gt_id": gt_id}
+        if cfg.reobserve:
+            refined, local, frames = self.reobserve(target)
+            out.update(reobserved=refined is not None, reobserve_frames=frames)
+            if refined is None:
+                # Nothing there on a close look: the map object was a phantom (or has gone).
+                out.update(cause="not_found", skipped=gt_id is None)
+                return out
+            target = {**target, "geometry": refined["geometry"]}
+            # Near the target the close views know better: their objects replace the map's there.
+            c = target["geometry"]["center"]
+            near = [n for n in local if n["id"] != refined["id"]]
+            far = [
+                n for n in neighbours if math.dist(n["geometry"]["center"][:2], c[:2]) > cfg.reobserve_replace_m
+            ]
+            neighbours = far + near
+            out["target_geometry"] = target["geometry"]
         plan = self.planner.plan_grasp(
             self.q_arm(), json.dumps(target["geometry"]), json.dumps([n["geometry"] for n in neighbours])
         )
@@ -212,7 +310,9 @@ class GraspSession:
         self.hold(cfg.hold_s, 0.0, track)
         rise = float(self.gt_positions()[gt_id][2] - z0) if gt_id is not None else 0.0
         out.update(rise_m=rise, max_rise_m=max_rise[0], held_gap_m=self.finger_gap_m())
-        if gt_id is not None and rise >= cfg.lift_success_m:
+        if gt_id is None:
+            out["cause"] = "phantom"  # no true object where the map put one
+        elif rise >= cfg.lift_success_m:
             out.update(success=True, cause="none")
         elif collided:
             out["cause"] = "collided"
@@ -246,15 +346,15 @@ def match_gt(map_objects: list[dict[str, Any]], gt: list[dict[str, Any]], radius
 
 def run_grasp_session(
     scene: SceneSpec,
-    camera: CameraConfig,
-    seed: int,
+    run_cfg: RunConfig,
     map_objects: list[dict[str, Any]],
     cfg: GraspRunConfig,
     rec: Any = None,
 ) -> list[dict[str, Any]]:
     """Grasp every map object of ``map_objects`` (records ``{"id", "label", "geometry"}``) one after
-    another in a fresh world; returns one row per attempt (+ ``not_in_map`` rows)."""
-    session = GraspSession(scene, camera, seed, cfg, rec)
+    another in a fresh world (camera, detector and mapper settings from ``run_cfg``); returns one
+    row per attempt (+ ``not_in_map`` rows)."""
+    session = GraspSession(scene, run_cfg, cfg, rec)
     gt = gt_objects(scene, session.world.ground_truth())
     gt_by_id = {g["id"]: g for g in gt}
     graspable_gt = {g["id"] for g in gt if narrowest_width(g["geometry"]) <= MAX_GRASP_WIDTH_M}
