@@ -33,12 +33,12 @@ SOURCES = ("estimated", "ground_truth", "init_only")
 CAUSES = ("no_ik", "no_path", "too_wide", "collided", "missed", "slipped", "phantom", "not_found", "not_in_map")
 
 
-def _session(scene: Any, cfg: Any, map_objects: list[dict], source: str, run_dir: Path, gcfg: Any) -> Path:
+def _session(scene: Any, cfg: Any, map_objects: list[dict], source: str, run_dir: Path, gcfg: Any, tag: str) -> Path:
     from objslam import _native
     from objslam.grasp import config_dict, run_grasp_session
 
     t0 = time.perf_counter()
-    rec = _native.Recorder(str(run_dir / f"grasp_{source}.rrd"), "objslam-grasp") if cfg.record.enabled else None
+    rec = _native.Recorder(str(run_dir / f"grasp_{source}{tag}.rrd"), "objslam-grasp") if cfg.record.enabled else None
     try:
         rows = run_grasp_session(scene, cfg, map_objects, gcfg, rec)
     finally:
@@ -53,19 +53,71 @@ def _session(scene: Any, cfg: Any, map_objects: list[dict], source: str, run_dir
         "config": config_dict(gcfg),
         "rows": rows,
     }
-    path = run_dir / f"grasp_{source}.json"
+    path = run_dir / f"grasp_{source}{tag}.json"
     path.write_text(json.dumps(out, indent=2) + "\n")
     return path
 
 
-def run_sweep(a: argparse.Namespace) -> list[str]:
+def _grasp_config(a: argparse.Namespace, source: str) -> Any:
+    from objslam.grasp import GraspRunConfig
+
+    return GraspRunConfig(reobserve=source in a.reobserve)
+
+
+def _map_objects(source: str, scene: Any, run_dir: Path) -> list[dict]:
     from objslam import _native
+    from objslam.scene import gt_objects
+
+    if source == "ground_truth":
+        return [{**g, "n_observations": 0} for g in gt_objects(scene)]
+    return json.loads(_native.map_objects_json(_native.load_map(str(run_dir / "map.json"))))
+
+
+def _print_session(path: Path, note: str) -> None:
+    d = json.loads(path.read_text())
+    att = [r for r in d["rows"] if not r.get("skipped")]
+    print(
+        f"{d['scene']} seed {d['seed']} {d['map_source']:<12} {sum(r['success'] for r in att)}/{len(att)} "
+        f"({note}grasping {d['wall_s']:.0f} s)",
+        flush=True,
+    )
+
+
+def _write_manifest(sessions: list[str], command: str, path: Path) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps({"command": command, "sessions": sessions}, indent=2) + "\n")
+
+
+def regrasp(a: argparse.Namespace, command: str) -> list[str]:
+    """Grasp sessions again on the maps of the sweep in ``runs/grasp_sweep.json`` (no new mapping)."""
+    from objslam.config import load_run_config
+    from objslam.scene import load_scene
+
+    old = json.loads(Path(a.maps_from).read_text())["sessions"]
+    sessions: list[str] = []
+    for p in old:
+        d = json.loads(Path(p).read_text())
+        if d["map_source"] not in a.sources or d["scene"] not in {Path(s).stem for s in a.scenes}:
+            continue
+        if d["seed"] not in a.seeds:
+            continue
+        run_dir = Path(d["map_run"])
+        overrides = [*a.set, f'scene="scenes/{d["scene"]}.toml"', f"seed={d['seed']}"]
+        cfg = load_run_config(overlays=a.config, overrides=overrides, strategy="object-driven")
+        scene = load_scene(REPO / "scenes" / f"{d['scene']}.toml")
+        objs = _map_objects(d["map_source"], scene, run_dir)
+        path = _session(scene, cfg, objs, d["map_source"], run_dir, _grasp_config(a, d["map_source"]), a.tag)
+        sessions.append(str(path))
+        _print_session(path, "reused map, ")
+        _write_manifest(sessions, command, Path(a.manifest))
+    return sessions
+
+
+def run_sweep(a: argparse.Namespace, command: str) -> list[str]:
     from objslam.config import load_run_config
     from objslam.episode import run_episode
-    from objslam.grasp import GraspRunConfig
-    from objslam.scene import gt_objects, load_scene
+    from objslam.scene import load_scene
 
-    gcfg = GraspRunConfig()
     sessions: list[str] = []
     for scene_file in a.scenes:
         for seed in a.seeds:
@@ -84,27 +136,16 @@ def run_sweep(a: argparse.Namespace) -> list[str]:
                 continue
             t_map = time.perf_counter() - t0
             for source in a.sources:
-                if source == "ground_truth":
-                    objs = [{**g, "n_observations": 0} for g in gt_objects(scene)]
-                    run_dir = runs["estimated"]
-                else:
-                    run_dir = runs[source]
-                    objs = json.loads(_native.map_objects_json(_native.load_map(str(run_dir / "map.json"))))
+                run_dir = runs["estimated" if source == "ground_truth" else source]
                 try:
-                    path = _session(scene, cfg, objs, source, run_dir, gcfg)
+                    objs = _map_objects(source, scene, run_dir)
+                    path = _session(scene, cfg, objs, source, run_dir, _grasp_config(a, source), a.tag)
                 except Exception as e:  # noqa: BLE001 - one failed session never stops the sweep
                     print(f"{scene.name} seed {seed} {source}: grasp session failed: {type(e).__name__}: {e}", file=sys.stderr)
                     continue
                 sessions.append(str(path))
-                d = json.loads(path.read_text())
-                att = [r for r in d["rows"] if not r.get("skipped")]
-                print(
-                    f"{scene.name} seed {seed} {source:<12} {sum(r['success'] for r in att)}/{len(att)} "
-                    f"(mapping {t_map:.0f} s, grasping {d['wall_s']:.0f} s)",
-                    flush=True,
-                )
-            (REPO / "runs").mkdir(exist_ok=True)
-            (REPO / "runs" / "grasp_sweep.json").write_text(json.dumps({"sessions": sessions}, indent=2) + "\n")
+                _print_session(path, f"mapping {t_map:.0f} s, ")
+            _write_manifest(sessions, command, Path(a.manifest))
     return sessions
 
 
@@ -129,6 +170,7 @@ def write_reports(sessions: list[str], out: Path, command: str) -> dict[str, Any
                     "object": r["object"],
                     "class": r["class"],
                     "map_source": d["map_source"],
+                    "reobserve": bool(d["config"].get("reobserve", False)),
                     "success": bool(r["success"]),
                     "cause": r["cause"],
                     "map_id": r.get("map_id"),
@@ -142,8 +184,11 @@ def write_reports(sessions: list[str], out: Path, command: str) -> dict[str, Any
     out.mkdir(parents=True, exist_ok=True)
     report = {"command": command, "sessions": sessions, "rows": rows}
     (out / "grasping.json").write_text(json.dumps(report, indent=2) + "\n")
-    sources = [s for s in SOURCES if any(r["map_source"] == s for r in rows)]
-    by = {s: [r for r in rows if r["map_source"] == s] for s in sources}
+    def variant(r: dict[str, Any]) -> str:
+        return r["map_source"] + (" + re-observation" if r["reobserve"] else "")
+
+    sources = sorted({variant(r) for r in rows}, key=lambda v: (SOURCES.index(v.split(" ")[0]), v))
+    by = {s: [r for r in rows if variant(r) == s] for s in sources}
     scenes = sorted({r["scene"] for r in rows})
     seeds = sorted({r["seed"] for r in rows})
     classes = sorted({r["class"] for r in rows})
@@ -158,7 +203,9 @@ def write_reports(sessions: list[str], out: Path, command: str) -> dict[str, Any
         "graspable true object no map object targets, plus `too_wide` rows where the map made a graspable",
         "object too wide. Success = the true object ends ≥ 10 cm above its start after the lift and a",
         "1 s hold (SAPIEN ground truth). Sources: `estimated` = object-driven exploration map,",
-        "`ground_truth` = true poses and sizes (upper bound), `init_only` = the four Init views' map.",
+        "`ground_truth` = true poses and sizes (upper bound), `init_only` = the four Init views' map;",
+        "`+ re-observation` = before each attempt three close views of the target are fused into a fresh",
+        "local map and its estimate is grasped (a phantom the close views do not find is skipped).",
         "",
         "## Overall",
         "",
@@ -198,14 +245,33 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--config", action="append", default=[], help="run-config overlay (repeatable)")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     ap.add_argument("--out", default="reports")
-    ap.add_argument("--report-only", action="store_true", help="rebuild the reports from runs/grasp_sweep.json")
+    ap.add_argument(
+        "--reobserve", nargs="*", default=["estimated"], choices=SOURCES,
+        help="map sources whose grasps re-observe the target first (default: estimated)",
+    )
+    ap.add_argument("--tag", default="", help="suffix of the session files (grasp_<source><tag>.json)")
+    ap.add_argument("--manifest", default=str(REPO / "runs" / "grasp_sweep.json"), help="the sweep's list of session files")
+    ap.add_argument("--maps-from", default=str(REPO / "runs" / "grasp_sweep.json"), help="manifest whose maps --reuse-maps grasps on")
+    ap.add_argument("--report-only", action="store_true", help="rebuild the reports from the manifest")
+    ap.add_argument("--also", action="append", default=[], help="with --report-only: more manifests to include")
+    ap.add_argument(
+        "--reuse-maps", action="store_true",
+        help="grasp again on the maps of the sweep in runs/grasp_sweep.json instead of mapping anew",
+    )
     a = ap.parse_args(argv)
-    command = "python experiments/grasp.py " + " ".join(shlex.quote(x) for x in (argv if argv is not None else sys.argv[1:]))
+    command = ("python experiments/grasp.py " + " ".join(shlex.quote(x) for x in (argv if argv is not None else sys.argv[1:]))).strip()
     if a.report_only:
-        sessions = json.loads((REPO / "runs" / "grasp_sweep.json").read_text())["sessions"]
+        manifest = json.loads(Path(a.manifest).read_text())
+        sessions, command = manifest["sessions"], manifest.get("command", command)
+        for extra in a.also:
+            m = json.loads(Path(extra).read_text())
+            sessions += m["sessions"]
+            command += f"` and `{m.get('command', extra)}"
+    elif a.reuse_maps:
+        sessions = regrasp(a, command)
     else:
-        sessions = run_sweep(a)
-    report = write_reports(sessions, REPO / a.out, command.strip())
+        sessions = run_sweep(a, command)
+    report = write_reports(sessions, REPO / a.out, command)
     print(f"{len(report['rows'])} rows → {a.out}/grasping.md")
     return 0
 

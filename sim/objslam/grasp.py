@@ -114,6 +114,10 @@ class GraspSession:
         self.rec = rec
         self.removed: set[int] = set()
         self.frame = 0
+        self.last_plan: dict[str, Any] | None = None
+        """The grasp plan of the last executed attempt (for placing)."""
+        self.last_target: dict[str, Any] | None = None
+        """The (refined) map object of the last executed attempt."""
 
     # ----- low-level execution ---------------------------------------------------------------------
     def q_arm(self) -> np.ndarray:
@@ -282,6 +286,7 @@ class GraspSession:
             out.update(cause=plan["cause"], message=plan["message"])
             return out
         self._log_plan(k, plan)
+        self.last_plan, self.last_target = plan, target
         open_half = float(plan["open_width_m"]) / 2.0
         out.update(
             open_width_m=float(plan["open_width_m"]),
