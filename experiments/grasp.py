@@ -30,7 +30,7 @@ from typing import Any
 
 REPO = Path(__file__).resolve().parents[1]
 SOURCES = ("estimated", "ground_truth", "init_only")
-CAUSES = ("no_ik", "no_path", "too_wide", "collided", "missed", "slipped", "phantom", "not_found", "not_in_map")
+CAUSES = ("no_ik", "no_path", "too_wide", "collided", "missed", "slipped", "wrong_object", "phantom", "not_found", "not_in_map")
 
 
 def _session(scene: Any, cfg: Any, map_objects: list[dict], source: str, run_dir: Path, gcfg: Any, tag: str) -> Path:
@@ -230,7 +230,11 @@ def write_reports(sessions: list[str], out: Path, command: str) -> dict[str, Any
         "Causes: `no_ik` no collision-free IK for any candidate; `no_path` IK but no collision-free path;",
         "`too_wide` the map's estimate is wider than the gripper; `collided` an object moved > 2 cm",
         "before closing or the arm was blocked; `missed` closed without lifting the object; `slipped`",
-        "lifted ≥ 2 cm but not held ≥ 10 cm; `not_in_map` no map object for a graspable true object.",
+        "lifted ≥ 2 cm but not held ≥ 10 cm; `wrong_object` another true object was lifted; `phantom` an",
+        "attempt on a map object with no true object there; `not_found` the close views found nothing at a",
+        "real object's estimate; `not_in_map` no map object for a graspable true object. Rows skipped (not",
+        "attempts): phantoms the close views did not find, duplicates of already grasped objects, map",
+        "objects too wide both in the map and in truth.",
         "",
     ]
     (out / "grasping.md").write_text("\n".join(lines))

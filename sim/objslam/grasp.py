@@ -19,7 +19,10 @@ Choices (config fields of :class:`GraspRunConfig`):
   but did not stay ≥ ``lift_success_m`` up), ``not_in_map`` (a graspable true object no map object
   matches), ``phantom`` (an attempt on a map object with no true object near it), ``not_found``
   (with re-observation: the close views found no object at the map's estimate; for phantoms this
-  is the right call and the row is skipped, not an attempt). Success rows have cause ``"none"``.
+  is the right call and the row is skipped, not an attempt), ``wrong_object`` (another true object
+  was lifted). A map object no true object is matched to that, on the attempt, lifts exactly one
+  true object is a duplicate resolved by the grasp: a success for that object (whose own map
+  object is then skipped as ``already_grasped``). Success rows have cause ``"none"``.
 - Graspable in ground truth: narrowest horizontal width ≤ the gripper's 8 cm opening minus 4 mm.
   Map objects the planner finds too wide are attempts only when their true object is graspable.
 - Re-observation (``reobserve``, off by default): before each attempt, three close views of the
@@ -79,6 +82,17 @@ class GraspRunConfig:
     reobserve: bool = False
     """Before each attempt, look at the target from close views and re-estimate it in a fresh local
     map (the core's pipeline, same settings as the exploration); the refined estimate is grasped."""
+    reobserve_views: str = "top"
+    """``"top"``: two top-down views above the estimate (0.36 and 0.29 m); ``"top+oblique"``: a
+    top-down view and two obliques from the robot's side."""
+    reobserve_frame_rate_hz: float = 2.0
+    """Frames fused while moving between re-observation views, per simulated second."""
+    reobserve_obstacles: str = "local"
+    """``"local"``: only the local map's objects are obstacles of the attempt (the close views cover
+    the target's neighbourhood; far map objects, phantoms included, are ignored); ``"replace"``:
+    the local objects replace the map's within ``reobserve_replace_m``, farther map objects stay."""
+    reobserve_combine: str = "hybrid"
+    """How the local estimate refines the map's (see :func:`combine`): ``"hybrid"`` or ``"local"``."""
     reobserve_height_m: float = 0.36
     """Height of the top-down re-observation view above the target's estimated centre, metres."""
     reobserve_offset_m: float = 0.20
@@ -88,8 +102,12 @@ class GraspRunConfig:
     reobserve_replace_m: float = 0.15
     """Map objects within this x-y distance of the refined target are replaced, as obstacles, by
     the local map's objects (the close views see that neighbourhood), metres."""
-    planner: dict[str, Any] = field(default_factory=dict)
-    """Overrides of the core planner's config (keys in ``Planner``'s stub docs)."""
+    planner: dict[str, Any] = field(
+        default_factory=lambda: {"opening_clearance_m": 0.08, "max_grasp_depth_m": 0.04}
+    )
+    """Overrides of the core planner's config (keys in ``Planner``'s stub docs). Default: open the
+    fingers fully (the most room for a centre error; the opening is capped at 8 cm) and grasp up to
+    4 cm below the estimated top (room for a height error; the palm is ~5.8 cm above the pads)."""
 
 
 def narrowest_width(geometry: dict[str, Any]) -> float:
@@ -219,17 +237,26 @@ class GraspSession:
         c = np.array(target["geometry"]["center"], dtype=float)
         c[2] = 0.5 * c[2]
         side = -1.0 if c[1] > 0 else 1.0
-        eyes = [
-            c + [0.0, 0.0, cfg.reobserve_height_m],
-            c + [-cfg.reobserve_offset_m, 0.0, cfg.reobserve_height_m - 0.05],
-            c + [0.0, side * cfg.reobserve_offset_m, cfg.reobserve_height_m - 0.05],
-        ]
+        if cfg.reobserve_views == "top":
+            # Straight above the estimate from two heights: every side is seen alike, so the centre
+            # is not pulled toward the camera.
+            eyes = [c + [0.0, 0.0, cfg.reobserve_height_m], c + [0.0, 0.0, cfg.reobserve_height_m - 0.07]]
+        else:
+            eyes = [
+                c + [0.0, 0.0, cfg.reobserve_height_m],
+                c + [-cfg.reobserve_offset_m, 0.0, cfg.reobserve_height_m - 0.05],
+                c + [0.0, side * cfg.reobserve_offset_m, cfg.reobserve_height_m - 0.05],
+            ]
         frames = 0
         for vi, eye in enumerate(eyes):
-            view = look_at(eye, c, np.array([1.0, 0.0, 0.0]) if vi == 0 else None)
+            top = cfg.reobserve_views == "top" or vi == 0
+            view = look_at(eye, c, np.array([1.0, 0.0, 0.0]) if top else None)
             try:
                 for frame in self.world.move_camera_to(
-                    view, frame_rate_hz=rc.frame_rate_hz, max_joint_speed=rc.max_joint_speed, what="re-observation"
+                    view,
+                    frame_rate_hz=cfg.reobserve_frame_rate_hz,
+                    max_joint_speed=rc.max_joint_speed,
+                    what="re-observation",
                 ):
                     dets = self.detector.detect(frame.segmentation, self.world.actor_to_object)
                     mapper.update(
@@ -270,14 +297,14 @@ class GraspSession:
                 # Nothing there on a close look: the map object was a phantom (or has gone).
                 out.update(cause="not_found", skipped=gt_id is None)
                 return out
-            target = {**target, "geometry": refined["geometry"]}
+            target = {**target, "geometry": combine(target["geometry"], refined["geometry"], cfg)}
             # Near the target the close views know better: their objects replace the map's there.
             c = target["geometry"]["center"]
             near = [n for n in local if n["id"] != refined["id"]]
             far = [
                 n for n in neighbours if math.dist(n["geometry"]["center"][:2], c[:2]) > cfg.reobserve_replace_m
             ]
-            neighbours = far + near
+            neighbours = near if cfg.reobserve_obstacles == "local" else far + near
             out["target_geometry"] = target["geometry"]
         plan = self.planner.plan_grasp(
             self.q_arm(), json.dumps(target["geometry"]), json.dumps([n["geometry"] for n in neighbours])
@@ -313,12 +340,20 @@ class GraspSession:
 
         self.execute(plan["lift"], 0.0, track)
         self.hold(cfg.hold_s, 0.0, track)
-        rise = float(self.gt_positions()[gt_id][2] - z0) if gt_id is not None else 0.0
-        out.update(rise_m=rise, max_rise_m=max_rise[0], held_gap_m=self.finger_gap_m())
-        if gt_id is None:
-            out["cause"] = "phantom"  # no true object where the map put one
-        elif rise >= cfg.lift_success_m:
+        now = self.gt_positions()
+        rise = float(now[gt_id][2] - z0) if gt_id is not None else 0.0
+        lifted = [oid for oid in now if oid in start and now[oid][2] - start[oid][2] >= cfg.lift_success_m]
+        out.update(rise_m=rise, max_rise_m=max_rise[0], held_gap_m=self.finger_gap_m(), lifted=lifted)
+        if gt_id is not None and rise >= cfg.lift_success_m:
             out.update(success=True, cause="none")
+        elif gt_id is None and len(lifted) == 1:
+            # A map object no true object was matched to (a duplicate of one matched to another map
+            # object) turned out to be that object: it was grasped and lifted.
+            out.update(success=True, cause="none", gt_id=lifted[0], resolved_duplicate=True)
+        elif gt_id is None:
+            out["cause"] = "phantom"  # no true object where the map put one
+        elif lifted:
+            out["cause"] = "wrong_object"
         elif collided:
             out["cause"] = "collided"
         elif max_rise[0] >= cfg.slip_rise_m:
@@ -329,6 +364,34 @@ class GraspSession:
         self._log("set_frame", self.frame, self.world.sim_time_s)
         self._log("log_scalar", "grasp/finger_gap_m", out["closed_gap_m"])
         return out
+
+
+def combine(mapped: dict[str, Any], local: dict[str, Any], cfg: GraspRunConfig) -> dict[str, Any]:
+    """The target geometry grasped after re-observation (``cfg.reobserve_combine``):
+    ``"local"`` = the local estimate as is; ``"hybrid"`` = centre x-y and yaw from the close
+    top-down views (accurate there), horizontal size the larger of both unless the map's is too
+    wide for the gripper, top height from the map (top-down views see little of the sides), and
+    the bottom on the table (objects stand on it)."""
+    if cfg.reobserve_combine == "local":
+        return local
+    mh, lh = mapped["half_extents"], local["half_extents"]
+    if narrowest_width(mapped) <= MAX_GRASP_WIDTH_M:
+        hx, hy = max(mh[0], lh[0]), max(mh[1], lh[1])
+        if mapped["shape"] == "cuboid" and local["shape"] == "cuboid":
+            # Same sides after the yaw change (the local yaw may be off by 90 degrees).
+            d = abs(math.remainder(local["yaw_rad"] - mapped["yaw_rad"], math.pi))
+            if d > math.pi / 4:
+                hx, hy = max(mh[1], lh[0]), max(mh[0], lh[1])
+    else:
+        hx, hy = lh[0], lh[1]
+    top = mapped["center"][2] + mh[2]
+    hz = max(top / 2.0, 0.005)
+    return {
+        "shape": local["shape"],
+        "center": [local["center"][0], local["center"][1], hz],
+        "yaw_rad": local["yaw_rad"],
+        "half_extents": [hx, hy, hz],
+    }
 
 
 def match_gt(map_objects: list[dict[str, Any]], gt: list[dict[str, Any]], radius_m: float) -> dict[int, int | None]:
@@ -373,7 +436,15 @@ def run_grasp_session(
     for k, target in enumerate(map_objects):
         gt_id = match[target["id"]]
         neighbours = [m for m in remaining if m["id"] != target["id"]]
+        if gt_id is not None and gt_id in session.removed:
+            # Already grasped through a duplicate map object: nothing left to do here.
+            rows.append({"map_id": target["id"], "map_label": target["label"], "object": f"gt{gt_id}",
+                         "class": gt_by_id[gt_id]["label"], "success": False, "cause": "already_grasped",
+                         "gt_id": gt_id, "skipped": True})
+            remaining = [m for m in remaining if m["id"] != target["id"]]
+            continue
         res = session.attempt(k, target, neighbours, gt_id)
+        gt_id = res["gt_id"]
         if res["cause"] == "too_wide" and (gt_id is None or gt_id not in graspable_gt):
             res["skipped"] = True  # too wide in the map and in truth: not an attempt
         row = {
@@ -386,8 +457,10 @@ def run_grasp_session(
         rows.append(row)
         session._log("log_event", f"grasp {k} map {target['id']} ({target['label']}) → {row['object']}: "
                      f"{'success' if res['success'] else res['cause']}")
-        if res["success"] and gt_id is not None:
-            session.set_aside(gt_id)
+        for oid in res.get("lifted", []):  # whatever is in the hand is set aside
+            if oid not in session.removed:
+                session.set_aside(oid)
+        if res["success"]:
             remaining = [m for m in remaining if m["id"] != target["id"]]
         if "open_width_m" in res:
             session.go_ready([m["geometry"] for m in remaining])
