@@ -155,8 +155,7 @@ def _rate(rows: list[dict]) -> str:
     return f"{s}/{n} ({100.0 * s / n:.1f} %)" if n else "-"
 
 
-def write_reports(sessions: list[str], out: Path, command: str) -> dict[str, Any]:
-    """grasping.json / grasping.md from session files."""
+def _rows(sessions: list[str]) -> list[dict[str, Any]]:
     rows: list[dict[str, Any]] = []
     for p in sessions:
         d = json.loads(Path(p).read_text())
@@ -181,8 +180,20 @@ def write_reports(sessions: list[str], out: Path, command: str) -> dict[str, Any
                     "run_dir": d["map_run"],
                 }
             )
+    return rows
+
+
+def write_reports(
+    sessions: list[str], out: Path, command: str, comparison: list[str] | None = None, comparison_note: str = ""
+) -> dict[str, Any]:
+    """grasping.json / grasping.md from session files (``comparison``: sessions of another variant,
+    reported apart in ``comparison_rows`` and their own table)."""
+    rows = _rows(sessions)
+    comp = _rows(comparison or [])
     out.mkdir(parents=True, exist_ok=True)
     report = {"command": command, "sessions": sessions, "rows": rows}
+    if comp:
+        report.update(comparison_sessions=comparison, comparison_rows=comp, comparison_note=comparison_note)
     (out / "grasping.json").write_text(json.dumps(report, indent=2) + "\n")
     def variant(r: dict[str, Any]) -> str:
         return r["map_source"] + (" + re-observation" if r["reobserve"] else "")
@@ -237,8 +248,30 @@ def write_reports(sessions: list[str], out: Path, command: str) -> dict[str, Any
         "objects too wide both in the map and in truth.",
         "",
     ]
+    if comp:
+        lines += [
+            "## Comparison: " + comparison_note,
+            "",
+            "From `comparison_rows` in `grasping.json` (not part of the tables above).",
+            "",
+            "| map source | attempts | success | causes |",
+            "|---|---:|---:|---|",
+        ]
+        for src in sorted({r["map_source"] for r in comp}, key=SOURCES.index):
+            rs = [r for r in comp if r["map_source"] == src]
+            cs = Counter(r["cause"] for r in rs if not r["success"])
+            lines.append(f"| {src} | {len(rs)} | {_rate(rs)} | " + ", ".join(f"{c} {n}" for c, n in cs.most_common()) + " |")
+        lines.append("")
     (out / "grasping.md").write_text("\n".join(lines))
     return report
+
+
+def _select(spec: str) -> tuple[list[str], dict[str, Any]]:
+    """Sessions of a manifest ``PATH[=SRC,SRC]`` (only those map sources when given)."""
+    path, _, srcs = spec.partition("=")
+    m = json.loads(Path(path).read_text())
+    keep = set(srcs.split(",")) if srcs else set(SOURCES)
+    return [p for p in m["sessions"] if json.loads(Path(p).read_text())["map_source"] in keep], m
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -257,25 +290,40 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--manifest", default=str(REPO / "runs" / "grasp_sweep.json"), help="the sweep's list of session files")
     ap.add_argument("--maps-from", default=str(REPO / "runs" / "grasp_sweep.json"), help="manifest whose maps --reuse-maps grasps on")
     ap.add_argument("--report-only", action="store_true", help="rebuild the reports from the manifest")
-    ap.add_argument("--also", action="append", default=[], help="with --report-only: more manifests to include")
+    ap.add_argument(
+        "--also", action="append", default=[], metavar="MANIFEST[=SRC,SRC]",
+        help="with --report-only: more sessions for the main tables (optionally only these sources)",
+    )
+    ap.add_argument(
+        "--compare", action="append", default=[], metavar="MANIFEST[=SRC,SRC]",
+        help="with --report-only: sessions of another variant, reported apart (comparison_rows)",
+    )
+    ap.add_argument("--compare-note", default="", help="title of the comparison table")
     ap.add_argument(
         "--reuse-maps", action="store_true",
         help="grasp again on the maps of the sweep in runs/grasp_sweep.json instead of mapping anew",
     )
     a = ap.parse_args(argv)
     command = ("python experiments/grasp.py " + " ".join(shlex.quote(x) for x in (argv if argv is not None else sys.argv[1:]))).strip()
+    comparison: list[str] = []
     if a.report_only:
         manifest = json.loads(Path(a.manifest).read_text())
-        sessions, command = manifest["sessions"], manifest.get("command", command)
+        sessions = manifest["sessions"]
+        made_by = [manifest.get("command", a.manifest)]
         for extra in a.also:
-            m = json.loads(Path(extra).read_text())
-            sessions += m["sessions"]
-            command += f"` and `{m.get('command', extra)}"
+            sel, m = _select(extra)
+            sessions += sel
+            made_by.append(m.get("command", extra))
+        for extra in a.compare:
+            sel, m = _select(extra)
+            comparison += sel
+            made_by.append(m.get("command", extra))
+        command += "` on the sessions of `" + "`, `".join(made_by)
     elif a.reuse_maps:
         sessions = regrasp(a, command)
     else:
         sessions = run_sweep(a, command)
-    report = write_reports(sessions, REPO / a.out, command)
+    report = write_reports(sessions, REPO / a.out, command, comparison, a.compare_note)
     print(f"{len(report['rows'])} rows → {a.out}/grasping.md")
     return 0
 

@@ -85,6 +85,8 @@ class GraspRunConfig:
     reobserve_views: str = "top"
     """``"top"``: two top-down views above the estimate (0.36 and 0.29 m); ``"top+oblique"``: a
     top-down view and two obliques from the robot's side."""
+    reobserve_still_frames: int = 2
+    """Extra frames rendered at each settled re-observation view."""
     reobserve_frame_rate_hz: float = 2.0
     """Frames fused while moving between re-observation views, per simulated second."""
     reobserve_obstacles: str = "local"
@@ -250,28 +252,42 @@ class GraspSession:
         frames = 0
         for vi, eye in enumerate(eyes):
             top = cfg.reobserve_views == "top" or vi == 0
-            view = look_at(eye, c, np.array([1.0, 0.0, 0.0]) if top else None)
+            # The camera's roll about its axis decides reachability (joint 7 limits): try four.
+            hints = [np.array(h, dtype=float) for h in ((1, 0, 0), (0, 1, 0), (0, -1, 0), (-1, 0, 0))] if top else [None]
+            view = None
+            for h in hints:
+                v = look_at(eye, c, h)
+                if self.world.is_reachable(v):
+                    view = v
+                    break
+            if view is None:
+                continue
             try:
-                for frame in self.world.move_camera_to(
-                    view,
-                    frame_rate_hz=cfg.reobserve_frame_rate_hz,
-                    max_joint_speed=rc.max_joint_speed,
-                    what="re-observation",
-                ):
-                    dets = self.detector.detect(frame.segmentation, self.world.actor_to_object)
-                    mapper.update(
-                        index=frames,
-                        intrinsics=frame.intrinsics,
-                        depth=frame.depth_m,
-                        world_from_camera=frame.world_from_camera_fk,
-                        detections=[d.as_tuple() for d in dets],
-                        grey=grey_of(frame.rgb) if (rc.parameterize or rc.pose_source != "fk") else None,
-                        world_from_camera_gt=frame.world_from_camera_gt,
-                        view_index=vi,
+                moved = list(
+                    self.world.move_camera_to(
+                        view,
+                        frame_rate_hz=cfg.reobserve_frame_rate_hz,
+                        max_joint_speed=rc.max_joint_speed,
+                        what="re-observation",
                     )
-                    frames += 1
+                )
             except (UnreachablePoseError, MotionError):
                 continue
+            # A few more frames from the settled view (fresh sensor noise and detector draws), so a
+            # short move still gives the pipeline enough observations to confirm the object.
+            for frame in moved + [self.world.render() for _ in range(cfg.reobserve_still_frames)]:
+                dets = self.detector.detect(frame.segmentation, self.world.actor_to_object)
+                mapper.update(
+                    index=frames,
+                    intrinsics=frame.intrinsics,
+                    depth=frame.depth_m,
+                    world_from_camera=frame.world_from_camera_fk,
+                    detections=[d.as_tuple() for d in dets],
+                    grey=grey_of(frame.rgb) if (rc.parameterize or rc.pose_source != "fk") else None,
+                    world_from_camera_gt=frame.world_from_camera_gt,
+                    view_index=vi,
+                )
+                frames += 1
             mapper.view_done(False)
         mapper.refresh_estimates()
         local = json.loads(mapper.objects_json())
