@@ -6,8 +6,8 @@ Entry point: :func:`run_place_task` (``make place`` → ``experiments/place.py``
   estimated volume). The simulator's cups are solid cylinders, so "into" is "onto its top".
   Success: the truly smallest block rests on the truly largest cup (its centre within the cup's
   true radius of the cup's axis, its bottom within 2 cm above the cup's top) after a 1 s wait.
-- ``cups_by_volume``: every cup of the map goes to a slot of a line (along y, 12 cm apart, the first
-  line of free table found from the map), ordered by estimated volume. Success: every true cup is
+- ``cups_by_volume``: every cup of the map goes to a slot of a line (along y, 10 cm apart, the first
+  line found from the map clear of the other objects by 4 cm), ordered by estimated volume. Success: every true cup is
   upright within ``slot_tolerance_m`` of a slot and their true volumes increase along the line.
 - ``bottles_by_height``: the same with the bottles, ordered by estimated height.
 
@@ -40,9 +40,9 @@ TASKS = ("block_in_cup", "cups_by_volume", "bottles_by_height")
 class PlaceConfig:
     """Placement settings."""
 
-    slot_spacing_m: float = 0.12
+    slot_spacing_m: float = 0.10
     """Distance between neighbouring slots of a line, metres."""
-    slot_clearance_m: float = 0.05
+    slot_clearance_m: float = 0.04
     """A slot is free when no map object's footprint comes closer than this to it, metres."""
     slot_tolerance_m: float = 0.04
     """A true object counts as at its slot within this x-y distance, metres."""
@@ -85,13 +85,13 @@ def top_down(x: float, y: float, z: float, yaw: float) -> np.ndarray:
 
 def free_line(map_objects: list[dict[str, Any]], n: int, cfg: PlaceConfig) -> list[tuple[float, float]] | None:
     """``n`` slots along y, centred on the first free line found (x from near to far, then y shifts)."""
-    for x in np.arange(0.32, 0.66, 0.03):
-        for y0 in (0.0, -0.1, 0.1, -0.2, 0.2):
+    for x in np.arange(0.28, 0.71, 0.03):
+        for y0 in (0.0, -0.1, 0.1, -0.2, 0.2, -0.3, 0.3):
             slots = [(float(x), float(y0 + (i - (n - 1) / 2) * cfg.slot_spacing_m)) for i in range(n)]
             if any(abs(sy) > 0.45 for _, sy in slots):
                 continue
             ok = all(
-                math.dist(s, o["geometry"]["center"][:2]) > footprint_radius(o["geometry"]) + cfg.slot_clearance_m + 0.04
+                math.dist(s, o["geometry"]["center"][:2]) > footprint_radius(o["geometry"]) + cfg.slot_clearance_m
                 for s in slots
                 for o in map_objects
             )
@@ -204,7 +204,8 @@ def run_place_task(
     if len(items) < 2 or len(true_items) < 2:
         out["reason"] = "not_applicable"
         return out
-    slots = free_line(objs, len(items), cfg)
+    # The items themselves leave their places, so only the other objects must clear the line.
+    slots = free_line([o for o in objs if o["label"] != label], len(items), cfg)
     if slots is None:
         out["reason"] = "no_free_line"
         return out
