@@ -7,8 +7,10 @@ RUN_ARGS ?=
 BENCHMARK_ARGS ?=
 ABLATION_ARGS ?=
 MATCH_SIM_ARGS ?=
+GRASP_ARGS ?=
+PLACE_ARGS ?=
 
-.PHONY: help setup run test test-rust test-py bench benchmark associate parameterize slam match match-sim report view lint fmt clean
+.PHONY: help setup run test test-rust test-py bench benchmark associate parameterize slam grasp place match match-sim report view lint fmt clean
 
 help: ## List the targets
 	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*## "}; {printf "  \033[1m%-12s\033[0m %s\n", $$1, $$2}'
@@ -43,6 +45,12 @@ parameterize: setup ## Parameterization stages (raw → iForest → lines → re
 
 slam: setup ## Pose accuracy: scenes × pose sources (slam, kinematics) → reports/slam.{md,json}
 	$(PY) experiments/ablations.py slam $(ABLATION_ARGS)
+
+grasp: setup ## Grasp success: 7 scenes × seeds × map sources (estimated, ground_truth, init_only) → reports/grasping.{md,json}
+	$(PY) experiments/grasp.py $(GRASP_ARGS)
+
+place: setup ## Placement tasks on the maps of the last grasp sweep (runs/grasp_sweep.json) → reports/placement.{md,json}
+	$(PY) experiments/place.py $(PLACE_ARGS)
 
 match: ## Scene matching vs shared-object ratio (500 trials per row) → reports/scene_matching.{md,json}
 	cargo run --release -p objslam-core --example match_experiment -- --scenes scenes --out reports --other-seeds 1,2,3

@@ -14,6 +14,7 @@ use objslam_core::map::{Label, MapError, ObjectMap};
 use objslam_core::naive::{NaiveConfig, NaiveMapper};
 use objslam_core::record::{DrawnObject, RecordError, Recorder};
 mod active;
+mod plan;
 mod topo;
 
 use pyo3::create_exception;
@@ -437,6 +438,8 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<NaiveMapperPy>()?;
     m.add_class::<RecorderPy>()?;
     m.add_class::<active::ActiveMapperPy>()?;
+    m.add("PlanningError", py.get_type::<plan::PlanningError>())?;
+    m.add_class::<plan::PlannerPy>()?;
     m.add_function(wrap_pyfunction!(evaluate_map, m)?)?;
     m.add_function(wrap_pyfunction!(load_map, m)?)?;
     m.add_function(wrap_pyfunction!(save_map, m)?)?;

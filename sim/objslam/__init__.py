@@ -8,11 +8,11 @@ package is the body: SAPIEN scenes (:mod:`objslam.scene`, :mod:`objslam.world`),
 - :func:`load_scene`, :func:`generate_scene`, :class:`SceneSpec`, :class:`SceneFileError`
 - :class:`RunConfig`, :func:`load_run_config`
 - :func:`run_episode`
-- :class:`NaiveMapper`, :class:`Recorder`, :func:`evaluate_map`, :func:`load_map`, :func:`save_map`
+- :class:`NaiveMapper`, :class:`Planner` (Panda motion planning, grasps), :class:`Recorder`, :func:`evaluate_map`, :func:`load_map`, :func:`save_map`
 - :func:`match_maps`, :func:`relocalise` (scene matching of two map JSONs; helpers in
   :mod:`objslam.topo`)
 - exceptions :class:`ObjslamError` (base), :class:`InputError`, :class:`MapFileError`,
-  :class:`RecordingError` raised by the core.
+  :class:`RecordingError`, :class:`PlanningError` raised by the core.
 """
 
 from ._native import (
@@ -20,6 +20,8 @@ from ._native import (
     MapFileError,
     NaiveMapper,
     ObjslamError,
+    Planner,
+    PlanningError,
     Recorder,
     RecordingError,
     __version__,
@@ -37,6 +39,8 @@ __all__ = [
     "MapFileError",
     "NaiveMapper",
     "ObjslamError",
+    "Planner",
+    "PlanningError",
     "Recorder",
     "RecordingError",
     "SceneFileError",

@@ -132,6 +132,37 @@ class _Recorder:
         return getattr(self.rec, name)
 
 
+def new_mapper(cfg: RunConfig, scene: SceneSpec) -> Any:
+    """A fresh :class:`_native.ActiveMapper` (association, parameterization, grids, tracker) for
+    a run config and scene (also used for the local re-observation maps of :mod:`objslam.grasp`)."""
+    return _native.ActiveMapper(
+        mapper_config_json=json.dumps(
+            {
+                "association_mode": cfg.association_mode,
+                "parameterize": cfg.parameterize,
+                "consolidate": cfg.consolidate,
+                "consolidate_cloud_overlap": cfg.consolidate_cloud_overlap,
+                "relabel_vote_ratio": cfg.relabel_vote_ratio,
+                "min_observations": cfg.min_observations,
+                # Only when not the default, so a core built before the option still loads.
+                **({"object_points": cfg.object_points} if cfg.object_points != "depth" else {}),
+                "naive": to_dict(cfg.naive),
+                "param": {
+                    "refine": {
+                        "refine_center": cfg.param.refine_center,
+                        "prior_px_per_m": cfg.param.refine_prior_px_per_m,
+                    }
+                },
+            }
+        ),
+        active_config_json=json.dumps(active_config(cfg)),
+        table=(*scene.table.center, *scene.table.size),
+        tracker_config_json=None
+        if cfg.pose_source == "fk"
+        else json.dumps({"pose_source": cfg.pose_source, "kinematic_noise": {**to_dict(cfg.pose_noise), "seed": cfg.seed}}),
+    )
+
+
 def run_episode(cfg: RunConfig, *, progress: bool = True, on_frame: Callable[[SensorFrame], None] | None = None) -> EpisodeResult:
     """Run one episode and write its run folder. Raises on failure after marking the folder."""
     cfg.validate()
@@ -154,32 +185,7 @@ def run_episode(cfg: RunConfig, *, progress: bool = True, on_frame: Callable[[Se
     assignments: list[tuple[int, int | None]] = []
     view_counter = [0]
     try:
-        mapper = _native.ActiveMapper(
-            mapper_config_json=json.dumps(
-                {
-                    "association_mode": cfg.association_mode,
-                    "parameterize": cfg.parameterize,
-                    "consolidate": cfg.consolidate,
-                    "consolidate_cloud_overlap": cfg.consolidate_cloud_overlap,
-                    "relabel_vote_ratio": cfg.relabel_vote_ratio,
-                    "min_observations": cfg.min_observations,
-                    # Only when not the default, so a core built before the option still loads.
-                    **({"object_points": cfg.object_points} if cfg.object_points != "depth" else {}),
-                    "naive": to_dict(cfg.naive),
-                    "param": {
-                        "refine": {
-                            "refine_center": cfg.param.refine_center,
-                            "prior_px_per_m": cfg.param.refine_prior_px_per_m,
-                        }
-                    },
-                }
-            ),
-            active_config_json=json.dumps(active_config(cfg)),
-            table=(*scene.table.center, *scene.table.size),
-            tracker_config_json=None
-            if cfg.pose_source == "fk"
-            else json.dumps({"pose_source": cfg.pose_source, "kinematic_noise": {**to_dict(cfg.pose_noise), "seed": cfg.seed}}),
-        )
+        mapper = new_mapper(cfg, scene)
         rng_sensor = np.random.default_rng([cfg.seed, 1])
         rng_detector = np.random.default_rng([cfg.seed, 2])
         world = SimWorld(scene, cfg.camera, rng_sensor)

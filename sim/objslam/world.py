@@ -33,6 +33,8 @@ ARM_STIFFNESS, ARM_DAMPING, ARM_FORCE_LIMIT = 1000.0, 100.0, 100.0
 #: Gripper finger drive.
 GRIPPER_STIFFNESS, GRIPPER_DAMPING, GRIPPER_FORCE_LIMIT = 1000.0, 100.0, 100.0
 GRIPPER_OPEN_M = 0.04
+#: Physics settings for grasping (ManiSkill's; ECOSYSTEM.md), used with ``SimWorld(grasp_physics=True)``.
+GRASP_PHYSICS = {"contact_offset_m": 0.02, "solver_position_iterations": 25, "patch_radius_m": 0.1}
 #: The camera path length is sampled every this many physics steps (30 Hz).
 PATH_SAMPLE_STEPS = PHYSICS_HZ // 30
 #: A comfortable start configuration (camera looking down over the table).
@@ -126,7 +128,12 @@ def look_at(eye: np.ndarray, target: np.ndarray, up_hint: np.ndarray | None = No
 class SimWorld:
     """A built scene with the robot and its hand camera."""
 
-    def __init__(self, spec: SceneSpec, camera: CameraConfig, rng: np.random.Generator) -> None:
+    def __init__(
+        self, spec: SceneSpec, camera: CameraConfig, rng: np.random.Generator, *, grasp_physics: bool = False
+    ) -> None:
+        """``grasp_physics``: ManiSkill's settings for reliable grasps (contact offset 0.02 m, 25 solver
+        position iterations, finger patch radius 0.1 m; see :data:`GRASP_PHYSICS`). Off for the
+        mapping episodes, whose physics only settles objects."""
         camera.validate()
         self.spec = spec
         self.camera_config = camera
@@ -139,7 +146,21 @@ class SimWorld:
         self._ik_cache: dict[bytes, np.ndarray] = {}
         self._last_camera_xyz: np.ndarray | None = None
 
-        scene = sapien.Scene()
+        self.grasp_physics = grasp_physics
+        shape_default, body_default = sapien.physx.get_shape_config(), sapien.physx.get_body_config()
+        if grasp_physics:
+            sapien.physx.set_shape_config(contact_offset=GRASP_PHYSICS["contact_offset_m"], rest_offset=0.0)
+            sapien.physx.set_body_config(
+                solver_position_iterations=GRASP_PHYSICS["solver_position_iterations"], solver_velocity_iterations=1
+            )
+        try:
+            scene = sapien.Scene()
+            self._build(scene, spec, camera)
+        finally:  # the configs are process-wide defaults: restore them for later worlds
+            sapien.physx.set_shape_config(shape_default)
+            sapien.physx.set_body_config(body_default)
+
+    def _build(self, scene: sapien.Scene, spec: SceneSpec, camera: CameraConfig) -> None:
         scene.set_timestep(1.0 / PHYSICS_HZ)
         self.scene = scene
         scene.set_ambient_light([0.45, 0.45, 0.45])
@@ -212,6 +233,12 @@ class SimWorld:
         for finger in ("panda_leftfinger", "panda_rightfinger"):
             loader.set_link_material(finger, 2.0, 2.0, 0.0)
         robot = loader.load(str(panda_urdf_path()))
+        if self.grasp_physics:
+            for link in robot.get_links():
+                if link.name in ("panda_leftfinger", "panda_rightfinger"):
+                    for shape in link.get_collision_shapes():
+                        shape.set_patch_radius(GRASP_PHYSICS["patch_radius_m"])
+                        shape.set_min_patch_radius(GRASP_PHYSICS["patch_radius_m"])
         robot.set_root_pose(sapien.Pose([0, 0, 0]))
         self.robot = robot
         self.joints = robot.get_active_joints()

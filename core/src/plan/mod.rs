@@ -194,6 +194,15 @@ pub enum PlanError {
         /// Candidates tried.
         candidates: usize,
     },
+    /// Some grasp candidates have collision-free IK solutions, but no collision-free path leads to
+    /// (or through) any of them.
+    #[error("{reachable} of {candidates} grasp candidates are reachable, but no collision-free path leads to them")]
+    NoGraspPath {
+        /// Candidates tried.
+        candidates: usize,
+        /// Candidates with IK solutions for all three poses.
+        reachable: usize,
+    },
 }
 
 /// Settings of the [`Planner`].
@@ -518,8 +527,9 @@ impl Planner {
     /// objects, pre-grasp → grasp and grasp → lift among the neighbours only (the fingers straddle
     /// the target). Tries the ranked candidates in order.
     ///
-    /// Errors: those of [`Planner::grasp_candidates`], or [`PlanError::NoReachableGrasp`] when no
-    /// candidate is reachable and plannable.
+    /// Errors: those of [`Planner::grasp_candidates`], [`PlanError::NoReachableGrasp`] when no
+    /// candidate has collision-free IK solutions, [`PlanError::NoGraspPath`] when some have but no
+    /// path to them is found.
     pub fn plan_grasp(
         &self,
         q_start: &JointVector,
@@ -532,6 +542,7 @@ impl Planner {
         all.push(*object);
         let scene_all = self.scene(&all)?;
         let scene_neigh = self.scene(neighbours)?;
+        let reachable = candidates.iter().filter(|c| c.reachable()).count();
         for c in candidates {
             let (Some(qp), Some(qg), Some(ql)) = (c.q_pregrasp, c.q_grasp, c.q_lift) else {
                 continue;
@@ -556,6 +567,10 @@ impl Planner {
                 candidate: c,
             });
         }
-        Err(PlanError::NoReachableGrasp { candidates: n })
+        if reachable == 0 {
+            Err(PlanError::NoReachableGrasp { candidates: n })
+        } else {
+            Err(PlanError::NoGraspPath { candidates: n, reachable })
+        }
     }
 }

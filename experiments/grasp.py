@@ -1,0 +1,334 @@
+"""Grasp success from object maps: ``python experiments/grasp.py [--scenes ...] [--seeds 0 1]
+[--sources estimated ground_truth init_only] [--config overlay.toml] [--set k=v] [--out reports]``.
+
+Per scene and seed: the object-driven exploration builds the estimated map and the Init-only
+episode the lower-bound map (both ordinary runs of the episode runner, each its own run folder);
+then, for every map source — ``estimated`` (object-driven map), ``ground_truth`` (true poses and
+sizes: the upper bound), ``init_only`` (the Init views' map) — a fresh simulated world grasps every
+map object one after another (:mod:`objslam.grasp`). Each session writes
+``grasp_<source>.json`` (rows + config) and ``grasp_<source>.rrd`` (planned TCP paths, grasp
+frames, finger gap, outcome events) into the run folder of its map. The sweep's list of session
+files goes to ``runs/grasp_sweep.json``; ``--report-only`` rebuilds the reports from it.
+
+Reports (from the session files): ``<out>/grasping.json`` = {"command", "sessions", "rows":
+[{"scene", "seed", "object", "class", "map_source", "success", "cause", ...}]} and
+``<out>/grasping.md``: success overall, per class, per scene, failure causes, per map source.
+One process, one simulator at a time.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import shlex
+import sys
+import time
+from collections import Counter
+from pathlib import Path
+from typing import Any
+
+REPO = Path(__file__).resolve().parents[1]
+SOURCES = ("estimated", "ground_truth", "init_only")
+CAUSES = ("no_ik", "no_path", "too_wide", "collided", "missed", "slipped", "wrong_object", "phantom", "not_found", "not_in_map")
+
+
+def _session(scene: Any, cfg: Any, map_objects: list[dict], source: str, run_dir: Path, gcfg: Any, tag: str) -> Path:
+    from objslam import _native
+    from objslam.grasp import config_dict, run_grasp_session
+
+    t0 = time.perf_counter()
+    rec = _native.Recorder(str(run_dir / f"grasp_{source}{tag}.rrd"), "objslam-grasp") if cfg.record.enabled else None
+    try:
+        rows = run_grasp_session(scene, cfg, map_objects, gcfg, rec)
+    finally:
+        if rec is not None:
+            rec.close()
+    out = {
+        "scene": scene.name,
+        "seed": cfg.seed,
+        "map_source": source,
+        "map_run": str(run_dir),
+        "wall_s": time.perf_counter() - t0,
+        "config": config_dict(gcfg),
+        "rows": rows,
+    }
+    path = run_dir / f"grasp_{source}{tag}.json"
+    path.write_text(json.dumps(out, indent=2) + "\n")
+    return path
+
+
+def _grasp_config(a: argparse.Namespace, source: str) -> Any:
+    from objslam.grasp import GraspRunConfig
+
+    return GraspRunConfig(reobserve=source in a.reobserve)
+
+
+def _map_objects(source: str, scene: Any, run_dir: Path) -> list[dict]:
+    from objslam import _native
+    from objslam.scene import gt_objects
+
+    if source == "ground_truth":
+        return [{**g, "n_observations": 0} for g in gt_objects(scene)]
+    return json.loads(_native.map_objects_json(_native.load_map(str(run_dir / "map.json"))))
+
+
+def _print_session(path: Path, note: str) -> None:
+    d = json.loads(path.read_text())
+    att = [r for r in d["rows"] if not r.get("skipped")]
+    print(
+        f"{d['scene']} seed {d['seed']} {d['map_source']:<12} {sum(r['success'] for r in att)}/{len(att)} "
+        f"({note}grasping {d['wall_s']:.0f} s)",
+        flush=True,
+    )
+
+
+def _write_manifest(sessions: list[str], command: str, path: Path) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps({"command": command, "sessions": sessions}, indent=2) + "\n")
+
+
+def regrasp(a: argparse.Namespace, command: str) -> list[str]:
+    """Grasp sessions again on the maps of the sweep in ``runs/grasp_sweep.json`` (no new mapping)."""
+    from objslam.config import load_run_config
+    from objslam.scene import load_scene
+
+    old = json.loads(Path(a.maps_from).read_text())["sessions"]
+    sessions: list[str] = []
+    for p in old:
+        d = json.loads(Path(p).read_text())
+        if d["map_source"] not in a.sources or d["scene"] not in {Path(s).stem for s in a.scenes}:
+            continue
+        if d["seed"] not in a.seeds:
+            continue
+        run_dir = Path(d["map_run"])
+        overrides = [*a.set, f'scene="scenes/{d["scene"]}.toml"', f"seed={d['seed']}"]
+        cfg = load_run_config(overlays=a.config, overrides=overrides, strategy="object-driven")
+        scene = load_scene(REPO / "scenes" / f"{d['scene']}.toml")
+        objs = _map_objects(d["map_source"], scene, run_dir)
+        path = _session(scene, cfg, objs, d["map_source"], run_dir, _grasp_config(a, d["map_source"]), a.tag)
+        sessions.append(str(path))
+        _print_session(path, "reused map, ")
+        _write_manifest(sessions, command, Path(a.manifest))
+    return sessions
+
+
+def run_sweep(a: argparse.Namespace, command: str) -> list[str]:
+    from objslam.config import load_run_config
+    from objslam.episode import run_episode
+    from objslam.scene import load_scene
+
+    sessions: list[str] = []
+    for scene_file in a.scenes:
+        for seed in a.seeds:
+            overrides = [*a.set, f'scene="{scene_file}"', f"seed={seed}"]
+            cfg = load_run_config(overlays=a.config, overrides=overrides, strategy="object-driven")
+            scene = load_scene(REPO / scene_file)
+            t0 = time.perf_counter()
+            runs: dict[str, Path] = {}
+            try:
+                if "estimated" in a.sources or "ground_truth" in a.sources:
+                    runs["estimated"] = run_episode(cfg, progress=False).run_dir
+                if "init_only" in a.sources:
+                    runs["init_only"] = run_episode(dataclasses.replace(cfg, strategy="init"), progress=False).run_dir
+            except Exception as e:  # noqa: BLE001 - the run folder records it; the sweep goes on
+                print(f"{scene.name} seed {seed}: mapping failed: {type(e).__name__}: {e}", file=sys.stderr)
+                continue
+            t_map = time.perf_counter() - t0
+            for source in a.sources:
+                run_dir = runs["estimated" if source == "ground_truth" else source]
+                try:
+                    objs = _map_objects(source, scene, run_dir)
+                    path = _session(scene, cfg, objs, source, run_dir, _grasp_config(a, source), a.tag)
+                except Exception as e:  # noqa: BLE001 - one failed session never stops the sweep
+                    print(f"{scene.name} seed {seed} {source}: grasp session failed: {type(e).__name__}: {e}", file=sys.stderr)
+                    continue
+                sessions.append(str(path))
+                _print_session(path, f"mapping {t_map:.0f} s, ")
+            _write_manifest(sessions, command, Path(a.manifest))
+    return sessions
+
+
+def _rate(rows: list[dict]) -> str:
+    n = len(rows)
+    s = sum(r["success"] for r in rows)
+    return f"{s}/{n} ({100.0 * s / n:.1f} %)" if n else "-"
+
+
+def _rows(sessions: list[str]) -> list[dict[str, Any]]:
+    rows: list[dict[str, Any]] = []
+    for p in sessions:
+        d = json.loads(Path(p).read_text())
+        for r in d["rows"]:
+            if r.get("skipped"):
+                continue
+            rows.append(
+                {
+                    "scene": d["scene"],
+                    "seed": d["seed"],
+                    "object": r["object"],
+                    "class": r["class"],
+                    "map_source": d["map_source"],
+                    "reobserve": bool(d["config"].get("reobserve", False)),
+                    "success": bool(r["success"]),
+                    "cause": r["cause"],
+                    "map_id": r.get("map_id"),
+                    "map_label": r.get("map_label"),
+                    "closed_gap_m": r.get("closed_gap_m"),
+                    "expected_closed_width_m": r.get("expected_closed_width_m"),
+                    "rise_m": r.get("rise_m"),
+                    "run_dir": d["map_run"],
+                }
+            )
+    return rows
+
+
+def write_reports(
+    sessions: list[str], out: Path, command: str, comparison: list[str] | None = None, comparison_note: str = ""
+) -> dict[str, Any]:
+    """grasping.json / grasping.md from session files (``comparison``: sessions of another variant,
+    reported apart in ``comparison_rows`` and their own table)."""
+    rows = _rows(sessions)
+    comp = _rows(comparison or [])
+    out.mkdir(parents=True, exist_ok=True)
+    report = {"command": command, "sessions": sessions, "rows": rows}
+    if comp:
+        report.update(comparison_sessions=comparison, comparison_rows=comp, comparison_note=comparison_note)
+    (out / "grasping.json").write_text(json.dumps(report, indent=2) + "\n")
+    def variant(r: dict[str, Any]) -> str:
+        return r["map_source"] + (" + re-observation" if r["reobserve"] else "")
+
+    sources = sorted({variant(r) for r in rows}, key=lambda v: (SOURCES.index(v.split(" ")[0]), v))
+    by = {s: [r for r in rows if variant(r) == s] for s in sources}
+    scenes = sorted({r["scene"] for r in rows})
+    seeds = sorted({r["seed"] for r in rows})
+    classes = sorted({r["class"] for r in rows})
+    lines = [
+        "# Grasping from object maps",
+        "",
+        f"Generated by `{command}` from the grasp session files listed in `grasping.json`",
+        f"(scenes {', '.join(scenes)}; seeds {', '.join(map(str, seeds))}).",
+        "",
+        "One row per attempt: every map object the planner can fit in the gripper, grasped top-down one",
+        "after another (grasped objects set aside), plus one `not_in_map` row per",
+        "graspable true object no map object targets, plus `too_wide` rows where the map made a graspable",
+        "object too wide. Success = the true object ends ≥ 10 cm above its start after the lift and a",
+        "1 s hold (SAPIEN ground truth). Sources: `estimated` = object-driven exploration map,",
+        "`ground_truth` = true poses and sizes (upper bound), `init_only` = the four Init views' map;",
+        "`+ re-observation` = before each attempt two close top-down views of the target are fused into a",
+        "fresh local map by the core's pipeline; its centre / yaw with the map's top height are grasped and",
+        "its objects are the obstacles (a phantom the close views do not find is skipped). Planner: fingers",
+        "open fully, grasp up to 4 cm below the estimated top (`sim/objslam/grasp.py`, `GraspRunConfig`).",
+        "",
+        "## Overall",
+        "",
+        "| map source | attempts | success |",
+        "|---|---:|---:|",
+    ]
+    for s in sources:
+        lines.append(f"| {s} | {len(by[s])} | {_rate(by[s])} |")
+    lines += ["", "## Per class", "", "| class | " + " | ".join(sources) + " |", "|---|" + "---:|" * len(sources)]
+    for c in classes:
+        lines.append(f"| {c} | " + " | ".join(_rate([r for r in by[s] if r["class"] == c]) for s in sources) + " |")
+    lines += ["", "## Per scene", "", "| scene | " + " | ".join(sources) + " |", "|---|" + "---:|" * len(sources)]
+    for sc in scenes:
+        lines.append(f"| {sc} | " + " | ".join(_rate([r for r in by[s] if r["scene"] == sc]) for s in sources) + " |")
+    lines += ["", "## Failure causes", "", "| cause | " + " | ".join(sources) + " |", "|---|" + "---:|" * len(sources)]
+    counts = {s: Counter(r["cause"] for r in by[s] if not r["success"]) for s in sources}
+    for c in CAUSES:
+        if any(counts[s][c] for s in sources):
+            lines.append(f"| {c} | " + " | ".join(str(counts[s][c]) for s in sources) + " |")
+    lines += [
+        "",
+        "Causes: `no_ik` no collision-free IK for any candidate; `no_path` IK but no collision-free path;",
+        "`too_wide` the map's estimate is wider than the gripper; `collided` an object moved > 2 cm",
+        "before closing or the arm was blocked; `missed` closed without lifting the object; `slipped`",
+        "lifted ≥ 2 cm but not held ≥ 10 cm; `wrong_object` another true object was lifted; `phantom` an",
+        "attempt on a map object with no true object there; `not_found` the close views found nothing at a",
+        "real object's estimate; `not_in_map` no map object for a graspable true object. Rows skipped (not",
+        "attempts): phantoms the close views did not find, duplicates of already grasped objects, map",
+        "objects too wide both in the map and in truth.",
+        "",
+    ]
+    if comp:
+        lines += [
+            "## Comparison: " + comparison_note,
+            "",
+            "From `comparison_rows` in `grasping.json` (not part of the tables above).",
+            "",
+            "| map source | attempts | success | causes |",
+            "|---|---:|---:|---|",
+        ]
+        for src in sorted({r["map_source"] for r in comp}, key=SOURCES.index):
+            rs = [r for r in comp if r["map_source"] == src]
+            cs = Counter(r["cause"] for r in rs if not r["success"])
+            lines.append(f"| {src} | {len(rs)} | {_rate(rs)} | " + ", ".join(f"{c} {n}" for c, n in cs.most_common()) + " |")
+        lines.append("")
+    (out / "grasping.md").write_text("\n".join(lines))
+    return report
+
+
+def _select(spec: str) -> tuple[list[str], dict[str, Any]]:
+    """Sessions of a manifest ``PATH[=SRC,SRC]`` (only those map sources when given)."""
+    path, _, srcs = spec.partition("=")
+    m = json.loads(Path(path).read_text())
+    keep = set(srcs.split(",")) if srcs else set(SOURCES)
+    return [p for p in m["sessions"] if json.loads(Path(p).read_text())["map_source"] in keep], m
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--scenes", nargs="+", default=[f"scenes/scene0{i}.toml" for i in range(1, 8)])
+    ap.add_argument("--seeds", nargs="+", type=int, default=[0, 1])
+    ap.add_argument("--sources", nargs="+", default=list(SOURCES), choices=SOURCES)
+    ap.add_argument("--config", action="append", default=[], help="run-config overlay (repeatable)")
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
+    ap.add_argument("--out", default="reports")
+    ap.add_argument(
+        "--reobserve", nargs="*", default=["estimated"], choices=SOURCES,
+        help="map sources whose grasps re-observe the target first (default: estimated)",
+    )
+    ap.add_argument("--tag", default="", help="suffix of the session files (grasp_<source><tag>.json)")
+    ap.add_argument("--manifest", default=str(REPO / "runs" / "grasp_sweep.json"), help="the sweep's list of session files")
+    ap.add_argument("--maps-from", default=str(REPO / "runs" / "grasp_sweep.json"), help="manifest whose maps --reuse-maps grasps on")
+    ap.add_argument("--report-only", action="store_true", help="rebuild the reports from the manifest")
+    ap.add_argument(
+        "--also", action="append", default=[], metavar="MANIFEST[=SRC,SRC]",
+        help="with --report-only: more sessions for the main tables (optionally only these sources)",
+    )
+    ap.add_argument(
+        "--compare", action="append", default=[], metavar="MANIFEST[=SRC,SRC]",
+        help="with --report-only: sessions of another variant, reported apart (comparison_rows)",
+    )
+    ap.add_argument("--compare-note", default="", help="title of the comparison table")
+    ap.add_argument(
+        "--reuse-maps", action="store_true",
+        help="grasp again on the maps of the sweep in runs/grasp_sweep.json instead of mapping anew",
+    )
+    a = ap.parse_args(argv)
+    command = ("python experiments/grasp.py " + " ".join(shlex.quote(x) for x in (argv if argv is not None else sys.argv[1:]))).strip()
+    comparison: list[str] = []
+    if a.report_only:
+        manifest = json.loads(Path(a.manifest).read_text())
+        sessions = manifest["sessions"]
+        made_by = [manifest.get("command", a.manifest)]
+        for extra in a.also:
+            sel, m = _select(extra)
+            sessions += sel
+            made_by.append(m.get("command", extra))
+        for extra in a.compare:
+            sel, m = _select(extra)
+            comparison += sel
+            made_by.append(m.get("command", extra))
+        command += "` on the sessions of `" + "`, `".join(made_by)
+    elif a.reuse_maps:
+        sessions = regrasp(a, command)
+    else:
+        sessions = run_sweep(a, command)
+    report = write_reports(sessions, REPO / a.out, command, comparison, a.compare_note)
+    print(f"{len(report['rows'])} rows → {a.out}/grasping.md")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,494 @@
+"""Grasping from an object map in SAPIEN: plan with the core's planner, execute, judge from ground truth.
+
+Entry point: :func:`run_grasp_session` — a fresh :class:`~objslam.world.SimWorld` of the scene with
+the grasp physics settings, then every map object in turn: ``Planner.plan_grasp`` (from the map
+estimates only: the target's estimate, the other estimates as obstacles) → fingers open to the
+planned width → pre-grasp trajectory → approach → close → lift → hold → judge from the simulator's
+ground truth → the grasped object is set aside (removed from the scene and from the obstacles) →
+open, back to the ready configuration, next object. Results: one row per attempt (and per
+ground-truth graspable object the map gave no attempt for), written by the caller.
+
+Choices (config fields of :class:`GraspRunConfig`):
+- Success: the target's true centre ends ≥ ``lift_success_m`` (0.10 m) above where it started, after
+  the lift and a ``hold_s`` (1 s) hold with the fingers squeezing.
+- The target of an attempt in ground truth: the true object whose centre is nearest (in x, y) to the
+  map estimate's centre, within ``match_radius_m``; none → a phantom attempt (counts as missed).
+- Causes: ``no_ik`` / ``no_path`` / ``too_wide`` (planner), ``collided`` (before closing, the target
+  or another object moved more than ``disturb_m``, or the arm was blocked), ``missed`` (the fingers
+  closed without lifting the target ≥ ``slip_rise_m``), ``slipped`` (the target rose ≥ ``slip_rise_m``
+  but did not stay ≥ ``lift_success_m`` up), ``not_in_map`` (a graspable true object no map object
+  matches), ``phantom`` (an attempt on a map object with no true object near it), ``not_found``
+  (with re-observation: the close views found no object at the map's estimate; for phantoms this
+  is the right call and the row is skipped, not an attempt), ``wrong_object`` (another true object
+  was lifted). A map object no true object is matched to that, on the attempt, lifts exactly one
+  true object is a duplicate resolved by the grasp: a success for that object (whose own map
+  object is then skipped as ``already_grasped``). Success rows have cause ``"none"``.
+- Graspable in ground truth: narrowest horizontal width ≤ the gripper's 8 cm opening minus 4 mm.
+  Map objects the planner finds too wide are attempts only when their true object is graspable.
+- Re-observation (``reobserve``, off by default): before each attempt, three close views of the
+  target (top-down and two obliques, moved by the simulator's interim IK) are fused into a fresh
+  local map by the core's pipeline (same settings as the exploration); the local object nearest the
+  map estimate is grasped, and the local objects replace the map's within ``reobserve_replace_m``
+  as obstacles. The exploration map itself is not updated.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+
+from . import _native
+from .config import RunConfig
+from .detector import SimulatedDetector
+from .scene import SceneSpec, gt_objects
+from .world import (
+    GRIPPER_OPEN_M,
+    PHYSICS_HZ,
+    READY_QPOS,
+    MotionError,
+    SimWorld,
+    UnreachablePoseError,
+    look_at,
+    panda_urdf_path,
+)
+
+#: Largest graspable width (gripper 8 cm minus the planner's 4 mm minimum clearance), metres.
+MAX_GRASP_WIDTH_M = 0.076
+
+
+@dataclass
+class GraspRunConfig:
+    """Execution and judging settings of a grasp session."""
+
+    lift_success_m: float = 0.10
+    """The target must end this far above its start, metres (the issue's bar)."""
+    hold_s: float = 1.0
+    """Hold after the lift before judging, seconds."""
+    close_s: float = 0.8
+    """Time given to the fingers to close, seconds."""
+    settle_s: float = 0.3
+    """Settling after each trajectory, seconds (at most)."""
+    disturb_m: float = 0.02
+    """Before closing, an object displaced this far (x, y, z) means the arm collided, metres."""
+    slip_rise_m: float = 0.02
+    """The target rose at least this far during the lift: a failure is ``slipped``, not ``missed``."""
+    match_radius_m: float = 0.08
+    """Largest x-y distance between a map estimate and the true object it targets, metres."""
+    reobserve: bool = False
+    """Before each attempt, look at the target from close views and re-estimate it in a fresh local
+    map (the core's pipeline, same settings as the exploration); the refined estimate is grasped."""
+    reobserve_views: str = "top"
+    """``"top"``: two top-down views above the estimate (0.36 and 0.29 m); ``"top+oblique"``: a
+    top-down view and two obliques from the robot's side."""
+    reobserve_still_frames: int = 2
+    """Extra frames rendered at each settled re-observation view."""
+    reobserve_frame_rate_hz: float = 2.0
+    """Frames fused while moving between re-observation views, per simulated second."""
+    reobserve_obstacles: str = "local"
+    """``"local"``: only the local map's objects are obstacles of the attempt (the close views cover
+    the target's neighbourhood; far map objects, phantoms included, are ignored); ``"replace"``:
+    the local objects replace the map's within ``reobserve_replace_m``, farther map objects stay."""
+    reobserve_combine: str = "hybrid"
+    """How the local estimate refines the map's (see :func:`combine`): ``"hybrid"`` or ``"local"``."""
+    reobserve_height_m: float = 0.36
+    """Height of the top-down re-observation view above the target's estimated centre, metres."""
+    reobserve_offset_m: float = 0.20
+    """Horizontal offset of the two oblique re-observation views, metres."""
+    reobserve_match_m: float = 0.06
+    """A local-map object within this x-y distance of the map estimate is the refined target."""
+    reobserve_replace_m: float = 0.15
+    """Map objects within this x-y distance of the refined target are replaced, as obstacles, by
+    the local map's objects (the close views see that neighbourhood), metres."""
+    planner: dict[str, Any] = field(
+        default_factory=lambda: {"opening_clearance_m": 0.08, "max_grasp_depth_m": 0.04}
+    )
+    """Overrides of the core planner's config (keys in ``Planner``'s stub docs). Default: open the
+    fingers fully (the most room for a centre error; the opening is capped at 8 cm) and grasp up to
+    4 cm below the estimated top (room for a height error; the palm is ~5.8 cm above the pads)."""
+
+
+def narrowest_width(geometry: dict[str, Any]) -> float:
+    """Narrowest horizontal width of an ObjectGeometry dict, metres."""
+    h = geometry["half_extents"]
+    return 2.0 * (min(h[0], h[1]) if geometry["shape"] == "cuboid" else (h[0] + h[1]) / 2.0)
+
+
+class GraspSession:
+    """One simulated world and the planner, executing grasps of map objects."""
+
+    def __init__(self, scene: SceneSpec, run_cfg: RunConfig, cfg: GraspRunConfig, rec: Any = None) -> None:
+        self.scene = scene
+        self.cfg = cfg
+        self.run_cfg = run_cfg
+        seed = run_cfg.seed
+        self.world = SimWorld(scene, run_cfg.camera, np.random.default_rng([seed, 7]), grasp_physics=True)
+        self.detector = SimulatedDetector(run_cfg.detector, np.random.default_rng([seed, 8]))
+        planner_cfg = {"rng_seed": int(seed) + 1, **cfg.planner}
+        self.planner = _native.Planner(str(panda_urdf_path()), json.dumps(planner_cfg))
+        self.limits = self.planner.joint_limits()
+        self.rec = rec
+        self.removed: set[int] = set()
+        self.frame = 0
+        self.last_plan: dict[str, Any] | None = None
+        """The grasp plan of the last executed attempt (for placing)."""
+        self.last_target: dict[str, Any] | None = None
+        """The (refined) map object of the last executed attempt."""
+
+    # ----- low-level execution ---------------------------------------------------------------------
+    def q_arm(self) -> np.ndarray:
+        """Measured arm joints, clipped into the URDF limits (the planner rejects values outside)."""
+        q = self.world.qpos()[:7]
+        return np.clip(q, self.limits[:, 0], self.limits[:, 1])
+
+    def finger_gap_m(self) -> float:
+        """Gap between the fingers (sum of both finger joints), metres."""
+        q = self.world.qpos()
+        return float(q[7] + q[8])
+
+    def _targets(self, q_arm: np.ndarray, finger_m: float, dq_arm: np.ndarray | None = None) -> None:
+        for i, j in enumerate(self.world.joints):
+            if i < 7:
+                j.set_drive_target(float(q_arm[i]))
+                j.set_drive_velocity_target(float(dq_arm[i]) if dq_arm is not None else 0.0)
+            else:
+                j.set_drive_target(float(finger_m))
+
+    def execute(self, traj: dict[str, Any], finger_m: float, on_step: Callable[[], None] | None = None) -> float:
+        """Track a sampled joint trajectory with the PD drives (linear interpolation of the samples at
+        the physics rate, velocity feed-forward), then settle; returns the final joint error, rad."""
+        t, pos, vel = traj["times_s"], traj["positions"], traj["velocities"]
+        n = math.ceil(float(traj["duration_s"]) * PHYSICS_HZ)
+        for k in range(1, n + 1):
+            tk = k / PHYSICS_HZ
+            q = np.array([np.interp(tk, t, pos[:, i]) for i in range(7)])
+            dq = np.array([np.interp(tk, t, vel[:, i]) for i in range(7)])
+            self._targets(q, finger_m, dq)
+            self.world._step()
+            if on_step is not None:
+                on_step()
+        goal = pos[-1]
+        self._targets(goal, finger_m)
+        for _ in range(int(self.cfg.settle_s * PHYSICS_HZ)):
+            self.world._step()
+            if on_step is not None:
+                on_step()
+            if float(np.max(np.abs(self.world.qpos()[:7] - goal))) < 2e-3:
+                break
+        return float(np.max(np.abs(self.world.qpos()[:7] - goal)))
+
+    def hold(self, seconds: float, finger_m: float, on_step: Callable[[], None] | None = None) -> None:
+        """Keep the current arm targets and the finger target for ``seconds``."""
+        q = self.world.qpos()[:7]
+        self._targets(q, finger_m)
+        for _ in range(int(seconds * PHYSICS_HZ)):
+            self.world._step()
+            if on_step is not None:
+                on_step()
+
+    def gt_positions(self) -> dict[int, np.ndarray]:
+        """True object centres now (objects set aside excluded)."""
+        return {oid: p for oid, (p, _) in self.world.ground_truth().items() if oid not in self.removed}
+
+    def set_aside(self, oid: int) -> None:
+        """Remove a grasped object from the scene (it is 'set aside')."""
+        actor = self.world.object_actors.pop(oid)
+        self.world.scene.remove_entity(actor)
+        self.removed.add(oid)
+
+    def go_ready(self, obstacles: list[dict[str, Any]]) -> None:
+        """Open the fingers and return to the ready configuration (planned around the map objects,
+        else around the table only)."""
+        self.hold(0.3, GRIPPER_OPEN_M)
+        for obs in (obstacles, []):
+            r = self.planner.plan_to_joints(self.q_arm(), READY_QPOS[:7], json.dumps(obs))
+            if r["ok"]:
+                self.execute(r, GRIPPER_OPEN_M)
+                return
+
+    # ----- recording -------------------------------------------------------------------------------
+    def _log(self, fn: str, *args: Any) -> None:
+        if self.rec is not None:
+            getattr(self.rec, fn)(*args)
+
+    def _log_plan(self, k: int, plan: dict[str, Any]) -> None:
+        if self.rec is None:
+            return
+        self.rec.set_frame(self.frame, self.world.sim_time_s)
+        for part in ("to_pregrasp", "approach", "lift"):
+            pts = np.array([self.planner.forward_tcp(q)[:3, 3] for q in plan[part]["positions"][::5]])
+            self.rec.log_points(f"world/grasp/{k}/{part}", pts, None)
+        g = plan["world_from_tcp_grasp"]
+        o = np.repeat(g[None, :3, 3], 3, axis=0)
+        v = 0.08 * g[:3, :3].T
+        self.rec.log_arrows(f"world/grasp/{k}/frame", o, v, np.array([[255, 0, 0], [0, 255, 0], [0, 0, 255]], dtype=np.uint8))
+
+    # ----- re-observation ---------------------------------------------------------------------------
+    def reobserve(self, target: dict[str, Any]) -> tuple[dict[str, Any] | None, list[dict[str, Any]], int]:
+        """Close views of ``target`` (top-down, then two obliques from the robot's side) fused into a
+        fresh local map; returns the local object that refines the target (nearest centre within
+        ``reobserve_match_m``, same label first) or None, all local objects, and the frames used."""
+        from .episode import grey_of, new_mapper
+
+        cfg, rc = self.cfg, self.run_cfg
+        mapper = new_mapper(rc, self.scene)
+        c = np.array(target["geometry"]["center"], dtype=float)
+        c[2] = 0.5 * c[2]
+        side = -1.0 if c[1] > 0 else 1.0
+        if cfg.reobserve_views == "top":
+            # Straight above the estimate from two heights: every side is seen alike, so the centre
+            # is not pulled toward the camera.
+            eyes = [c + [0.0, 0.0, cfg.reobserve_height_m], c + [0.0, 0.0, cfg.reobserve_height_m - 0.07]]
+        else:
+            eyes = [
+                c + [0.0, 0.0, cfg.reobserve_height_m],
+                c + [-cfg.reobserve_offset_m, 0.0, cfg.reobserve_height_m - 0.05],
+                c + [0.0, side * cfg.reobserve_offset_m, cfg.reobserve_height_m - 0.05],
+            ]
+        frames = 0
+        for vi, eye in enumerate(eyes):
+            top = cfg.reobserve_views == "top" or vi == 0
+            # The camera's roll about its axis decides reachability (joint 7 limits): try four.
+            hints = [np.array(h, dtype=float) for h in ((1, 0, 0), (0, 1, 0), (0, -1, 0), (-1, 0, 0))] if top else [None]
+            view = None
+            for h in hints:
+                v = look_at(eye, c, h)
+                if self.world.is_reachable(v):
+                    view = v
+                    break
+            if view is None:
+                continue
+            try:
+                moved = list(
+                    self.world.move_camera_to(
+                        view,
+                        frame_rate_hz=cfg.reobserve_frame_rate_hz,
+                        max_joint_speed=rc.max_joint_speed,
+                        what="re-observation",
+                    )
+                )
+            except (UnreachablePoseError, MotionError):
+                continue
+            # A few more frames from the settled view (fresh sensor noise and detector draws), so a
+            # short move still gives the pipeline enough observations to confirm the object.
+            for frame in moved + [self.world.render() for _ in range(cfg.reobserve_still_frames)]:
+                dets = self.detector.detect(frame.segmentation, self.world.actor_to_object)
+                mapper.update(
+                    index=frames,
+                    intrinsics=frame.intrinsics,
+                    depth=frame.depth_m,
+                    world_from_camera=frame.world_from_camera_fk,
+                    detections=[d.as_tuple() for d in dets],
+                    grey=grey_of(frame.rgb) if (rc.parameterize or rc.pose_source != "fk") else None,
+                    world_from_camera_gt=frame.world_from_camera_gt,
+                    view_index=vi,
+                )
+                frames += 1
+            mapper.view_done(False)
+        mapper.refresh_estimates()
+        local = json.loads(mapper.objects_json())
+        best = None
+        for o in local:
+            d = math.dist(o["geometry"]["center"][:2], target["geometry"]["center"][:2])
+            if d > cfg.reobserve_match_m:
+                continue
+            key = (o["label"] != target["label"], d)
+            if best is None or key < best[0]:
+                best = (key, o)
+        return (best[1] if best else None), local, frames
+
+    # ----- one attempt ------------------------------------------------------------------------------
+    def attempt(self, k: int, target: dict[str, Any], neighbours: list[dict[str, Any]], gt_id: int | None) -> dict[str, Any]:
+        """Plan and execute one grasp of map object ``target``; returns the outcome record."""
+        cfg = self.cfg
+        out: dict[str, Any] = {"success": False, "cause": None, "gt_id": gt_id}
+        if cfg.reobserve:
+            refined, local, frames = self.reobserve(target)
+            out.update(reobserved=refined is not None, reobserve_frames=frames)
+            if refined is None:
+                # Nothing there on a close look: the map object was a phantom (or has gone).
+                out.update(cause="not_found", skipped=gt_id is None)
+                return out
+            target = {**target, "geometry": combine(target["geometry"], refined["geometry"], cfg)}
+            # Near the target the close views know better: their objects replace the map's there.
+            c = target["geometry"]["center"]
+            near = [n for n in local if n["id"] != refined["id"]]
+            far = [
+                n for n in neighbours if math.dist(n["geometry"]["center"][:2], c[:2]) > cfg.reobserve_replace_m
+            ]
+            neighbours = near if cfg.reobserve_obstacles == "local" else far + near
+            out["target_geometry"] = target["geometry"]
+        plan = self.planner.plan_grasp(
+            self.q_arm(), json.dumps(target["geometry"]), json.dumps([n["geometry"] for n in neighbours])
+        )
+        if not plan["ok"]:
+            out.update(cause=plan["cause"], message=plan["message"])
+            return out
+        self._log_plan(k, plan)
+        self.last_plan, self.last_target = plan, target
+        open_half = float(plan["open_width_m"]) / 2.0
+        out.update(
+            open_width_m=float(plan["open_width_m"]),
+            expected_closed_width_m=float(plan["expected_closed_width_m"]),
+            hand_yaw_rad=float(plan["hand_yaw_rad"]),
+        )
+        start = self.gt_positions()
+        # Open the fingers while moving to the pre-grasp pose.
+        err_pre = self.execute(plan["to_pregrasp"], open_half)
+        err_app = self.execute(plan["approach"], open_half)
+        now = self.gt_positions()
+        moved = {oid: float(np.linalg.norm(now[oid] - start[oid])) for oid in start}
+        collided = max(err_pre, err_app) > 0.02 or any(d > cfg.disturb_m for d in moved.values())
+        out["disturbed"] = {str(o): round(d, 4) for o, d in moved.items() if d > cfg.disturb_m}
+        # Close.
+        self.hold(cfg.close_s, 0.0)
+        out["closed_gap_m"] = self.finger_gap_m()
+        z0 = start[gt_id][2] if gt_id is not None else 0.0
+        max_rise = [0.0]
+
+        def track() -> None:
+            if gt_id is not None:
+                max_rise[0] = max(max_rise[0], float(self.gt_positions()[gt_id][2] - z0))
+
+        self.execute(plan["lift"], 0.0, track)
+        self.hold(cfg.hold_s, 0.0, track)
+        now = self.gt_positions()
+        rise = float(now[gt_id][2] - z0) if gt_id is not None else 0.0
+        lifted = [oid for oid in now if oid in start and now[oid][2] - start[oid][2] >= cfg.lift_success_m]
+        out.update(rise_m=rise, max_rise_m=max_rise[0], held_gap_m=self.finger_gap_m(), lifted=lifted)
+        if gt_id is not None and rise >= cfg.lift_success_m:
+            out.update(success=True, cause="none")
+        elif gt_id is None and len(lifted) == 1:
+            # A map object no true object was matched to (a duplicate of one matched to another map
+            # object) turned out to be that object: it was grasped and lifted.
+            out.update(success=True, cause="none", gt_id=lifted[0], resolved_duplicate=True)
+        elif gt_id is None:
+            out["cause"] = "phantom"  # no true object where the map put one
+        elif lifted:
+            out["cause"] = "wrong_object"
+        elif collided:
+            out["cause"] = "collided"
+        elif max_rise[0] >= cfg.slip_rise_m:
+            out["cause"] = "slipped"
+        else:
+            out["cause"] = "missed"
+        self.frame += 1
+        self._log("set_frame", self.frame, self.world.sim_time_s)
+        self._log("log_scalar", "grasp/finger_gap_m", out["closed_gap_m"])
+        return out
+
+
+def combine(mapped: dict[str, Any], local: dict[str, Any], cfg: GraspRunConfig) -> dict[str, Any]:
+    """The target geometry grasped after re-observation (``cfg.reobserve_combine``):
+    ``"local"`` = the local estimate as is; ``"hybrid"`` = centre x-y and yaw from the close
+    top-down views (accurate there), horizontal size the larger of both unless the map's is too
+    wide for the gripper, top height from the map (top-down views see little of the sides), and
+    the bottom on the table (objects stand on it)."""
+    if cfg.reobserve_combine == "local":
+        return local
+    mh, lh = mapped["half_extents"], local["half_extents"]
+    if narrowest_width(mapped) <= MAX_GRASP_WIDTH_M:
+        hx, hy = max(mh[0], lh[0]), max(mh[1], lh[1])
+        if mapped["shape"] == "cuboid" and local["shape"] == "cuboid":
+            # Same sides after the yaw change (the local yaw may be off by 90 degrees).
+            d = abs(math.remainder(local["yaw_rad"] - mapped["yaw_rad"], math.pi))
+            if d > math.pi / 4:
+                hx, hy = max(mh[1], lh[0]), max(mh[0], lh[1])
+    else:
+        hx, hy = lh[0], lh[1]
+    top = mapped["center"][2] + mh[2]
+    hz = max(top / 2.0, 0.005)
+    return {
+        "shape": local["shape"],
+        "center": [local["center"][0], local["center"][1], hz],
+        "yaw_rad": local["yaw_rad"],
+        "half_extents": [hx, hy, hz],
+    }
+
+
+def match_gt(map_objects: list[dict[str, Any]], gt: list[dict[str, Any]], radius_m: float) -> dict[int, int | None]:
+    """Map object id → the true object id it targets (nearest centre in x-y within ``radius_m``;
+    each true object at most once, closest pairs first)."""
+    pairs = []
+    for m in map_objects:
+        for g in gt:
+            d = math.dist(m["geometry"]["center"][:2], g["geometry"]["center"][:2])
+            if d <= radius_m:
+                pairs.append((d, m["id"], g["id"]))
+    out: dict[int, int | None] = {m["id"]: None for m in map_objects}
+    used: set[int] = set()
+    for _, mid, gid in sorted(pairs):
+        if out[mid] is None and gid not in used:
+            out[mid] = gid
+            used.add(gid)
+    return out
+
+
+def run_grasp_session(
+    scene: SceneSpec,
+    run_cfg: RunConfig,
+    map_objects: list[dict[str, Any]],
+    cfg: GraspRunConfig,
+    rec: Any = None,
+) -> list[dict[str, Any]]:
+    """Grasp every map object of ``map_objects`` (records ``{"id", "label", "geometry"}``) one after
+    another in a fresh world (camera, detector and mapper settings from ``run_cfg``); returns one
+    row per attempt (+ ``not_in_map`` rows)."""
+    session = GraspSession(scene, run_cfg, cfg, rec)
+    gt = gt_objects(scene, session.world.ground_truth())
+    gt_by_id = {g["id"]: g for g in gt}
+    graspable_gt = {g["id"] for g in gt if narrowest_width(g["geometry"]) <= MAX_GRASP_WIDTH_M}
+    if rec is not None:
+        rec.set_frame(0, session.world.sim_time_s)
+        rec.log_objects("world/ground_truth", json.dumps(gt))
+        rec.log_objects("world/map", json.dumps(map_objects))
+    match = match_gt(map_objects, gt, cfg.match_radius_m)
+    remaining = list(map_objects)
+    rows: list[dict[str, Any]] = []
+    for k, target in enumerate(map_objects):
+        gt_id = match[target["id"]]
+        neighbours = [m for m in remaining if m["id"] != target["id"]]
+        if gt_id is not None and gt_id in session.removed:
+            # Already grasped through a duplicate map object: nothing left to do here.
+            rows.append({"map_id": target["id"], "map_label": target["label"], "object": f"gt{gt_id}",
+                         "class": gt_by_id[gt_id]["label"], "success": False, "cause": "already_grasped",
+                         "gt_id": gt_id, "skipped": True})
+            remaining = [m for m in remaining if m["id"] != target["id"]]
+            continue
+        res = session.attempt(k, target, neighbours, gt_id)
+        gt_id = res["gt_id"]
+        if res["cause"] == "too_wide" and (gt_id is None or gt_id not in graspable_gt):
+            res["skipped"] = True  # too wide in the map and in truth: not an attempt
+        row = {
+            "map_id": target["id"],
+            "map_label": target["label"],
+            "object": f"gt{gt_id}" if gt_id is not None else f"map{target['id']}",
+            "class": gt_by_id[gt_id]["label"] if gt_id is not None else target["label"],
+            **res,
+        }
+        rows.append(row)
+        session._log("log_event", f"grasp {k} map {target['id']} ({target['label']}) → {row['object']}: "
+                     f"{'success' if res['success'] else res['cause']}")
+        for oid in res.get("lifted", []):  # whatever is in the hand is set aside
+            if oid not in session.removed:
+                session.set_aside(oid)
+        if res["success"]:
+            remaining = [m for m in remaining if m["id"] != target["id"]]
+        if "open_width_m" in res:
+            session.go_ready([m["geometry"] for m in remaining])
+    attempted = {r["gt_id"] for r in rows if r["gt_id"] is not None}
+    for gid in sorted(graspable_gt - attempted):
+        rows.append(
+            {"map_id": None, "map_label": None, "object": f"gt{gid}", "class": gt_by_id[gid]["label"],
+             "success": False, "cause": "not_in_map", "gt_id": gid}
+        )
+    return rows
+
+
+def config_dict(cfg: GraspRunConfig) -> dict[str, Any]:
+    """The config as a plain dict (for run folders)."""
+    return asdict(cfg)

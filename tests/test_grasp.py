@@ -1,0 +1,76 @@
+"""Grasping in SAPIEN through the core's planner: a known box closes at its width and is lifted
+≥ 10 cm (judged from the simulator's ground truth); per-attempt failures are outcomes, not crashes."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from objslam import _native
+from objslam.config import load_run_config
+from objslam.grasp import GraspRunConfig, GraspSession, run_grasp_session
+from objslam.scene import gt_objects, load_scene
+from objslam.world import READY_QPOS, panda_urdf_path
+
+from .conftest import SCENES
+
+
+@pytest.fixture(scope="module")
+def scene01_session(ci_overlay):
+    scene = load_scene(SCENES[0])
+    cfg = load_run_config(overlays=[ci_overlay], overrides=[], strategy="init")
+    return scene, cfg
+
+
+def test_grasp_of_a_known_box_closes_at_its_width_and_lifts_it(scene01_session) -> None:
+    scene, cfg = scene01_session
+    session = GraspSession(scene, cfg, GraspRunConfig())
+    gt = gt_objects(scene, session.world.ground_truth())
+    book = next(g for g in gt if g["label"] == "book")  # a 6.2 cm wide box
+    z0 = book["geometry"]["center"][2]
+    others = [g for g in gt if g["id"] != book["id"]]
+    out = session.attempt(0, book, others, book["id"])
+    width = 2 * min(book["geometry"]["half_extents"][:2])
+    assert out["expected_closed_width_m"] == pytest.approx(width, abs=1e-6)
+    assert out["open_width_m"] > width + 0.01
+    # The fingers stop on the box's faces: the gap equals its true width within 3 mm.
+    assert out["closed_gap_m"] == pytest.approx(width, abs=0.003)
+    z1 = session.world.ground_truth()[book["id"]][0][2]
+    assert z1 - z0 >= 0.10
+    assert out["success"] and out["cause"] == "none"
+    # The other objects were not disturbed.
+    assert not out["disturbed"]
+
+
+def test_unreachable_and_degenerate_targets_are_outcomes(scene01_session) -> None:
+    scene, cfg = scene01_session
+    far = {"id": 99, "label": "block", "geometry": {"shape": "cuboid", "center": [1.6, 0.0, 0.03], "yaw_rad": 0.0,
+                                                    "half_extents": [0.02, 0.02, 0.03]}}
+    wide = {"id": 98, "label": "book", "geometry": {"shape": "cuboid", "center": [0.5, 0.0, 0.02], "yaw_rad": 0.0,
+                                                    "half_extents": [0.1, 0.1, 0.02]}}
+    rows = run_grasp_session(scene, cfg, [far, wide], GraspRunConfig())
+    by_map = {r["map_id"]: r for r in rows}
+    assert by_map[99]["cause"] == "no_ik" and not by_map[99]["success"]
+    assert by_map[98]["cause"] == "too_wide"
+    # Every graspable true object without an attempt gets a not_in_map row.
+    assert sum(r["cause"] == "not_in_map" for r in rows) == 4
+
+
+def test_planner_rejects_bad_input_with_named_fields() -> None:
+    p = _native.Planner(str(panda_urdf_path()))
+    q = READY_QPOS[:7].copy()
+    box = json.dumps({"shape": "cuboid", "center": [0.5, 0.0, 0.03], "yaw_rad": 0.0, "half_extents": [0.02, 0.02, 0.03]})
+    with pytest.raises(_native.InputError, match="q_start"):
+        p.plan_grasp(np.array([0.0, 1.0]), box, "[]")
+    with pytest.raises(_native.InputError, match="q_start"):
+        p.plan_grasp(np.full(7, np.nan), box, "[]")
+    with pytest.raises(_native.InputError, match="target_json"):
+        p.plan_grasp(q, "{}", "[]")
+    with pytest.raises(_native.InputError, match="unknown key \"bogus\""):
+        _native.Planner(str(panda_urdf_path()), json.dumps({"bogus": 1}))
+    with pytest.raises(_native.PlanningError):
+        _native.Planner("/nonexistent/panda.urdf")
+    with pytest.raises(_native.InputError, match="outside the joint limits"):
+        p.plan_to_joints(q + 10.0, q, "[]")
