@@ -236,6 +236,9 @@ pub struct ObjectPipeline {
     estimates: BTreeMap<u32, ObjectEstimate>,
     dirty: BTreeSet<u32>,
     merged_into: BTreeMap<u32, u32>,
+    /// Objects folded as label confusions: their observations vote for the label, their points
+    /// are left out (the majority object's own clouds describe the surface).
+    relabelled: BTreeSet<u32>,
 }
 
 impl ObjectPipeline {
@@ -261,6 +264,7 @@ impl ObjectPipeline {
             estimates: BTreeMap::new(),
             dirty: BTreeSet::new(),
             merged_into: BTreeMap::new(),
+            relabelled: BTreeSet::new(),
         })
     }
 
@@ -396,13 +400,13 @@ impl ObjectPipeline {
     fn consolidate(&mut self) {
         loop {
             let map = self.raw_map();
-            let mut fold: Option<(u32, u32)> = None;
+            let mut fold: Option<(u32, u32, bool)> = None;
             'pairs: for (i, a) in map.objects.iter().enumerate() {
                 for b in &map.objects[i + 1..] {
                     let (ga, gb) = (a.geometry(), b.geometry());
                     if a.label != b.label {
-                        if let Some(fold_pair) = self.label_confusion(a, b, &ga, &gb) {
-                            fold = Some(fold_pair);
+                        if let Some((minor, major)) = self.label_confusion(a, b, &ga, &gb) {
+                            fold = Some((minor, major, true));
                             break 'pairs;
                         }
                         continue;
@@ -412,13 +416,16 @@ impl ObjectPipeline {
                         || crate::geometry::iou3d(&ga, &gb) >= self.config.consolidate_iou
                         || self.share_surface(a, b)
                     {
-                        fold = Some((a.id.max(b.id), a.id.min(b.id)));
+                        fold = Some((a.id.max(b.id), a.id.min(b.id), false));
                         break 'pairs;
                     }
                 }
             }
-            let Some((young, old)) = fold else { break };
+            let Some((young, old, relabel)) = fold else { break };
             self.merged_into.insert(young, old);
+            if relabel {
+                self.relabelled.insert(young);
+            }
             self.estimators.remove(&young);
             self.estimates.remove(&young);
             self.dirty.remove(&young);
@@ -504,7 +511,9 @@ impl ObjectPipeline {
             let mut merged = members[0].clone();
             for m in &members[1..] {
                 merged.observations.extend_from_slice(&m.observations);
-                merged.points_in_world.extend_from_slice(&m.points_in_world);
+                if !self.relabelled.contains(&m.id) {
+                    merged.points_in_world.extend_from_slice(&m.points_in_world);
+                }
             }
             merged.observations.sort_by_key(|o| o.frame);
             if let Some((label, _)) = votes.iter().max_by_key(|(l, n)| (**n, std::cmp::Reverse(**l))) {
