@@ -19,6 +19,7 @@ Backends:
 
 from __future__ import annotations
 
+import multiprocessing
 import os
 from collections.abc import Iterator
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -68,7 +69,10 @@ def run_job_in(job: Job, cwd: str) -> dict[str, Any]:
 
 
 def _pool_results(jobs: list[Job], workers: int) -> Iterator[tuple[int, dict[str, Any]]]:
-    with ProcessPoolExecutor(max_workers=max(1, workers)) as pool:
+    # Spawned, not forked: a fork of a process that already runs SAPIEN's renderer or the core's
+    # threads can deadlock in the child (seen when a sweep runs after other episodes in-process).
+    ctx = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(max_workers=max(1, workers), mp_context=ctx) as pool:
         futures = {pool.submit(run_job, j): i for i, j in enumerate(jobs)}
         for f in as_completed(futures):
             yield futures[f], f.result()
