@@ -76,6 +76,11 @@ class ParamRunConfig:
     """Let the yaw/scale refinement also move the centre (the paper refines yaw and scale only)."""
     refine_prior_px_per_m: float = 200.0
     """Weight of the refinement's prior on centre and scale, pixels per metre."""
+    iforest_passes: int = 1
+    """Isolation-forest fits per estimate, each on the points the previous kept. 1 = the paper's
+    Algorithm 1 (the run default: the local clouds are already cut to the object's surface, and
+    more passes trim its extremes — Init sweep refined 3D IoU 0.656 with 1 pass vs 0.620 with 4);
+    the core's own default of 4 suits heavily contaminated clouds (``core/src/objects/iforest.rs``)."""
 
 
 @dataclass(frozen=True)
@@ -200,6 +205,8 @@ class RunConfig:
             )
         if self.object_points == "slam_map" and self.pose_source == "fk":
             raise ConfigError("object_points: slam_map needs a tracker (pose_source kinematics, slam or ground_truth)")
+        if self.param.iforest_passes < 1:
+            raise ConfigError("param.iforest_passes: must be ≥ 1")
         if self.min_observations < 1:
             raise ConfigError("min_observations: must be ≥ 1")
         if self.explore.max_views < 0:
