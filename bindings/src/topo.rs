@@ -123,6 +123,19 @@ fn result_dict<'py>(
     Ok(d)
 }
 
+/// Parse both maps and the config (typed errors naming the argument), then match without the GIL.
+fn parse_and_match(
+    py: Python<'_>,
+    prior_map_json: &str,
+    query_map_json: &str,
+    config_json: Option<&str>,
+) -> PyResult<(ObjectMap, ObjectMap, MatchResult)> {
+    let config = config(config_json)?;
+    let (prior, query) = maps(prior_map_json, query_map_json)?;
+    let result = py.detach(|| match_object_maps(&prior, &query, &config));
+    Ok((prior, query, result))
+}
+
 /// Match two object maps: the similarity `query_from_prior` (q = s R p + t).
 ///
 /// Returns a dict: `matched`; `rotation` (3×3), `translation` (3,), `scale`, `matrix` (4×4) of
@@ -138,9 +151,7 @@ pub fn match_maps<'py>(
     query_map_json: &str,
     config_json: Option<&str>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let config = config(config_json)?;
-    let (prior, query) = maps(prior_map_json, query_map_json)?;
-    let result = py.detach(|| match_object_maps(&prior, &query, &config));
+    let (prior, query, result) = parse_and_match(py, prior_map_json, query_map_json, config_json)?;
     result_dict(py, &result, &prior, &query, false)
 }
 
@@ -157,9 +168,7 @@ pub fn relocalise<'py>(
     query_map_json: &str,
     config_json: Option<&str>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let config = config(config_json)?;
-    let (prior, query) = maps(prior_map_json, query_map_json)?;
-    let result = py.detach(|| match_object_maps(&prior, &query, &config));
+    let (prior, query, result) = parse_and_match(py, prior_map_json, query_map_json, config_json)?;
     let d = result_dict(py, &result, &prior, &query, true)?;
     let mut ids: Vec<(u32, u32)> = match &result {
         MatchResult::Match(m) => m.inliers.iter().map(|p| (id_of(&prior, p.prior), id_of(&query, p.query))).collect(),
