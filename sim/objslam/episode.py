@@ -148,7 +148,11 @@ def new_mapper(cfg: RunConfig, scene: SceneSpec) -> Any:
                 **({"object_points": cfg.object_points} if cfg.object_points != "depth" else {}),
                 "naive": to_dict(cfg.naive),
                 "param": {
-                    "iforest": {"passes": cfg.param.iforest_passes},
+                    "iforest": {
+                        "passes": cfg.param.iforest_passes,
+                        "readmit_rings": cfg.param.iforest_readmit_rings,
+                        "readmit_gap_factor": cfg.param.iforest_readmit_gap,
+                    },
                     "refine": {
                         "refine_center": cfg.param.refine_center,
                         "prior_px_per_m": cfg.param.refine_prior_px_per_m,
