@@ -155,16 +155,22 @@ class RunConfig:
     """Frames rendered per simulated second while the arm moves."""
     max_joint_speed: float = 1.0
     """Peak joint speed of camera moves, rad/s."""
+    camera_path: str = "cartesian"
+    """How the arm moves between views: ``cartesian`` (the camera travels the straight line between
+    the two views with its orientation slerped, IK every 2 cm / 5°, so the tracker keeps the scene in
+    view; falls back to ``joint`` when a waypoint is unreachable) or ``joint`` (one minimum-jerk
+    joint-space move, during which the camera can swing off the table)."""
     association_mode: str = "ensemble"
     """Association: ``naive`` (the foundation baseline), ``iou``, ``iou_np``, ``iou_t`` or
     ``ensemble`` (the paper's method; see the core's ``association`` module)."""
     parameterize: bool = True
     """Run object parameterization (iForest, line-alignment yaw, refinement) after association."""
-    pose_source: str = "fk"
-    """Camera pose used by the mapper: ``fk`` (exact forward kinematics of the measured joints — no
-    calibration error; the foundation's behaviour), ``kinematics`` (forward kinematics with the
-    calibration-error model of ``[pose_noise]``), ``slam`` (visual tracking seeded by that noisy
-    prior), ``ground_truth`` (oracle)."""
+    pose_source: str = "slam"
+    """Camera pose used by the mapper: ``slam`` (default: visual tracking seeded by the noisy
+    kinematic prior, the paper's ORB-SLAM2 role), ``kinematics`` (forward kinematics with the
+    calibration-error model of ``[pose_noise]``), ``ground_truth`` (oracle), ``fk`` (exact forward
+    kinematics of the measured joints — no calibration error and no tracker; the foundation's
+    behaviour, kept for ablations and fast runs)."""
     object_points: str = "depth"
     """Local object point clouds for the association: ``depth`` (depth pixels in each box) or
     ``slam_map`` (the SLAM map points observed in each box, the paper's Sec. III-B; needs a
@@ -204,6 +210,8 @@ class RunConfig:
             raise ConfigError("frame_rate_hz: must be in (0, 60]")
         if not (0 < self.max_joint_speed <= 2.5):
             raise ConfigError("max_joint_speed: must be in (0, 2.5] rad/s")
+        if self.camera_path not in CAMERA_PATHS:
+            raise ConfigError(f"camera_path: unknown {self.camera_path!r}; known: {', '.join(CAMERA_PATHS)}")
         if self.pose_source not in POSE_SOURCES:
             raise ConfigError(f"pose_source: unknown {self.pose_source!r}; known: {', '.join(POSE_SOURCES)}")
         if not (0.0 < self.consolidate_cloud_overlap):
@@ -236,6 +244,7 @@ class RunConfig:
 
 
 POSE_SOURCES = ("fk", "kinematics", "slam", "ground_truth")
+CAMERA_PATHS = ("cartesian", "joint")
 OBJECT_POINT_SOURCES = ("depth", "slam_map")
 ASSOCIATION_MODES = ("naive", "iou", "iou_np", "iou_t", "ensemble")
 STRATEGIES = ("init", "object-driven", "random", "coverage", "expected-gain")

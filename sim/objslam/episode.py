@@ -189,6 +189,7 @@ def run_episode(cfg: RunConfig, *, progress: bool = True, on_frame: Callable[[Se
     views_done = 0
     assignments: list[tuple[int, int | None]] = []
     view_counter = [0]
+    move_paths: dict[str, int] = {"cartesian": 0, "joint": 0}
     try:
         mapper = new_mapper(cfg, scene)
         rng_sensor = np.random.default_rng([cfg.seed, 1])
@@ -259,7 +260,13 @@ def run_episode(cfg: RunConfig, *, progress: bool = True, on_frame: Callable[[Se
         def execute(view: np.ndarray, what: str) -> bool:
             """Move to a view while fusing the streamed frames; False if it was skipped."""
             try:
-                it = world.move_camera_to(view, frame_rate_hz=cfg.frame_rate_hz, max_joint_speed=cfg.max_joint_speed, what=what)
+                it = world.move_camera_to(
+                    view,
+                    frame_rate_hz=cfg.frame_rate_hz,
+                    max_joint_speed=cfg.max_joint_speed,
+                    what=what,
+                    path=cfg.camera_path,
+                )
                 while True:
                     t0 = time.perf_counter()
                     try:
@@ -271,6 +278,7 @@ def run_episode(cfg: RunConfig, *, progress: bool = True, on_frame: Callable[[Se
                     rec.log_scalar("timings/render_ms", times["render"][-1])
                     process(frame)
                 ok = True
+                move_paths[world.last_move_path] += 1
             except (UnreachablePoseError, MotionError) as e:
                 events.append(f"{what} skipped: {e}")
                 rec.log_event(f"{what} skipped: {e}")
@@ -335,6 +343,7 @@ def run_episode(cfg: RunConfig, *, progress: bool = True, on_frame: Callable[[Se
             "views": views_done,
             "frames": frames,
             "path_length_m": world.camera_path_length_m,
+            "moves_by_path": dict(move_paths),
             "wall_s": wall_s,
             "mean": evaluation["mean"],
             "objects": evaluation["objects"],

@@ -142,6 +142,8 @@ class SimWorld:
         self.sim_time_s = 0.0
         self.camera_path_length_m = 0.0
         """Length of the camera's path so far, metres (forward kinematics sampled at 30 Hz)."""
+        self.last_move_path = "joint"
+        """How the last :meth:`move_camera_to` moved: ``cartesian`` or ``joint`` (fallback)."""
         self._steps = 0
         self._ik_cache: dict[bytes, np.ndarray] = {}
         self._last_camera_xyz: np.ndarray | None = None
@@ -297,6 +299,58 @@ class SimWorld:
         world_from_gl = np.asarray(self.camera.get_model_matrix(), dtype=np.float64)
         return world_from_gl @ np.diag([1.0, -1.0, -1.0, 1.0])
 
+    def _ik_from(self, world_from_camera: np.ndarray, seed: np.ndarray, iterations: int = 100) -> np.ndarray | None:
+        """IK for a camera pose from one seed (no retries); ``None`` when it fails or leaves the limits."""
+        world_from_hand = world_from_camera @ np.linalg.inv(self.hand_from_camera_cv())
+        mask = np.array([1] * 7 + [0, 0], dtype=np.int32)
+        q, ok, _ = self.pinocchio.compute_inverse_kinematics(
+            self.hand_index,
+            matrix_to_pose(world_from_hand),
+            initial_qpos=seed,
+            active_qmask=mask,
+            max_iterations=iterations,
+        )
+        q = np.asarray(q, dtype=np.float64)
+        within = np.all(q[:7] >= self.qlimits[:7, 0] - 1e-4) and np.all(q[:7] <= self.qlimits[:7, 1] + 1e-4)
+        if not (ok and within):
+            return None
+        q[7:] = GRIPPER_OPEN_M
+        return q
+
+    def camera_path(self, q0: np.ndarray, world_from_camera: np.ndarray) -> np.ndarray | None:
+        """Joint waypoints (k, 9) from ``q0`` that keep the camera near the straight line between its
+        current and the goal position, its orientation slerped (so it keeps looking where the two
+        views look instead of swinging away during a joint-space move: the tracker needs the scene
+        in view while the arm moves). Waypoints every 2 cm / 5° at most, each solved by IK seeded
+        with the previous one. When the straight line leaves the reachable set, the same path
+        lifted by a bump of 10 then 20 cm at its middle (``h sin(π s)``) is tried. ``None`` when no
+        variant works or the arm would jump (> 0.35 rad on a joint between waypoints)."""
+        t0 = self.world_from_camera_fk(q0)
+        t1 = np.asarray(world_from_camera, dtype=np.float64)
+        a, b = _quat_from_matrix(t0[:3, :3]), _quat_from_matrix(t1[:3, :3])
+        if float(np.dot(a, b)) < 0:
+            b = -b
+        angle = 2.0 * math.acos(min(1.0, abs(float(np.dot(a, b)))))
+        dist = float(np.linalg.norm(t1[:3, 3] - t0[:3, 3]))
+        n = max(4, int(math.ceil(dist / 0.02)), int(math.ceil(math.degrees(angle) / 5.0)))
+        for lift in (0.0, 0.1, 0.2):
+            path = [np.asarray(q0, dtype=np.float64).copy()]
+            for k in range(1, n + 1):
+                s = k / n
+                t = np.eye(4)
+                t[:3, 3] = (1 - s) * t0[:3, 3] + s * t1[:3, 3]
+                t[2, 3] += lift * math.sin(math.pi * s)
+                t[:3, :3] = _matrix_from_quat(_slerp(a, b, s))
+                q = self._ik_from(t, path[-1])
+                if q is None:
+                    q = self._ik_from(t, path[-1], iterations=400)
+                if q is None or float(np.max(np.abs(q[:7] - path[-1][:7]))) > 0.35:
+                    break
+                path.append(q)
+            else:
+                return np.array(path)
+        return None
+
     def solve_ik(self, world_from_camera: np.ndarray, what: str = "view") -> np.ndarray:
         """Joint positions placing the camera at ``world_from_camera`` (OpenCV axes); tries the current
         configuration then a few deterministic seeds. Raises :class:`UnreachablePoseError`."""
@@ -384,6 +438,7 @@ class SimWorld:
         max_joint_speed: float = 1.0,
         settle_s: float = 0.3,
         what: str = "view",
+        path: str = "cartesian",
     ) -> Iterator[SensorFrame]:
         """Move the camera to a pose: IK, then a minimum-jerk joint trajectory tracked by the PD
         drives; yields a rendered frame every ``1 / frame_rate_hz`` simulated seconds and one after
@@ -394,22 +449,48 @@ class SimWorld:
         q_goal = self._ik_cache.pop(key, None)
         if q_goal is None:
             q_goal = self.solve_ik(world_from_camera, what)
-        yield from self.move_joints_to(q_goal, frame_rate_hz=frame_rate_hz, max_joint_speed=max_joint_speed, settle_s=settle_s)
+        waypoints = self.camera_path(self.qpos(), world_from_camera) if path == "cartesian" else None
+        self.last_move_path = "joint" if waypoints is None else "cartesian"
+        if waypoints is None:
+            waypoints = np.array([self.qpos(), q_goal])
+        yield from self.move_along(waypoints, frame_rate_hz=frame_rate_hz, max_joint_speed=max_joint_speed, settle_s=settle_s)
 
     def move_joints_to(
         self, q_goal: np.ndarray, *, frame_rate_hz: float, max_joint_speed: float = 1.0, settle_s: float = 0.3
     ) -> Iterator[SensorFrame]:
         """Execute a minimum-jerk joint move (see :meth:`move_camera_to`)."""
-        q0 = self.qpos()
-        dq = q_goal - q0
+        yield from self.move_along(
+            np.array([self.qpos(), q_goal]), frame_rate_hz=frame_rate_hz, max_joint_speed=max_joint_speed, settle_s=settle_s
+        )
+
+    def move_along(
+        self, waypoints: np.ndarray, *, frame_rate_hz: float, max_joint_speed: float = 1.0, settle_s: float = 0.3
+    ) -> Iterator[SensorFrame]:
+        """Execute a joint path (k ≥ 2 waypoints, the first the current configuration): piecewise
+        linear in joint space, parameterised by its cumulative max-joint distance and timed by one
+        minimum-jerk profile over the whole path (peak joint speed ``max_joint_speed``); yields a
+        frame every ``1 / frame_rate_hz`` simulated seconds and one after settling at the last
+        waypoint. Two waypoints give the plain minimum-jerk joint move."""
+        w = np.asarray(waypoints, dtype=np.float64)
+        seg = np.max(np.abs(np.diff(w[:, :7], axis=0)), axis=1)
+        cum = np.concatenate([[0.0], np.cumsum(seg)])
+        total = float(cum[-1])
+        q_goal = w[-1]
         # Minimum jerk peaks at 1.875x the mean speed.
-        duration = max(0.5, 1.875 * float(np.max(np.abs(dq[:7]))) / max_joint_speed)
+        duration = max(0.5, 1.875 * total / max_joint_speed)
         n_steps = int(math.ceil(duration * PHYSICS_HZ))
         steps_per_frame = max(1, int(round(PHYSICS_HZ / frame_rate_hz)))
         for i in range(1, n_steps + 1):
             s = i / n_steps
             blend = 10 * s**3 - 15 * s**4 + 6 * s**5
-            self._set_targets(q0 + blend * dq)
+            if total <= 0.0:
+                target = q_goal
+            else:
+                d = blend * total
+                j = min(int(np.searchsorted(cum, d, side="right")) - 1, len(w) - 2)
+                u = 0.0 if seg[j] <= 0.0 else (d - cum[j]) / seg[j]
+                target = w[j] + min(max(u, 0.0), 1.0) * (w[j + 1] - w[j])
+            self._set_targets(target)
             self._step()
             if i % steps_per_frame == 0 and i < n_steps:
                 yield self.render()
@@ -420,6 +501,46 @@ class SimWorld:
         if err > 0.02:
             raise MotionError(f"arm stopped {err:.3f} rad from its joint target")
         yield self.render()
+
+
+def _quat_from_matrix(r: np.ndarray) -> np.ndarray:
+    """Unit quaternion (w, x, y, z) of a rotation matrix (Shepperd's method)."""
+    tr = float(np.trace(r))
+    if tr > 0:
+        k = math.sqrt(tr + 1.0) * 2
+        q = np.array([0.25 * k, (r[2, 1] - r[1, 2]) / k, (r[0, 2] - r[2, 0]) / k, (r[1, 0] - r[0, 1]) / k])
+    else:
+        i = int(np.argmax(np.diag(r)))
+        j, m = (i + 1) % 3, (i + 2) % 3
+        k = math.sqrt(1.0 + r[i, i] - r[j, j] - r[m, m]) * 2
+        q = np.zeros(4)
+        q[0] = (r[m, j] - r[j, m]) / k
+        q[1 + i] = 0.25 * k
+        q[1 + j] = (r[j, i] + r[i, j]) / k
+        q[1 + m] = (r[m, i] + r[i, m]) / k
+    return q / np.linalg.norm(q)
+
+
+def _matrix_from_quat(q: np.ndarray) -> np.ndarray:
+    """Rotation matrix of a unit quaternion (w, x, y, z)."""
+    w, x, y, z = q
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def _slerp(a: np.ndarray, b: np.ndarray, s: float) -> np.ndarray:
+    """Spherical linear interpolation between unit quaternions on the same hemisphere."""
+    dot = min(1.0, float(np.dot(a, b)))
+    if dot > 0.9995:
+        q = a + s * (b - a)
+        return q / np.linalg.norm(q)
+    th = math.acos(dot)
+    return (math.sin((1 - s) * th) * a + math.sin(s * th) * b) / math.sin(th)
 
 
 FrameCallback = Callable[[SensorFrame], None]
