@@ -203,7 +203,9 @@ class RunConfig:
         if self.strategy not in STRATEGIES:
             raise ConfigError(f"strategy: unknown {self.strategy!r}; known: {', '.join(STRATEGIES)}")
         if self.association_mode not in ASSOCIATION_MODES:
-            raise ConfigError(f"association_mode: unknown {self.association_mode!r}; known: {', '.join(ASSOCIATION_MODES)}")
+            raise ConfigError(
+                f"association_mode: unknown {self.association_mode!r}; known: {', '.join(ASSOCIATION_MODES)}"
+            )
         if self.seed < 0:
             raise ConfigError("seed: must be ≥ 0")
         if not (0 < self.frame_rate_hz <= 60):
@@ -223,7 +225,9 @@ class RunConfig:
                 f"object_points: unknown {self.object_points!r}; known: {', '.join(OBJECT_POINT_SOURCES)}"
             )
         if self.object_points == "slam_map" and self.pose_source == "fk":
-            raise ConfigError("object_points: slam_map needs a tracker (pose_source kinematics, slam or ground_truth)")
+            raise ConfigError(
+                "object_points: slam_map needs a tracker (pose_source kinematics, slam or ground_truth)"
+            )
         if self.param.iforest_passes < 1:
             raise ConfigError("param.iforest_passes: must be ≥ 1")
         if self.param.iforest_readmit_rings < 0:

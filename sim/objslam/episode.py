@@ -53,7 +53,11 @@ GRID_COLORS = np.array([[150, 150, 150], [60, 200, 60], [220, 50, 50]], dtype=np
 
 def grey_of(rgb: np.ndarray) -> np.ndarray:
     """ITU-R BT.601 luma of an (H, W, 3) uint8 image, as uint8."""
-    g = rgb[..., 0].astype(np.float32) * 0.299 + rgb[..., 1].astype(np.float32) * 0.587 + rgb[..., 2].astype(np.float32) * 0.114
+    g = (
+        rgb[..., 0].astype(np.float32) * 0.299
+        + rgb[..., 1].astype(np.float32) * 0.587
+        + rgb[..., 2].astype(np.float32) * 0.114
+    )
     return np.clip(g + 0.5, 0, 255).astype(np.uint8)
 
 
@@ -77,7 +81,10 @@ def _log_decision(rec: Any, decision: dict[str, Any]) -> None:
         rec.log_arrows("world/explore/candidates", poses[:, :3, 3], 0.08 * poses[:, :3, 2], colors)
     chosen = decision["world_from_camera"]
     rec.log_arrows(
-        "world/explore/chosen", chosen[None, :3, 3], 0.12 * chosen[None, :3, 2], np.array([[255, 255, 255]], dtype=np.uint8)
+        "world/explore/chosen",
+        chosen[None, :3, 3],
+        0.12 * chosen[None, :3, 2],
+        np.array([[255, 255, 255]], dtype=np.uint8),
     )
     if np.isfinite(decision.get("utility", float("nan"))):
         rec.log_scalar("explore/utility", float(decision["utility"]))
@@ -93,7 +100,9 @@ def _make_run_dir(cfg: RunConfig, scene: SceneSpec) -> Path:
     if not runs.is_absolute():
         runs = REPO_ROOT / runs
     now = datetime.now()
-    base = runs / now.strftime("%Y-%m-%d") / f"{now.strftime('%H%M%S')}_{cfg.strategy}_{scene.name}_{cfg.seed}"
+    base = (
+        runs / now.strftime("%Y-%m-%d") / f"{now.strftime('%H%M%S')}_{cfg.strategy}_{scene.name}_{cfg.seed}"
+    )
     base.parent.mkdir(parents=True, exist_ok=True)
     d, k = base, 1
     while True:  # never reuse (and so never overwrite) a folder, even when workers start together
@@ -156,7 +165,7 @@ def new_mapper(cfg: RunConfig, scene: SceneSpec) -> Any:
                     "refine": {
                         "refine_center": cfg.param.refine_center,
                         "prior_px_per_m": cfg.param.refine_prior_px_per_m,
-                    }
+                    },
                 },
             }
         ),
@@ -164,11 +173,15 @@ def new_mapper(cfg: RunConfig, scene: SceneSpec) -> Any:
         table=(*scene.table.center, *scene.table.size),
         tracker_config_json=None
         if cfg.pose_source == "fk"
-        else json.dumps({"pose_source": cfg.pose_source, "kinematic_noise": {**to_dict(cfg.pose_noise), "seed": cfg.seed}}),
+        else json.dumps(
+            {"pose_source": cfg.pose_source, "kinematic_noise": {**to_dict(cfg.pose_noise), "seed": cfg.seed}}
+        ),
     )
 
 
-def run_episode(cfg: RunConfig, *, progress: bool = True, on_frame: Callable[[SensorFrame], None] | None = None) -> EpisodeResult:
+def run_episode(
+    cfg: RunConfig, *, progress: bool = True, on_frame: Callable[[SensorFrame], None] | None = None
+) -> EpisodeResult:
     """Run one episode and write its run folder. Raises on failure after marking the folder."""
     cfg.validate()
     scene = load_scene(_scene_path(cfg))
@@ -241,7 +254,9 @@ def run_episode(cfg: RunConfig, *, progress: bool = True, on_frame: Callable[[Se
             if cfg.record.map_points and frame.index % cfg.record.every_n_frames == 0:
                 pts = mapper.map_points()
                 if pts is not None and len(pts):
-                    rec.log_colored_points("world/map/points", pts, np.tile(MAP_POINT_COLOR, (len(pts), 1)), 0.002)
+                    rec.log_colored_points(
+                        "world/map/points", pts, np.tile(MAP_POINT_COLOR, (len(pts), 1)), 0.002
+                    )
             rec.log_trajectory("estimated", np.array(est_positions))
             rec.log_trajectory("ground_truth", np.array(gt_positions))
             rec.log_objects("world/map", mapper.objects_json())
@@ -312,7 +327,9 @@ def run_episode(cfg: RunConfig, *, progress: bool = True, on_frame: Callable[[Se
             rec.log_scalar("explore/mean_normalized_entropy", mapper.entropy_curve()[-1])
             if cfg.record.grids:
                 pts, states = mapper.grid_cells()
-                rec.log_colored_points("world/map/grids", pts, GRID_COLORS[np.frombuffer(states, dtype=np.uint8)], 0.004)
+                rec.log_colored_points(
+                    "world/map/grids", pts, GRID_COLORS[np.frombuffer(states, dtype=np.uint8)], 0.004
+                )
         if bar is not None:
             bar.close()
 
@@ -324,13 +341,17 @@ def run_episode(cfg: RunConfig, *, progress: bool = True, on_frame: Callable[[Se
         rec.log_objects("world/ground_truth", json.dumps(gt))
         if cfg.record.estimator_inputs:
             inputs = json.loads(mapper.estimator_inputs_json())
-            (run_dir / "estimator_inputs.json").write_text(json.dumps({"objects": inputs, "ground_truth": gt}))
-        evaluation = json.loads(
-            _native.evaluate_map(json.dumps(gt), map_json, json.dumps(to_dict(cfg.eval)))
-        )
+            (run_dir / "estimator_inputs.json").write_text(
+                json.dumps({"objects": inputs, "ground_truth": gt})
+            )
+        evaluation = json.loads(_native.evaluate_map(json.dumps(gt), map_json, json.dumps(to_dict(cfg.eval))))
         stages = {}
         for stage in ("raw", "iforest", "lines", "refined"):
-            ev = json.loads(_native.evaluate_map(json.dumps(gt), mapper.stage_map_json(stage), json.dumps(to_dict(cfg.eval))))
+            ev = json.loads(
+                _native.evaluate_map(
+                    json.dumps(gt), mapper.stage_map_json(stage), json.dumps(to_dict(cfg.eval))
+                )
+            )
             stages[stage] = ev["mean"]
         association = json.loads(mapper.association_metrics_json(assignments, [o.id for o in scene.objects]))
         wall_s = time.perf_counter() - t_start

@@ -63,7 +63,9 @@ def panda_urdf_path() -> Path:
         return Path(env)
     spec = importlib.util.find_spec("mani_skill")
     if spec is None or not spec.submodule_search_locations:
-        raise FileNotFoundError("mani_skill is not installed: run `make setup` (it installs mani-skill --no-deps)")
+        raise FileNotFoundError(
+            "mani_skill is not installed: run `make setup` (it installs mani-skill --no-deps)"
+        )
     path = Path(spec.submodule_search_locations[0]) / "assets/robots/panda/panda_v2.urdf"
     if not path.exists():
         raise FileNotFoundError(f"Panda URDF not found at {path}")
@@ -153,7 +155,8 @@ class SimWorld:
         if grasp_physics:
             sapien.physx.set_shape_config(contact_offset=GRASP_PHYSICS["contact_offset_m"], rest_offset=0.0)
             sapien.physx.set_body_config(
-                solver_position_iterations=GRASP_PHYSICS["solver_position_iterations"], solver_velocity_iterations=1
+                solver_position_iterations=GRASP_PHYSICS["solver_position_iterations"],
+                solver_velocity_iterations=1,
             )
         try:
             scene = sapien.Scene()
@@ -176,14 +179,22 @@ class SimWorld:
         mount = sapien.Pose(list(camera.mount_xyz), list(camera.mount_wxyz))
         self.hand_from_sapien_camera = pose_to_matrix(mount)
         self.camera = scene.add_mounted_camera(
-            "hand_camera", self.hand.entity, mount, camera.width, camera.height,
-            math.radians(camera.fovy_deg), camera.near_m, camera.far_m,
+            "hand_camera",
+            self.hand.entity,
+            mount,
+            camera.width,
+            camera.height,
+            math.radians(camera.fovy_deg),
+            camera.near_m,
+            camera.far_m,
         )
         self.intrinsics = camera.intrinsics()
         k = np.asarray(self.camera.get_intrinsic_matrix(), dtype=np.float64)
         if not np.allclose(k, self.intrinsics, atol=1e-2):
             raise RuntimeError(f"camera intrinsics disagree with the config: {k} vs {self.intrinsics}")
-        self.actor_to_object = {a.per_scene_id: (oid, spec.objects[oid].cls) for oid, a in self.object_actors.items()}
+        self.actor_to_object = {
+            a.per_scene_id: (oid, spec.objects[oid].cls) for oid, a in self.object_actors.items()
+        }
         self.robot_actor_ids = {link.entity.per_scene_id for link in self.robot.get_links()}
         # Let objects settle on the table.
         for _ in range(PHYSICS_HZ // 4):
@@ -203,14 +214,18 @@ class SimWorld:
         self.table = table
         # A floor far below, so depth beyond the table edge has a return like a real room.
         fb = self.scene.create_actor_builder()
-        fb.add_box_visual(half_size=[3, 3, 0.01], material=sapien.render.RenderMaterial(base_color=[0.35, 0.35, 0.38, 1]))
+        fb.add_box_visual(
+            half_size=[3, 3, 0.01], material=sapien.render.RenderMaterial(base_color=[0.35, 0.35, 0.38, 1])
+        )
         floor = fb.build_static(name="floor")
         floor.set_pose(sapien.Pose([0, 0, -0.75]))
 
     def _build_objects(self) -> None:
         for o in self.spec.objects:
             mat = sapien.render.RenderMaterial()
-            mat.base_color_texture = sapien.render.RenderTexture2D(object_texture(self.spec.seed, o.id), "R8G8B8A8Unorm")
+            mat.base_color_texture = sapien.render.RenderTexture2D(
+                object_texture(self.spec.seed, o.id), "R8G8B8A8Unorm"
+            )
             mat.roughness = 0.8
             b = self.scene.create_actor_builder()
             phys = self.scene.create_physical_material(1.0, 1.0, 0.0)
@@ -247,7 +262,9 @@ class SimWorld:
         for j in self.joints[:7]:
             j.set_drive_properties(stiffness=ARM_STIFFNESS, damping=ARM_DAMPING, force_limit=ARM_FORCE_LIMIT)
         for j in self.joints[7:]:
-            j.set_drive_properties(stiffness=GRIPPER_STIFFNESS, damping=GRIPPER_DAMPING, force_limit=GRIPPER_FORCE_LIMIT)
+            j.set_drive_properties(
+                stiffness=GRIPPER_STIFFNESS, damping=GRIPPER_DAMPING, force_limit=GRIPPER_FORCE_LIMIT
+            )
         links = robot.get_links()
         self.hand = next(link for link in links if link.name == "panda_hand")
         self.hand_index = links.index(self.hand)
@@ -299,8 +316,20 @@ class SimWorld:
         world_from_gl = np.asarray(self.camera.get_model_matrix(), dtype=np.float64)
         return world_from_gl @ np.diag([1.0, -1.0, -1.0, 1.0])
 
-    def _ik_from(self, world_from_camera: np.ndarray, seed: np.ndarray, iterations: int = 100) -> np.ndarray | None:
-        """IK for a camera pose from one seed (no retries); ``None`` when it fails or leaves the limits."""
+    def _within_limits(self, q: np.ndarray) -> bool:
+        return bool(
+            np.all(q[:7] >= self.qlimits[:7, 0] - 1e-4) and np.all(q[:7] <= self.qlimits[:7, 1] + 1e-4)
+        )
+
+    def _ik_from(
+        self,
+        world_from_camera: np.ndarray,
+        seed: np.ndarray,
+        iterations: int = 100,
+        check_limits: bool = True,
+    ) -> np.ndarray | None:
+        """IK for a camera pose from one seed (no retries); ``None`` when it fails or (with
+        ``check_limits``) leaves the joint limits."""
         world_from_hand = world_from_camera @ np.linalg.inv(self.hand_from_camera_cv())
         mask = np.array([1] * 7 + [0, 0], dtype=np.int32)
         q, ok, _ = self.pinocchio.compute_inverse_kinematics(
@@ -311,20 +340,54 @@ class SimWorld:
             max_iterations=iterations,
         )
         q = np.asarray(q, dtype=np.float64)
-        within = np.all(q[:7] >= self.qlimits[:7, 0] - 1e-4) and np.all(q[:7] <= self.qlimits[:7, 1] + 1e-4)
-        if not (ok and within):
+        if not ok or (check_limits and not self._within_limits(q)):
             return None
         q[7:] = GRIPPER_OPEN_M
         return q
 
-    def camera_path(self, q0: np.ndarray, world_from_camera: np.ndarray) -> np.ndarray | None:
-        """Joint waypoints (k, 9) from ``q0`` that keep the camera near the straight line between its
-        current and the goal position, its orientation slerped (so it keeps looking where the two
-        views look instead of swinging away during a joint-space move: the tracker needs the scene
-        in view while the arm moves). Waypoints every 2 cm / 5° at most, each solved by IK seeded
-        with the previous one. When the straight line leaves the reachable set, the same path
-        lifted by a bump of 10 then 20 cm at its middle (``h sin(π s)``) is tried. ``None`` when no
-        variant works or the arm would jump (> 0.35 rad on a joint between waypoints)."""
+    def camera_path(
+        self, q0: np.ndarray, world_from_camera: np.ndarray, q_goal: np.ndarray | None = None
+    ) -> np.ndarray | None:
+        """Joint waypoints (k, 9) from ``q0`` that keep the camera looking at the scene on its way
+        to ``world_from_camera`` (a joint-space move can swing it off the table, and the tracker
+        needs the scene in view while the arm moves). Tried in order: the straight line between the
+        two camera positions with the orientation slerped, then the same line lifted by 10 and
+        20 cm at its middle, then two such legs through a hub view (above the midpoint of the two
+        views, then above the table centre, 0.5 m over the table, looking at its centre).
+        With ``q_goal`` (an IK solution of the goal), the camera's roll about its optical axis is
+        not slerped but follows the wrist joint from its start to its goal value (the optical axis
+        is the last joint's axis): the slerp's shortest roll can need the wrist beyond its limits,
+        and roll does not change what the camera sees. ``None`` when none works."""
+        q7_end = None if q_goal is None else float(q_goal[6])
+        direct = self._line_path(q0, world_from_camera, q7_end)
+        if direct is not None:
+            return direct
+        t0 = self.world_from_camera_fk(q0)
+        t1 = np.asarray(world_from_camera, dtype=np.float64)
+        table = np.array([*self.spec.table.center, 0.0])
+        mid = (t0[:3, 3] + t1[:3, 3]) / 2.0
+        hubs = [
+            np.array([mid[0], mid[1], max(t0[2, 3], t1[2, 3], 0.35) + 0.1]),
+            table + np.array([0.0, 0.0, 0.5]),
+        ]
+        for eye in hubs:
+            hub = look_at(eye, table)
+            first = self._line_path(q0, hub)
+            if first is None:
+                continue
+            second = self._line_path(first[-1], world_from_camera, q7_end)
+            if second is not None:
+                return np.concatenate([first, second[1:]])
+        return None
+
+    def _line_path(
+        self, q0: np.ndarray, world_from_camera: np.ndarray, q7_end: float | None = None
+    ) -> np.ndarray | None:
+        """One leg of :meth:`camera_path`: the straight (then lifted) line with the orientation
+        slerped, waypoints every 2 cm / 5° at most, each solved by IK seeded with the previous one
+        (with ``q7_end``: then turned about the optical axis so the wrist joint moves linearly from
+        its start value to ``q7_end``); ``None`` when a waypoint is unreachable, the arm would jump
+        (> 0.35 rad on a joint) or the last waypoint's roll misses the goal by > 3°."""
         t0 = self.world_from_camera_fk(q0)
         t1 = np.asarray(world_from_camera, dtype=np.float64)
         a, b = _quat_from_matrix(t0[:3, :3]), _quat_from_matrix(t1[:3, :3])
@@ -332,7 +395,7 @@ class SimWorld:
             b = -b
         angle = 2.0 * math.acos(min(1.0, abs(float(np.dot(a, b)))))
         dist = float(np.linalg.norm(t1[:3, 3] - t0[:3, 3]))
-        n = max(4, int(math.ceil(dist / 0.02)), int(math.ceil(math.degrees(angle) / 5.0)))
+        n = max(4, math.ceil(dist / 0.02), math.ceil(math.degrees(angle) / 5.0))
         for lift in (0.0, 0.1, 0.2):
             path = [np.asarray(q0, dtype=np.float64).copy()]
             for k in range(1, n + 1):
@@ -341,15 +404,42 @@ class SimWorld:
                 t[:3, 3] = (1 - s) * t0[:3, 3] + s * t1[:3, 3]
                 t[2, 3] += lift * math.sin(math.pi * s)
                 t[:3, :3] = _matrix_from_quat(_slerp(a, b, s))
-                q = self._ik_from(t, path[-1])
+                q = (
+                    self._ik_from(t, path[-1])
+                    if q7_end is None
+                    else self._ik_roll(t, path[-1], (1 - s) * q0[6] + s * q7_end)
+                )
                 if q is None:
                     q = self._ik_from(t, path[-1], iterations=400)
                 if q is None or float(np.max(np.abs(q[:7] - path[-1][:7]))) > 0.35:
                     break
                 path.append(q)
             else:
+                if q7_end is not None and abs(path[-1][6] - q7_end) > math.radians(3.0):
+                    return None
                 return np.array(path)
         return None
+
+    def _ik_roll(self, world_from_camera: np.ndarray, seed: np.ndarray, q7: float) -> np.ndarray | None:
+        """IK for a camera pose up to its roll about the optical axis, chosen so the wrist joint
+        ends near ``q7`` (two corrections: the optical axis is the wrist's axis up to the camera's
+        mounting offset)."""
+        q = self._ik_from(world_from_camera, seed, check_limits=False)
+        t = world_from_camera
+        for _ in range(2):
+            if q is None:
+                return None
+            phi = q7 - float(q[6])
+            if abs(phi) < 1e-3:
+                break
+            c, s = math.cos(phi), math.sin(phi)
+            rz = np.eye(4)
+            rz[:2, :2] = [[c, -s], [s, c]]
+            t = t @ rz
+            q = self._ik_from(t, q, check_limits=False)
+        if q is None or not self._within_limits(q):
+            return None
+        return q
 
     def solve_ik(self, world_from_camera: np.ndarray, what: str = "view") -> np.ndarray:
         """Joint positions placing the camera at ``world_from_camera`` (OpenCV axes); tries the current
@@ -369,7 +459,9 @@ class SimWorld:
             )
             q = np.asarray(q, dtype=np.float64)
             e = float(np.linalg.norm(err))
-            within = np.all(q[:7] >= self.qlimits[:7, 0] - 1e-4) and np.all(q[:7] <= self.qlimits[:7, 1] + 1e-4)
+            within = np.all(q[:7] >= self.qlimits[:7, 0] - 1e-4) and np.all(
+                q[:7] <= self.qlimits[:7, 1] + 1e-4
+            )
             if ok and within:
                 q[7:] = GRIPPER_OPEN_M
                 return q
@@ -449,22 +541,32 @@ class SimWorld:
         q_goal = self._ik_cache.pop(key, None)
         if q_goal is None:
             q_goal = self.solve_ik(world_from_camera, what)
-        waypoints = self.camera_path(self.qpos(), world_from_camera) if path == "cartesian" else None
+        waypoints = self.camera_path(self.qpos(), world_from_camera, q_goal) if path == "cartesian" else None
         self.last_move_path = "joint" if waypoints is None else "cartesian"
         if waypoints is None:
             waypoints = np.array([self.qpos(), q_goal])
-        yield from self.move_along(waypoints, frame_rate_hz=frame_rate_hz, max_joint_speed=max_joint_speed, settle_s=settle_s)
+        yield from self.move_along(
+            waypoints, frame_rate_hz=frame_rate_hz, max_joint_speed=max_joint_speed, settle_s=settle_s
+        )
 
     def move_joints_to(
         self, q_goal: np.ndarray, *, frame_rate_hz: float, max_joint_speed: float = 1.0, settle_s: float = 0.3
     ) -> Iterator[SensorFrame]:
         """Execute a minimum-jerk joint move (see :meth:`move_camera_to`)."""
         yield from self.move_along(
-            np.array([self.qpos(), q_goal]), frame_rate_hz=frame_rate_hz, max_joint_speed=max_joint_speed, settle_s=settle_s
+            np.array([self.qpos(), q_goal]),
+            frame_rate_hz=frame_rate_hz,
+            max_joint_speed=max_joint_speed,
+            settle_s=settle_s,
         )
 
     def move_along(
-        self, waypoints: np.ndarray, *, frame_rate_hz: float, max_joint_speed: float = 1.0, settle_s: float = 0.3
+        self,
+        waypoints: np.ndarray,
+        *,
+        frame_rate_hz: float,
+        max_joint_speed: float = 1.0,
+        settle_s: float = 0.3,
     ) -> Iterator[SensorFrame]:
         """Execute a joint path (k ≥ 2 waypoints, the first the current configuration): piecewise
         linear in joint space, parameterised by its cumulative max-joint distance and timed by one
@@ -478,8 +580,8 @@ class SimWorld:
         q_goal = w[-1]
         # Minimum jerk peaks at 1.875x the mean speed.
         duration = max(0.5, 1.875 * total / max_joint_speed)
-        n_steps = int(math.ceil(duration * PHYSICS_HZ))
-        steps_per_frame = max(1, int(round(PHYSICS_HZ / frame_rate_hz)))
+        n_steps = math.ceil(duration * PHYSICS_HZ)
+        steps_per_frame = max(1, round(PHYSICS_HZ / frame_rate_hz))
         for i in range(1, n_steps + 1):
             s = i / n_steps
             blend = 10 * s**3 - 15 * s**4 + 6 * s**5
