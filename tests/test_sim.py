@@ -62,4 +62,44 @@ def test_fk_pose_matches_renderer_and_depth_matches_geometry(scene1_world) -> No
 
 def test_unreachable_pose_raises(scene1_world) -> None:
     with pytest.raises(UnreachablePoseError, match="unreachable"):
-        list(scene1_world.move_camera_to(look_at(np.array([2.0, 0.0, 0.5]), np.array([2.5, 0, 0])), frame_rate_hz=4))
+        list(
+            scene1_world.move_camera_to(
+                look_at(np.array([2.0, 0.0, 0.5]), np.array([2.5, 0, 0])), frame_rate_hz=4
+            )
+        )
+
+
+def test_cartesian_move_keeps_the_table_in_view(scene1_world) -> None:
+    """A move between two views across the table: the camera travels close to the straight line
+    between them and keeps looking at the table (a joint-space move swings it off), while the
+    joint-space move between the same views deviates from the line."""
+    w = scene1_world
+    target = np.array([0.5, 0.0, 0.0])
+    a = look_at(np.array([0.35, 0.25, 0.45]), target)
+    b = look_at(np.array([0.40, -0.30, 0.40]), target)
+    list(w.move_camera_to(a, frame_rate_hz=4.0, path="joint"))
+    q_goal = w.solve_ik(b, "b")
+    path = w.camera_path(w.qpos(), b, q_goal)
+    assert path is not None
+    p0, p1 = a[:3, 3], b[:3, 3]
+    line = (p1 - p0) / np.linalg.norm(p1 - p0)
+
+    def off_line(m: np.ndarray) -> float:
+        d = m[:3, 3] - p0
+        return float(np.linalg.norm(d - np.dot(d, line) * line))
+
+    def off_target_deg(m: np.ndarray) -> float:
+        to = target - m[:3, 3]
+        return float(np.degrees(np.arccos(np.clip(np.dot(m[:3, 2], to / np.linalg.norm(to)), -1, 1))))
+
+    poses = [w.world_from_camera_fk(q) for q in path]
+    assert max(off_line(m) for m in poses) < 0.005
+    # Both views look at the target, so every waypoint aims at it (the roll about the axis is free).
+    assert max(off_target_deg(m) for m in poses) < 1.0
+    assert np.allclose(poses[-1][:3, 3], p1, atol=2e-3)
+    assert abs(path[-1][6] - q_goal[6]) < np.radians(3.0)
+    frames = list(w.move_camera_to(b, frame_rate_hz=8.0))
+    assert w.last_move_path == "cartesian"
+    # Executed by the PD drives: every streamed frame still looks at the table centre.
+    assert max(off_target_deg(f.world_from_camera_gt) for f in frames) < 5.0
+    assert np.allclose(frames[-1].world_from_camera_gt[:3, 3], p1, atol=5e-3)

@@ -396,6 +396,7 @@ class SimWorld:
         angle = 2.0 * math.acos(min(1.0, abs(float(np.dot(a, b)))))
         dist = float(np.linalg.norm(t1[:3, 3] - t0[:3, 3]))
         n = max(4, math.ceil(dist / 0.02), math.ceil(math.degrees(angle) / 5.0))
+        f0, f1 = _fixation_point(t0), _fixation_point(t1)
         for lift in (0.0, 0.1, 0.2):
             path = [np.asarray(q0, dtype=np.float64).copy()]
             for k in range(1, n + 1):
@@ -403,7 +404,9 @@ class SimWorld:
                 t = np.eye(4)
                 t[:3, 3] = (1 - s) * t0[:3, 3] + s * t1[:3, 3]
                 t[2, 3] += lift * math.sin(math.pi * s)
-                t[:3, :3] = _matrix_from_quat(_slerp(a, b, s))
+                # Slerped orientation, turned (minimally) to aim at the interpolated fixation
+                # point: the camera keeps looking where the two views look.
+                t[:3, :3] = _aim(_matrix_from_quat(_slerp(a, b, s)), (1 - s) * f0 + s * f1 - t[:3, 3])
                 q = (
                     self._ik_from(t, path[-1])
                     if q7_end is None
@@ -603,6 +606,28 @@ class SimWorld:
         if err > 0.02:
             raise MotionError(f"arm stopped {err:.3f} rad from its joint target")
         yield self.render()
+
+
+def _fixation_point(world_from_camera: np.ndarray) -> np.ndarray:
+    """Where a view looks: its optical axis meets the table plane (z = 0) when it points down
+    by more than ~10°, else the point 0.4 m along the axis."""
+    eye, axis = world_from_camera[:3, 3], world_from_camera[:3, 2]
+    if axis[2] < -0.17 and eye[2] > 0:
+        return eye + axis * (eye[2] / -axis[2])
+    return eye + 0.4 * axis
+
+
+def _aim(r: np.ndarray, direction: np.ndarray) -> np.ndarray:
+    """``r`` rotated by the smallest rotation taking its z axis (the optical axis) to ``direction``."""
+    n = float(np.linalg.norm(direction))
+    if n < 1e-9:
+        return r
+    z, d = r[:, 2], direction / n
+    v, c = np.cross(z, d), float(np.dot(z, d))
+    if c < -0.999:
+        return r
+    k = np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+    return (np.eye(3) + k + k @ k / (1.0 + c)) @ r
 
 
 def _quat_from_matrix(r: np.ndarray) -> np.ndarray:
