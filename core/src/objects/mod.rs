@@ -20,9 +20,13 @@
 //! at θ + 90° with `(b, a)`; evaluation against ground truth written the other way round must
 //! compare yaw modulo 90° (or canonicalise the truth the same way).
 //!
-//! Cylinders (cups, cans, bottles, bowls, balls; [`crate::map::Label::shape`]) stop after stage 2
-//! with yaw 0 and radius = mean of the two horizontal half-extents (the paper ignores their
-//! orientation); a cylinder can also be written as a dual quadric ([`dual_quadric_world`], Eq.
+//! Cylinders (cups, cans, bottles, bowls, balls; [`crate::map::Label::shape`]) have no yaw (the
+//! paper ignores their orientation) and no `lines` stage. The paper stops them after stage 2, with
+//! radius = mean of the two horizontal half-extents; beyond the paper their `refined` stage is a
+//! circle fitted to the side-wall points ([`cylinder`]: the mean of the points of a partly seen
+//! cylinder lies off its axis, towards the cameras), kept when it covers a long enough arc and
+//! fits well ([`ParamConfig::cylinder`]; `enabled = false` gives the paper's behaviour). A
+//! cylinder can also be written as a dual quadric ([`dual_quadric_world`], Eq.
 //! "quadric para": `Q_w = T Q_o Tᵀ`, `Q_o = diag(s_l², s_w², s_h², −1)`).
 //!
 //! # Entry points
@@ -76,6 +80,7 @@
 //!   and the acceptance cost ([`refine`]).
 //! - Window length `t` ([`ParamConfig::window_frames`], default 10).
 
+pub mod cylinder;
 pub mod iforest;
 pub mod lsd;
 pub mod refine;
@@ -88,6 +93,7 @@ use nalgebra::{Matrix4, Point3, Vector3};
 use crate::geometry::{ObjectGeometry, Shape};
 use crate::map::EstimateStage;
 
+use cylinder::{fit_cylinder, CylinderFitConfig};
 use iforest::{mean_and_half_extent, robust_centroid_scale, IForestConfig};
 use refine::{refine_yaw_scale, RefineConfig};
 use yaw::{align_yaw, canonical_cuboid, cuboid, oriented_extent, LineFrame, YawConfig};
@@ -137,6 +143,8 @@ pub struct ParamConfig {
     pub yaw: YawConfig,
     /// Joint yaw/scale refinement.
     pub refine: RefineConfig,
+    /// Cylinder fit: the `refined` stage of cylinders ([`cylinder`], beyond the paper).
+    pub cylinder: CylinderFitConfig,
     /// Window `t`: frames of segments kept (ring buffer), default 10 (the paper's "t consecutive
     /// images" is not given a value).
     pub window_frames: usize,
@@ -164,6 +172,7 @@ impl Default for ParamConfig {
             iforest: IForestConfig::default(),
             yaw: YawConfig::default(),
             refine: RefineConfig::default(),
+            cylinder: CylinderFitConfig::default(),
             window_frames: 10,
             border_margin_px: 2.0,
             refine_enabled: true,
@@ -387,7 +396,13 @@ impl ObjectEstimator {
             }
         };
         if self.shape == Shape::Cylinder {
-            return Ok(iforest_final(stages));
+            let mut out = iforest_final(stages);
+            if let Some(g) = fit_cylinder(&inliers, &self.config.cylinder) {
+                out.stages.refined = Some(g);
+                out.geometry = g;
+                out.stage = EstimateStage::Refined;
+            }
+            return Ok(out);
         }
         let frames: Vec<LineFrame> = self.window.iter().cloned().collect();
         let geometry_for_yaw = |yaw: f64| {
