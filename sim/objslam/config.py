@@ -92,6 +92,10 @@ class ParamRunConfig:
     iforest_readmit_gap: float = 4.0
     """Gap separating an outlier from the cloud, in median point spacings (2 gave back too few
     border points on the Init sweep; 3 and 4 both beat plain removal, 4 by a little more)."""
+    cylinder_fit: bool = True
+    """Beyond the paper: the ``refined`` stage of cylinders is a circle fitted to their side-wall
+    points with the height centred on the points' vertical extent (``core/src/objects/cylinder.rs``);
+    False = the paper (cylinders end at the iForest mean and axis-aligned extent)."""
 
 
 @dataclass(frozen=True)
