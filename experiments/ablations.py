@@ -197,8 +197,10 @@ def parameterize(a: argparse.Namespace, command: str) -> int:
         "## Final stage of each map object",
         "",
         (
-            "Objects of the final maps by the stage their estimate comes from (cylinders stop at iforest; a "
-            "cuboid stays at lines when the refinement finds too few segments or does not lower its data cost)."
+            "Objects of the final maps by the stage their estimate comes from. Cylinders have no lines stage "
+            "(no yaw): their refined stage is the side-wall circle fit, and they stay at iforest when the fit is "
+            "not accepted (too short an arc, poor fit); their lines row repeats iforest. A cuboid stays at lines "
+            "when the refinement finds too few segments or does not lower its data cost."
         ),
         "",
         "| scene | " + " | ".join(STAGES) + " |",

@@ -3,8 +3,9 @@
 Entry point: :class:`SimWorld` (build from a :class:`~objslam.scene.SceneSpec`), then
 :meth:`SimWorld.render` → :class:`SensorFrame` (what the robot senses) and
 :meth:`SimWorld.ground_truth` (what only evaluation sees), and :meth:`SimWorld.move_camera_to`,
-which solves IK for a camera pose and executes a smooth joint trajectory with the PD drives while
-emitting frames at a fixed rate (a video stream, as SLAM needs).
+which solves IK for a camera pose and executes a smooth trajectory along a Cartesian camera path
+(the camera keeps looking at the scene) with the PD drives while emitting frames at a fixed rate
+(a video stream, as SLAM needs).
 
 Rendering is CPU-only (Mesa lavapipe ≥ 24.3; see ECOSYSTEM.md). Physics runs at 240 Hz with the
 solver settings ManiSkill uses for reliable grasps.
@@ -535,9 +536,12 @@ class SimWorld:
         what: str = "view",
         path: str = "cartesian",
     ) -> Iterator[SensorFrame]:
-        """Move the camera to a pose: IK, then a minimum-jerk joint trajectory tracked by the PD
-        drives; yields a rendered frame every ``1 / frame_rate_hz`` simulated seconds and one after
-        settling. Raises :class:`UnreachablePoseError` before moving if IK fails."""
+        """Move the camera to a pose: IK, then (``path="cartesian"``) the joint waypoints of
+        :meth:`camera_path` or (``"joint"``, or when no Cartesian path is found) one joint-space
+        move, timed by one minimum-jerk profile and tracked by the PD drives
+        (:attr:`last_move_path` says which); yields a rendered frame every ``1 / frame_rate_hz``
+        simulated seconds and one after settling. Raises :class:`UnreachablePoseError` before
+        moving if IK fails."""
         if frame_rate_hz <= 0:
             raise ValueError("frame_rate_hz: must be > 0")
         key = np.round(np.asarray(world_from_camera, dtype=np.float64), 9).tobytes()
