@@ -51,6 +51,8 @@ pub struct ActiveMapperPy {
     /// Pose used for each frame and the true pose, for ATE / RPE.
     poses_used: Vec<Se3>,
     poses_true: Vec<Se3>,
+    /// The tracker's map epoch and world ← map gauge when the object map was last moved with it.
+    gauge: Option<(u32, Se3)>,
 }
 
 #[pymethods]
@@ -81,6 +83,7 @@ impl ActiveMapperPy {
             tracker,
             poses_used: Vec::new(),
             poses_true: Vec::new(),
+            gauge: None,
         })
     }
 
@@ -125,6 +128,18 @@ impl ActiveMapperPy {
                 })
                 .map_err(input_err)?;
             frame.world_from_camera = out.world_from_camera;
+            if self.mapper.config().follow_slam_gauge {
+                let now = (tracker.epoch(), tracker.world_from_map());
+                // Within one SLAM map the gauge change is a change of the world frame; across a
+                // map re-initialisation the gauges relate different maps and nothing is moved.
+                if let Some(before) = self.gauge.filter(|(epoch, _)| *epoch == now.0) {
+                    let delta = now.1 * before.1.inverse();
+                    if delta.translation.vector.norm() > 1e-9 || delta.rotation.angle() > 1e-9 {
+                        self.mapper.transform_world(&delta);
+                    }
+                }
+                self.gauge = Some(now);
+            }
             map_points = Some(
                 out.observed.iter().map(|p| MapPointObservation { pixel: p.pixel, p_in_world: p.p_in_world }).collect(),
             );

@@ -587,6 +587,25 @@ impl GlobalObject {
         }
     }
 
+    /// Move every world-frame quantity by `delta` (see [`Associator::transform_world`]).
+    fn transform(&mut self, delta: &Se3) {
+        let mv = |v: &mut Vector3<f64>| *v = (delta * Point3::from(*v)).coords;
+        for p in &mut self.points {
+            *p = delta * *p;
+        }
+        self.voxel_keys.clear();
+        for p in &self.points {
+            self.voxel_keys.insert(voxel_key(p, self.voxel_m));
+        }
+        for h in &mut self.history {
+            mv(&mut h.centroid_in_world);
+        }
+        for o in &mut self.observations {
+            mv(&mut o.observation.centroid_in_world);
+        }
+        self.np_cache = OnceLock::new();
+    }
+
     fn add_points(&mut self, new_points: &[Point3<f64>], max_points: usize) {
         self.voxel_keys.reserve(new_points.len());
         for p in new_points {
@@ -705,6 +724,17 @@ impl Associator {
     /// The configuration.
     pub fn config(&self) -> &AssociationConfig {
         &self.config
+    }
+
+    /// Re-express the whole map in a moved world frame: every object's points, centroid history
+    /// and observation centroids go through the rigid `delta` (`new_world ← old_world`). Used when
+    /// the SLAM re-fits its world ← map gauge (each new view's kinematic prior moves it by a few
+    /// millimetres): points fused under the old gauge stay consistent with those fused under the
+    /// new one. Boxes (image space) are unchanged.
+    pub fn transform_world(&mut self, delta: &Se3) {
+        for obj in self.objects.values_mut() {
+            obj.transform(delta);
+        }
     }
 
     /// The global objects, by increasing id.

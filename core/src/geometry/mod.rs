@@ -302,6 +302,16 @@ pub struct ObjectGeometry {
 }
 
 impl ObjectGeometry {
+    /// The same object seen in a world frame moved by the rigid `delta` (`new_world ← old_world`):
+    /// centre moved, yaw turned by the heading change of the object's x axis, size unchanged
+    /// (`delta` is meant to be close to a rotation about z, e.g. a SLAM gauge update).
+    pub fn transformed(&self, delta: &Se3) -> ObjectGeometry {
+        let center = (delta * Point3::from(self.center)).coords;
+        let x = delta.rotation * Vector3::new(self.yaw_rad.cos(), self.yaw_rad.sin(), 0.0);
+        let yaw_rad = if self.shape == Shape::Cylinder { self.yaw_rad } else { x.y.atan2(x.x) };
+        ObjectGeometry { center, yaw_rad, ..*self }
+    }
+
     /// Radius of a cylinder: mean of the two horizontal half-extents.
     pub fn radius(&self) -> f64 {
         (self.half_extents.x + self.half_extents.y) / 2.0

@@ -234,6 +234,19 @@ pub struct ObjectEstimate {
     pub inliers: usize,
 }
 
+impl ObjectEstimate {
+    /// This estimate (every stage) in a world frame moved by the rigid `delta`.
+    pub fn transform_world(&mut self, delta: &crate::geometry::Se3) {
+        self.geometry = self.geometry.transformed(delta);
+        for g in [&mut self.stages.raw, &mut self.stages.iforest, &mut self.stages.lines, &mut self.stages.refined]
+            .into_iter()
+            .flatten()
+        {
+            *g = g.transformed(delta);
+        }
+    }
+}
+
 /// What [`ObjectEstimator::add_frame`] did with a frame.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum FrameUse {
@@ -260,6 +273,21 @@ impl ObjectEstimator {
     /// An estimator for an object modelled by `shape` (from [`crate::map::Label::shape`]).
     pub fn new(shape: Shape, config: ParamConfig) -> Self {
         Self { shape, config, window: VecDeque::new(), last: None, last_line_yaw: None }
+    }
+
+    /// Re-express the window's camera poses and the last estimate in a world frame moved by the
+    /// rigid `delta` (`new_world ← old_world`; see [`crate::pipeline::ObjectPipeline::transform_world`]).
+    pub fn transform_world(&mut self, delta: &crate::geometry::Se3) {
+        for f in &mut self.window {
+            f.world_from_camera = delta * f.world_from_camera;
+        }
+        if let Some(last) = &mut self.last {
+            last.transform_world(delta);
+        }
+        if let Some(yaw) = &mut self.last_line_yaw {
+            let x = delta.rotation * Vector3::new(yaw.cos(), yaw.sin(), 0.0);
+            *yaw = x.y.atan2(x.x);
+        }
     }
 
     /// The last estimate, if any.

@@ -23,7 +23,7 @@ use serde::{Deserialize, Serialize};
 use crate::association::mapper::{local_objects_from_frame, LocalCloudConfig};
 use crate::association::{AssociationConfig, AssociationError, AssociationMode, Associator, GlobalObject, LocalObject};
 use crate::frame::{Frame, FrameError, GreyImage};
-use crate::geometry::{se3_from_yaw, ObjectGeometry};
+use crate::geometry::{se3_from_yaw, ObjectGeometry, Se3};
 use crate::map::{EstimateStage, MapObject, ObjectMap};
 use crate::naive::{NaiveConfig, NaiveMapper};
 use crate::objects::lsd::{detect_segments, segments_in_box, LsdConfig};
@@ -113,6 +113,12 @@ pub struct PipelineConfig {
     /// Objects with fewer observations are kept internally but left out of the map (filters
     /// false positives and label confusions; 1 keeps everything).
     pub min_observations: usize,
+    /// With a SLAM pose source: when the tracker re-fits its world ← map gauge (every view's
+    /// kinematic prior moves it by millimetres), move the whole map with it
+    /// ([`ObjectPipeline::transform_world`]) so points fused under different gauges stay one rigid
+    /// map (default true; false keeps every point where its frame put it, as a pipeline fed with
+    /// poses one by one would).
+    pub follow_slam_gauge: bool,
 }
 
 impl Default for PipelineConfig {
@@ -135,6 +141,7 @@ impl Default for PipelineConfig {
             relabel_containment: 0.5,
             consolidate_cloud_radius_m: 0.01,
             min_observations: 3,
+            follow_slam_gauge: true,
         }
     }
 }
@@ -375,6 +382,24 @@ impl ObjectPipeline {
             }
         }
         Ok(out)
+    }
+
+    /// Re-express the map in a world frame moved by the rigid `delta` (`new_world ← old_world`):
+    /// the associator's points and centroids, the estimators' camera poses and every estimate. The
+    /// runner calls it when the SLAM's world ← map gauge changes, so the map stays one rigid whole
+    /// in the current gauge (objects are re-estimated at the next refresh). The `naive` baseline
+    /// mapper is left as it is (its voxel tracks are not re-expressed).
+    pub fn transform_world(&mut self, delta: &Se3) {
+        if let Mapper::Ensemble(a) = &mut self.mapper {
+            a.transform_world(delta);
+        }
+        for est in self.estimators.values_mut() {
+            est.transform_world(delta);
+        }
+        for e in self.estimates.values_mut() {
+            e.transform_world(delta);
+        }
+        self.dirty.extend(self.estimates.keys().copied());
     }
 
     /// Re-estimate the objects observed since the last refresh (no-op without parameterization).
@@ -749,6 +774,42 @@ mod tests {
         let up = p.update_with_map_points(&frame(4, 0.02), None, None).unwrap_or_else(|e| panic!("{e}"));
         let id = up.assigned[0].unwrap_or_else(|| panic!("unassigned"));
         assert!(up.observed.get(&id).map_or(0, Vec::len) > 49);
+    }
+
+    #[test]
+    fn transform_world_moves_the_whole_map_rigidly() {
+        // The same four frames fused under a world frame moved by `delta` give the moved map: the
+        // points and the estimate follow exactly (2 cm, 3 cm shift and 2° about z).
+        let delta: Se3 = Isometry3::from_parts(
+            Translation3::new(0.02, -0.03, 0.0),
+            UnitQuaternion::from_axis_angle(&Vector3::z_axis(), 2f64.to_radians()),
+        );
+        let mut p = ObjectPipeline::new(PipelineConfig::default()).unwrap_or_else(|e| panic!("{e}"));
+        for (i, x) in [0.0, 0.005, 0.01, 0.015].iter().enumerate() {
+            p.update(&frame(i as u32, *x), None).unwrap_or_else(|e| panic!("{e}"));
+        }
+        p.refresh_estimates();
+        let before = p.map();
+        p.transform_world(&delta);
+        let moved = p.map();
+        assert_eq!(before.len(), 1);
+        assert_eq!(moved.len(), 1);
+        let (a, b) = (&before.objects[0], &moved.objects[0]);
+        assert_eq!(a.points_in_world.len(), b.points_in_world.len());
+        for (pa, pb) in a.points_in_world.iter().zip(&b.points_in_world) {
+            assert!(((delta * pa) - pb).norm() < 1e-12);
+        }
+        for (oa, ob) in a.observations.iter().zip(&b.observations) {
+            assert!(((delta * Point3::from(oa.centroid_in_world)).coords - ob.centroid_in_world).norm() < 1e-12);
+        }
+        let (ga, gb) = (a.geometry(), b.geometry());
+        assert!(((delta * Point3::from(ga.center)).coords - gb.center).norm() < 1e-9, "{ga:?} {gb:?}");
+        // Re-estimating from the moved points gives the moved estimate (up to the yaw symmetry of
+        // a square block: compare the extents and the centre).
+        p.refresh_estimates();
+        let again = p.map().objects[0].geometry();
+        assert!((again.center - gb.center).norm() < 2e-3, "{again:?} vs {gb:?}");
+        assert!((again.half_extents.z - ga.half_extents.z).abs() < 1e-3);
     }
 
     #[test]

@@ -542,6 +542,12 @@ impl Tracker {
         self.keyframes.len()
     }
 
+    /// Map epoch: incremented when the tracker gives up its map and starts a new one (after a
+    /// lost streak). World ← map gauges of different epochs relate different map frames.
+    pub fn epoch(&self) -> u32 {
+        self.epoch
+    }
+
     /// Number of lost frames so far.
     pub fn n_lost(&self) -> usize {
         self.n_lost
