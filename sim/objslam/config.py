@@ -193,6 +193,11 @@ class RunConfig:
     second object); the label is then the majority vote. 0 disables."""
     min_observations: int = 3
     """Objects seen fewer times are left out of the map (false positives, label confusions)."""
+    follow_slam_gauge: bool = True
+    """With a tracker: when the SLAM re-fits its world ← map gauge to the views' kinematic priors
+    (millimetres per view), move the whole object map with it so points fused under different
+    gauges stay one rigid map (``ObjectPipeline::transform_world``). False keeps each point where
+    its frame's pose put it (measured on scene03, object-driven: 3D IoU 0.65 without, 0.89 with)."""
     camera: CameraConfig = field(default_factory=CameraConfig)
     detector: DetectorConfig = field(default_factory=DetectorConfig)
     naive: NaiveMapperConfig = field(default_factory=NaiveMapperConfig)

@@ -153,6 +153,7 @@ def new_mapper(cfg: RunConfig, scene: SceneSpec) -> Any:
                 "consolidate_cloud_overlap": cfg.consolidate_cloud_overlap,
                 "relabel_vote_ratio": cfg.relabel_vote_ratio,
                 "min_observations": cfg.min_observations,
+                "follow_slam_gauge": cfg.follow_slam_gauge,
                 # Only when not the default, so a core built before the option still loads.
                 **({"object_points": cfg.object_points} if cfg.object_points != "depth" else {}),
                 "naive": to_dict(cfg.naive),
