@@ -44,8 +44,13 @@ class ExploreRunConfig:
     """Candidate views sampled around each object still to explore."""
     distance_m: tuple[float, float] = (0.35, 0.6)
     """Candidate camera distance from the object centre, metres."""
-    elevation_deg: tuple[float, float] = (25.0, 75.0)
-    """Candidate elevation, degrees."""
+    elevation_deg: tuple[float, float] = (45.0, 80.0)
+    """Candidate elevation above the object's horizontal plane, degrees (the paper gives none).
+    Views below ~45° look across the crowded table: neighbours occlude the target, boxes take in
+    their surfaces and the association merges objects. Exploration benchmark, seed 0,
+    object-driven: 25-75° → 3D IoU 0.790 / CDE 0.60 cm (2 merged and 2 missed objects in scene07);
+    45-80° → 0.834 / 0.40 cm; 60-88° → 0.834 / 0.50 cm (chosen on seed 0; the 3-seed report is
+    the check)."""
     init_height_m: float = 0.5
     init_inset_m: float = 0.3
     init_tilt_deg: float = 20.0
@@ -197,7 +202,8 @@ class RunConfig:
     """With a tracker: when the SLAM re-fits its world ← map gauge to the views' kinematic priors
     (millimetres per view), move the whole object map with it so points fused under different
     gauges stay one rigid map (``ObjectPipeline::transform_world``). False keeps each point where
-    its frame's pose put it (measured on scene03, object-driven: 3D IoU 0.65 without, 0.89 with)."""
+    its frame's pose put it. Exploration benchmark, seed 0, mean over the 7 scenes: object-driven
+    3D IoU 0.707 → 0.790 and CDE 1.01 → 0.60 cm with it; Init 0.743 → 0.822."""
     camera: CameraConfig = field(default_factory=CameraConfig)
     detector: DetectorConfig = field(default_factory=DetectorConfig)
     naive: NaiveMapperConfig = field(default_factory=NaiveMapperConfig)
