@@ -285,8 +285,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     ap.add_argument("--out", default="reports")
     ap.add_argument(
-        "--reobserve", nargs="*", default=["estimated"], choices=SOURCES,
-        help="map sources whose grasps re-observe the target first (default: estimated)",
+        "--reobserve", nargs="*", default=[], choices=SOURCES,
+        help=(
+            "map sources whose grasps re-observe the target first (default: none; with the current "
+            "maps re-observation lowered estimated-map success from 83.7 %% to 70.2 %%, reports/grasping.md)"
+        ),
     )
     ap.add_argument("--tag", default="", help="suffix of the session files (grasp_<source><tag>.json)")
     ap.add_argument("--manifest", default=str(REPO / "runs" / "grasp_sweep.json"), help="the sweep's list of session files")
