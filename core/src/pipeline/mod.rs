@@ -622,7 +622,7 @@ impl ObjectPipeline {
 /// Share of `query` points with a point of `reference` within `radius` (0 for an empty query).
 /// A hash grid of `radius` cells over `reference`; each query point checks its 27 cells.
 pub fn cloud_share_within(query: &[Point3<f64>], reference: &[Point3<f64>], radius: f64) -> f64 {
-    if query.is_empty() || reference.is_empty() || !(radius > 0.0) {
+    if query.is_empty() || reference.is_empty() || radius.is_nan() || radius <= 0.0 {
         return 0.0;
     }
     let cell = |p: &Point3<f64>| -> [i64; 3] {
