@@ -186,10 +186,10 @@ fn config_from_json(json: Option<&str>) -> PyResult<PlannerConfig> {
             return Err(input_err(format!("config.{name}: expected a value in (0, 1], got {s}")));
         }
     }
-    if !(c.sample_dt_s > 0.0) {
+    if c.sample_dt_s.is_nan() || c.sample_dt_s <= 0.0 {
         return Err(input_err(format!("config.sample_dt_s: expected > 0, got {}", c.sample_dt_s)));
     }
-    if !(c.edge_resolution_rad > 0.0) {
+    if c.edge_resolution_rad.is_nan() || c.edge_resolution_rad <= 0.0 {
         return Err(input_err(format!("config.edge_resolution_rad: expected > 0, got {}", c.edge_resolution_rad)));
     }
     if c.object_margin_m < 0.0 || c.table_margin_m < 0.0 {
