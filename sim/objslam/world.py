@@ -322,6 +322,26 @@ class SimWorld:
             np.all(q[:7] >= self.qlimits[:7, 0] - 1e-4) and np.all(q[:7] <= self.qlimits[:7, 1] + 1e-4)
         )
 
+    def _ik_attempt(
+        self, world_from_camera: np.ndarray, seed: np.ndarray, iterations: int, check_limits: bool = True
+    ) -> tuple[np.ndarray | None, float]:
+        """One IK solve for a camera pose from one seed: (joint positions or ``None`` when it fails
+        or, with ``check_limits``, leaves the joint limits; the residual norm)."""
+        world_from_hand = world_from_camera @ np.linalg.inv(self.hand_from_camera_cv())
+        mask = np.array([1] * 7 + [0, 0], dtype=np.int32)
+        q, ok, err = self.pinocchio.compute_inverse_kinematics(
+            self.hand_index,
+            matrix_to_pose(world_from_hand),
+            initial_qpos=seed,
+            active_qmask=mask,
+            max_iterations=iterations,
+        )
+        q = np.asarray(q, dtype=np.float64)
+        if not ok or (check_limits and not self._within_limits(q)):
+            return None, float(np.linalg.norm(err))
+        q[7:] = GRIPPER_OPEN_M
+        return q, float(np.linalg.norm(err))
+
     def _ik_from(
         self,
         world_from_camera: np.ndarray,
@@ -331,20 +351,7 @@ class SimWorld:
     ) -> np.ndarray | None:
         """IK for a camera pose from one seed (no retries); ``None`` when it fails or (with
         ``check_limits``) leaves the joint limits."""
-        world_from_hand = world_from_camera @ np.linalg.inv(self.hand_from_camera_cv())
-        mask = np.array([1] * 7 + [0, 0], dtype=np.int32)
-        q, ok, _ = self.pinocchio.compute_inverse_kinematics(
-            self.hand_index,
-            matrix_to_pose(world_from_hand),
-            initial_qpos=seed,
-            active_qmask=mask,
-            max_iterations=iterations,
-        )
-        q = np.asarray(q, dtype=np.float64)
-        if not ok or (check_limits and not self._within_limits(q)):
-            return None
-        q[7:] = GRIPPER_OPEN_M
-        return q
+        return self._ik_attempt(world_from_camera, seed, iterations, check_limits)[0]
 
     def camera_path(
         self, q0: np.ndarray, world_from_camera: np.ndarray, q_goal: np.ndarray | None = None
@@ -448,9 +455,6 @@ class SimWorld:
     def solve_ik(self, world_from_camera: np.ndarray, what: str = "view") -> np.ndarray:
         """Joint positions placing the camera at ``world_from_camera`` (OpenCV axes); tries the current
         configuration then a few deterministic seeds. Raises :class:`UnreachablePoseError`."""
-        world_from_hand = world_from_camera @ np.linalg.inv(self.hand_from_camera_cv())
-        target = matrix_to_pose(world_from_hand)
-        mask = np.array([1] * 7 + [0, 0], dtype=np.int32)
         seeds = [self.qpos(), READY_QPOS.copy()]
         for k in range(4):
             s = READY_QPOS.copy()
@@ -458,18 +462,10 @@ class SimWorld:
             seeds.append(s)
         best_err = math.inf
         for seed in seeds:
-            q, ok, err = self.pinocchio.compute_inverse_kinematics(
-                self.hand_index, target, initial_qpos=seed, active_qmask=mask, max_iterations=300
-            )
-            q = np.asarray(q, dtype=np.float64)
-            e = float(np.linalg.norm(err))
-            within = np.all(q[:7] >= self.qlimits[:7, 0] - 1e-4) and np.all(
-                q[:7] <= self.qlimits[:7, 1] + 1e-4
-            )
-            if ok and within:
-                q[7:] = GRIPPER_OPEN_M
+            q, err = self._ik_attempt(world_from_camera, seed, iterations=300)
+            if q is not None:
                 return q
-            best_err = min(best_err, e)
+            best_err = min(best_err, err)
         raise UnreachablePoseError(what, world_from_camera[:3, 3], best_err)
 
     def is_reachable(self, world_from_camera: np.ndarray) -> bool:
@@ -635,33 +631,16 @@ def _aim(r: np.ndarray, direction: np.ndarray) -> np.ndarray:
 
 
 def _quat_from_matrix(r: np.ndarray) -> np.ndarray:
-    """Unit quaternion (w, x, y, z) of a rotation matrix (Shepperd's method)."""
-    tr = float(np.trace(r))
-    if tr > 0:
-        k = math.sqrt(tr + 1.0) * 2
-        q = np.array([0.25 * k, (r[2, 1] - r[1, 2]) / k, (r[0, 2] - r[2, 0]) / k, (r[1, 0] - r[0, 1]) / k])
-    else:
-        i = int(np.argmax(np.diag(r)))
-        j, m = (i + 1) % 3, (i + 2) % 3
-        k = math.sqrt(1.0 + r[i, i] - r[j, j] - r[m, m]) * 2
-        q = np.zeros(4)
-        q[0] = (r[m, j] - r[j, m]) / k
-        q[1 + i] = 0.25 * k
-        q[1 + j] = (r[j, i] + r[i, j]) / k
-        q[1 + m] = (r[m, i] + r[i, m]) / k
+    """Unit quaternion (w, x, y, z) of a rotation matrix (SAPIEN's conversion)."""
+    m = np.eye(4)
+    m[:3, :3] = r
+    q = np.asarray(matrix_to_pose(m).q, dtype=np.float64)
     return q / np.linalg.norm(q)
 
 
 def _matrix_from_quat(q: np.ndarray) -> np.ndarray:
-    """Rotation matrix of a unit quaternion (w, x, y, z)."""
-    w, x, y, z = q
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-        ]
-    )
+    """Rotation matrix of a unit quaternion (w, x, y, z) (SAPIEN's conversion)."""
+    return pose_to_matrix(sapien.Pose(q=np.asarray(q, dtype=np.float32)))[:3, :3]
 
 
 def _slerp(a: np.ndarray, b: np.ndarray, s: float) -> np.ndarray:
