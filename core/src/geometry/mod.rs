@@ -469,6 +469,53 @@ pub fn yaw_error_deg(estimate: &ObjectGeometry, truth: &ObjectGeometry, square_t
 /// A point in the world, as nalgebra's type (re-exported for convenience).
 pub type PointWorld = Point3<f64>;
 
+/// Fixed-radius neighbour test on 3D points: a hash grid with cells of the radius, so "is any
+/// stored point within `radius` of q" looks at the 27 cells around q. Non-finite points are not
+/// stored and have no neighbours.
+#[derive(Debug, Clone)]
+pub struct RadiusGrid {
+    radius: f64,
+    cells: std::collections::HashMap<[i64; 3], Vec<Point3<f64>>>,
+}
+
+impl RadiusGrid {
+    /// An empty grid; `None` unless `radius` is finite and positive.
+    pub fn new(radius: f64) -> Option<Self> {
+        (radius.is_finite() && radius > 0.0).then(|| Self { radius, cells: std::collections::HashMap::new() })
+    }
+
+    fn cell(&self, p: &Point3<f64>) -> [i64; 3] {
+        let r = self.radius;
+        [(p.x / r).floor() as i64, (p.y / r).floor() as i64, (p.z / r).floor() as i64]
+    }
+
+    /// Store a point (ignored when non-finite).
+    pub fn insert(&mut self, p: Point3<f64>) {
+        if p.coords.iter().all(|v| v.is_finite()) {
+            let c = self.cell(&p);
+            self.cells.entry(c).or_default().push(p);
+        }
+    }
+
+    /// Whether a stored point lies within the radius of `q` (inclusive).
+    pub fn has_within(&self, q: &Point3<f64>) -> bool {
+        if !q.coords.iter().all(|v| v.is_finite()) {
+            return false;
+        }
+        let c = self.cell(q);
+        let r2 = self.radius * self.radius;
+        (-1..=1).any(|dx| {
+            (-1..=1).any(|dy| {
+                (-1..=1).any(|dz| {
+                    self.cells
+                        .get(&[c[0] + dx, c[1] + dy, c[2] + dz])
+                        .is_some_and(|ps| ps.iter().any(|p| (p - q).norm_squared() <= r2))
+                })
+            })
+        })
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -29,6 +29,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 use super::ObjectsError;
+use crate::geometry::RadiusGrid;
 
 /// Euler–Mascheroni constant used in the harmonic-number approximation `H(i) ≈ ln i + γ`.
 pub const EULER_GAMMA: f64 = 0.577_215_664_9;
@@ -387,49 +388,23 @@ pub fn median_spacing(cloud: &[Point3<f64>]) -> Option<f64> {
     Some(nn[nn.len() / 2])
 }
 
-/// Integer cell of a point in a hash grid of cell size `h`.
-fn cell_of(p: &Point3<f64>, h: f64) -> (i64, i64, i64) {
-    ((p.x / h).floor() as i64, (p.y / h).floor() as i64, (p.z / h).floor() as i64)
-}
-
 /// The re-admission rings of [`IForestConfig::readmit_rings`]: `inlier` is updated in place.
 fn readmit_adjacent(points: &[Point3<f64>], inlier: &mut [bool], rings: usize, gap_factor: f64) {
     let kept: Vec<Point3<f64>> = points.iter().zip(inlier.iter()).filter(|(_, k)| **k).map(|(p, _)| *p).collect();
-    let Some(spacing) = median_spacing(&kept) else {
+    let Some(mut grid) = median_spacing(&kept).and_then(|spacing| RadiusGrid::new(gap_factor * spacing)) else {
         return;
     };
-    let radius = gap_factor * spacing;
-    if !(radius.is_finite() && radius > 0.0) {
-        return;
+    for p in &kept {
+        grid.insert(*p);
     }
-    let mut grid: std::collections::HashMap<(i64, i64, i64), Vec<usize>> = std::collections::HashMap::new();
-    for (i, p) in points.iter().enumerate() {
-        if inlier[i] {
-            grid.entry(cell_of(p, radius)).or_default().push(i);
-        }
-    }
-    let r2 = radius * radius;
     for _ in 0..rings {
-        let admitted: Vec<usize> = (0..points.len())
-            .filter(|&i| !inlier[i])
-            .filter(|&i| {
-                let (cx, cy, cz) = cell_of(&points[i], radius);
-                (-1..=1).any(|dx| {
-                    (-1..=1).any(|dy| {
-                        (-1..=1).any(|dz| {
-                            grid.get(&(cx + dx, cy + dy, cz + dz))
-                                .is_some_and(|v| v.iter().any(|&j| (points[j] - points[i]).norm_squared() <= r2))
-                        })
-                    })
-                })
-            })
-            .collect();
+        let admitted: Vec<usize> = (0..points.len()).filter(|&i| !inlier[i] && grid.has_within(&points[i])).collect();
         if admitted.is_empty() {
             break;
         }
         for i in admitted {
             inlier[i] = true;
-            grid.entry(cell_of(&points[i], radius)).or_default().push(i);
+            grid.insert(points[i]);
         }
     }
 }

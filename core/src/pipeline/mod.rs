@@ -23,7 +23,7 @@ use serde::{Deserialize, Serialize};
 use crate::association::mapper::{local_objects_from_frame, LocalCloudConfig};
 use crate::association::{AssociationConfig, AssociationError, AssociationMode, Associator, GlobalObject, LocalObject};
 use crate::frame::{Frame, FrameError, GreyImage};
-use crate::geometry::{se3_from_yaw, ObjectGeometry, Se3};
+use crate::geometry::{se3_from_yaw, ObjectGeometry, RadiusGrid, Se3};
 use crate::map::{EstimateStage, MapObject, ObjectMap};
 use crate::naive::{NaiveConfig, NaiveMapper};
 use crate::objects::lsd::{detect_segments, segments_in_box, LsdConfig};
@@ -622,33 +622,16 @@ impl ObjectPipeline {
 /// Share of `query` points with a point of `reference` within `radius` (0 for an empty query).
 /// A hash grid of `radius` cells over `reference`; each query point checks its 27 cells.
 pub fn cloud_share_within(query: &[Point3<f64>], reference: &[Point3<f64>], radius: f64) -> f64 {
-    if query.is_empty() || reference.is_empty() || radius.is_nan() || radius <= 0.0 {
+    let Some(mut grid) = RadiusGrid::new(radius) else {
+        return 0.0;
+    };
+    if query.is_empty() || reference.is_empty() {
         return 0.0;
     }
-    let cell = |p: &Point3<f64>| -> [i64; 3] {
-        [(p.x / radius).floor() as i64, (p.y / radius).floor() as i64, (p.z / radius).floor() as i64]
-    };
-    let mut grid: std::collections::HashMap<[i64; 3], Vec<Point3<f64>>> = std::collections::HashMap::new();
-    for p in reference.iter().filter(|p| p.coords.iter().all(|v| v.is_finite())) {
-        grid.entry(cell(p)).or_default().push(*p);
+    for p in reference {
+        grid.insert(*p);
     }
-    let r2 = radius * radius;
-    let near = |q: &Point3<f64>| -> bool {
-        let c = cell(q);
-        for dx in -1..=1 {
-            for dy in -1..=1 {
-                for dz in -1..=1 {
-                    if let Some(ps) = grid.get(&[c[0] + dx, c[1] + dy, c[2] + dz]) {
-                        if ps.iter().any(|p| (p - q).norm_squared() <= r2) {
-                            return true;
-                        }
-                    }
-                }
-            }
-        }
-        false
-    };
-    let hits = query.iter().filter(|q| q.coords.iter().all(|v| v.is_finite()) && near(q)).count();
+    let hits = query.iter().filter(|q| grid.has_within(q)).count();
     hits as f64 / query.len() as f64
 }
 
