@@ -631,16 +631,34 @@ def _aim(r: np.ndarray, direction: np.ndarray) -> np.ndarray:
 
 
 def _quat_from_matrix(r: np.ndarray) -> np.ndarray:
-    """Unit quaternion (w, x, y, z) of a rotation matrix (SAPIEN's conversion)."""
-    m = np.eye(4)
-    m[:3, :3] = r
-    q = np.asarray(matrix_to_pose(m).q, dtype=np.float64)
+    """Unit quaternion (w, x, y, z) of a rotation matrix (Shepperd's method, float64: SAPIEN's
+    ``Pose`` conversion is float32 and would move every waypoint, and so the recorded runs, by ~1e-7)."""
+    tr = float(np.trace(r))
+    if tr > 0:
+        k = math.sqrt(tr + 1.0) * 2
+        q = np.array([0.25 * k, (r[2, 1] - r[1, 2]) / k, (r[0, 2] - r[2, 0]) / k, (r[1, 0] - r[0, 1]) / k])
+    else:
+        i = int(np.argmax(np.diag(r)))
+        j, m = (i + 1) % 3, (i + 2) % 3
+        k = math.sqrt(1.0 + r[i, i] - r[j, j] - r[m, m]) * 2
+        q = np.zeros(4)
+        q[0] = (r[m, j] - r[j, m]) / k
+        q[1 + i] = 0.25 * k
+        q[1 + j] = (r[j, i] + r[i, j]) / k
+        q[1 + m] = (r[m, i] + r[i, m]) / k
     return q / np.linalg.norm(q)
 
 
 def _matrix_from_quat(q: np.ndarray) -> np.ndarray:
-    """Rotation matrix of a unit quaternion (w, x, y, z) (SAPIEN's conversion)."""
-    return pose_to_matrix(sapien.Pose(q=np.asarray(q, dtype=np.float32)))[:3, :3]
+    """Rotation matrix of a unit quaternion (w, x, y, z)."""
+    w, x, y, z = q
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
 
 
 def _slerp(a: np.ndarray, b: np.ndarray, s: float) -> np.ndarray:
