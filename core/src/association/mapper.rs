@@ -4,8 +4,10 @@
 //! Per [`Frame`]: validate it; build one [`LocalObject`] per detection from the depth pixels inside
 //! its box ([`local_objects_from_frame`]: every `pixel_stride`-th pixel, back-projected with the
 //! frame's camera and `world_from_camera`, points at or below `min_height_m` above the table
-//! dropped); call [`Associator::associate_frame`]. [`EnsembleMapper::map`] gives an [`ObjectMap`]
-//! of raw estimates ([`GlobalObject::to_map_object_raw`]); parameterization refines them from
+//! dropped, cut to the depth surface connected to the box centre, and without the surface of an
+//! occluding neighbour detection, see [`LocalCloudConfig`]); call
+//! [`Associator::associate_frame`]. [`EnsembleMapper::map`] gives an [`ObjectMap`] of raw
+//! estimates ([`GlobalObject::to_map_object_raw`]); parameterization refines them from
 //! [`EnsembleMapper::associator`]'s clouds and histories.
 //!
 //! The paper's local clouds are ORB map points inside the box; depth pixels are the substitute
@@ -46,6 +48,18 @@ pub struct LocalCloudConfig {
     /// Smallest depth step accepted between neighbouring samples, metres (default 0.01: depth
     /// noise and quantisation at arm's length stay well below it).
     pub connect_min_step_m: f64,
+    /// Beyond the paper: occluder exclusion. When most (`claim_share`) of a box's cut surface lies
+    /// on the cut surface of another detection of the same frame, and that surface reaches well
+    /// beyond the box (`claim_outside_share` of its samples outside it), the box's centre sits on
+    /// an occluder crossing it (a bottle in front of a block): the neighbour's surface is masked
+    /// and the box is cut again from the median of what is left (empty if nothing is). A
+    /// neighbour's surface that stays inside the box (a false-positive box over the object) is
+    /// not an occluder and changes nothing. Default true.
+    pub claim_exclusion: bool,
+    /// Share of the box's samples on the neighbour's surface that triggers the exclusion (default 0.5).
+    pub claim_share: f64,
+    /// Share of the neighbour's samples outside the box that makes it an occluder (default 0.25).
+    pub claim_outside_share: f64,
 }
 
 impl Default for LocalCloudConfig {
@@ -57,6 +71,9 @@ impl Default for LocalCloudConfig {
             depth_gate_m: 0.15,
             connect_slope: 3.0,
             connect_min_step_m: 0.01,
+            claim_exclusion: true,
+            claim_share: 0.5,
+            claim_outside_share: 0.25,
         }
     }
 }
@@ -92,89 +109,248 @@ pub struct EnsembleMapperConfig {
 
 /// One [`LocalObject`] per detection of a (validated) frame, in detection order: the depth pixels
 /// inside the box (clipped to the image), back-projected into the world, gated and cut to the
-/// surface connected to the box centre (see [`LocalCloudConfig`]).
+/// surface connected to the box centre, then (with [`LocalCloudConfig::claim_exclusion`]) re-cut
+/// without the surface of a neighbouring detection that occludes the box centre.
 pub fn local_objects_from_frame(frame: &Frame, config: &LocalCloudConfig) -> Vec<LocalObject> {
+    let surfaces: Vec<Option<BoxSurface>> =
+        frame.detections.iter().map(|det| BoxSurface::sample(frame, &det.bbox, config)).collect();
     frame
         .detections
         .iter()
-        .map(|det| LocalObject { detection: *det, points_in_world: box_cloud(frame, &det.bbox, config) })
+        .enumerate()
+        .map(|(i, det)| {
+            let points_in_world = match &surfaces[i] {
+                None => Vec::new(),
+                Some(own) => {
+                    let claimed = if config.claim_exclusion {
+                        claimed_by_neighbours(i, &surfaces, &frame.detections, config)
+                    } else {
+                        None
+                    };
+                    match claimed {
+                        Some(mask) => own.recut(&mask, frame, config),
+                        None => own.points(),
+                    }
+                }
+            };
+            LocalObject { detection: *det, points_in_world }
+        })
         .collect()
 }
 
-/// The local cloud of one box (empty for a non-finite or empty box).
-fn box_cloud(frame: &Frame, b: &crate::geometry::Box2, config: &LocalCloudConfig) -> Vec<Point3<f64>> {
-    let stride = config.pixel_stride.max(1);
-    let w = f64::from(frame.camera.width);
-    let h = f64::from(frame.camera.height);
-    if !b.is_finite() {
-        return Vec::new();
-    }
-    let u0 = b.min[0].clamp(0.0, w).floor() as u32;
-    let v0 = b.min[1].clamp(0.0, h).floor() as u32;
-    let u1 = b.max[0].clamp(0.0, w).ceil() as u32;
-    let v1 = b.max[1].clamp(0.0, h).ceil() as u32;
-    if u1 <= u0 || v1 <= v0 {
-        return Vec::new();
-    }
-    let median = central_median_depth(frame, u0, v0, u1, v1, stride as usize);
-    let gate = if config.depth_gate_m.is_finite() { median } else { None };
-    // The sample grid: (depth, world point) of the samples that pass the range, gate and table tests.
-    let cols = ((u1 - u0).div_ceil(stride)) as usize;
-    let rows = ((v1 - v0).div_ceil(stride)) as usize;
-    let mut grid: Vec<Option<(f64, Point3<f64>)>> = vec![None; cols * rows];
-    for (r, v) in (v0..v1).step_by(stride as usize).enumerate() {
-        for (c, u) in (u0..u1).step_by(stride as usize).enumerate() {
-            let Some(d) = frame.depth.at(u, v) else { continue };
-            let d = f64::from(d);
-            if d > config.max_depth_m || gate.is_some_and(|m| (d - m).abs() > config.depth_gate_m) {
-                continue;
-            }
-            let p: Point3<f64> = frame.world_from_camera * frame.camera.unproject(f64::from(u), f64::from(v), d);
-            if p.z > config.min_height_m {
-                grid[r * cols + c] = Some((d, p));
-            }
+/// The sampled depth surface of one box: the stride grid of (depth, world point) samples that
+/// pass the range, gate and table tests, and which of them the flood fill kept.
+struct BoxSurface {
+    u0: u32,
+    v0: u32,
+    stride: u32,
+    cols: usize,
+    rows: usize,
+    grid: Vec<Option<(f64, Point3<f64>)>>,
+    keep: Vec<bool>,
+}
+
+impl BoxSurface {
+    /// `None` for a non-finite or empty box.
+    fn sample(frame: &Frame, b: &crate::geometry::Box2, config: &LocalCloudConfig) -> Option<Self> {
+        let stride = config.pixel_stride.max(1);
+        let w = f64::from(frame.camera.width);
+        let h = f64::from(frame.camera.height);
+        if !b.is_finite() {
+            return None;
         }
-    }
-    let (Some(m), true) = (median, config.connect_slope > 0.0) else {
-        return grid.into_iter().flatten().map(|(_, p)| p).collect();
-    };
-    let spacing_per_m = f64::from(stride) / frame.camera.fx;
-    let step = |d: f64| (config.connect_slope * spacing_per_m * d).max(config.connect_min_step_m);
-    // Seeds: central-half samples on the median surface; then a 4-neighbour flood fill.
-    let mut keep = vec![false; cols * rows];
-    let mut queue = std::collections::VecDeque::new();
-    let (c_lo, c_hi, r_lo, r_hi) = (cols / 4, cols - cols / 4, rows / 4, rows - rows / 4);
-    for r in r_lo..r_hi.max(r_lo + 1).min(rows) {
-        for c in c_lo..c_hi.max(c_lo + 1).min(cols) {
-            let i = r * cols + c;
-            if grid[i].is_some_and(|(d, _)| (d - m).abs() <= step(m)) {
-                keep[i] = true;
-                queue.push_back(i);
-            }
+        let u0 = b.min[0].clamp(0.0, w).floor() as u32;
+        let v0 = b.min[1].clamp(0.0, h).floor() as u32;
+        let u1 = b.max[0].clamp(0.0, w).ceil() as u32;
+        let v1 = b.max[1].clamp(0.0, h).ceil() as u32;
+        if u1 <= u0 || v1 <= v0 {
+            return None;
         }
-    }
-    while let Some(i) = queue.pop_front() {
-        let Some((d, _)) = grid[i] else { continue };
-        let (r, c) = (i / cols, i % cols);
-        let neighbours = [
-            (r > 0).then(|| i - cols),
-            (r + 1 < rows).then(|| i + cols),
-            (c > 0).then(|| i - 1),
-            (c + 1 < cols).then(|| i + 1),
-        ];
-        for j in neighbours.into_iter().flatten() {
-            if keep[j] {
-                continue;
-            }
-            if let Some((dj, _)) = grid[j] {
-                if (dj - d).abs() <= step(d.min(dj)) {
-                    keep[j] = true;
-                    queue.push_back(j);
+        let median = central_median_depth(frame, u0, v0, u1, v1, stride as usize);
+        let cols = ((u1 - u0).div_ceil(stride)) as usize;
+        let rows = ((v1 - v0).div_ceil(stride)) as usize;
+        let mut grid: Vec<Option<(f64, Point3<f64>)>> = vec![None; cols * rows];
+        for (r, v) in (v0..v1).step_by(stride as usize).enumerate() {
+            for (c, u) in (u0..u1).step_by(stride as usize).enumerate() {
+                let Some(d) = frame.depth.at(u, v) else { continue };
+                let d = f64::from(d);
+                if d > config.max_depth_m {
+                    continue;
+                }
+                let p: Point3<f64> = frame.world_from_camera * frame.camera.unproject(f64::from(u), f64::from(v), d);
+                if p.z > config.min_height_m {
+                    grid[r * cols + c] = Some((d, p));
                 }
             }
         }
+        let mut surface = Self { u0, v0, stride, cols, rows, grid, keep: Vec::new() };
+        surface.keep = match median {
+            Some(m) => surface.flood(m, None, frame, config),
+            None => surface.grid.iter().map(Option::is_some).collect(),
+        };
+        Some(surface)
     }
-    grid.into_iter().zip(keep).filter_map(|(g, k)| if k { g.map(|(_, p)| p) } else { None }).collect()
+
+    /// Pixel of grid cell `i`.
+    fn pixel(&self, i: usize) -> (u32, u32) {
+        (self.u0 + (i % self.cols) as u32 * self.stride, self.v0 + (i / self.cols) as u32 * self.stride)
+    }
+
+    /// The samples not `masked` within the depth gate around `median`; with a positive
+    /// `connect_slope`, only those connected to the centre: seeds are the central-half samples
+    /// within one step of `median`, then a 4-neighbour flood fill.
+    fn flood(&self, median: f64, masked: Option<&[bool]>, frame: &Frame, config: &LocalCloudConfig) -> Vec<bool> {
+        let (cols, rows) = (self.cols, self.rows);
+        let usable = |i: usize| {
+            masked.is_none_or(|m| !m[i])
+                && self.grid[i]
+                    .is_some_and(|(d, _)| !config.depth_gate_m.is_finite() || (d - median).abs() <= config.depth_gate_m)
+        };
+        if config.connect_slope <= 0.0 {
+            return (0..cols * rows).map(usable).collect();
+        }
+        let spacing_per_m = f64::from(self.stride) / frame.camera.fx;
+        let step = |d: f64| (config.connect_slope * spacing_per_m * d).max(config.connect_min_step_m);
+        let mut keep = vec![false; cols * rows];
+        let mut queue = std::collections::VecDeque::new();
+        let (c_lo, c_hi, r_lo, r_hi) = (cols / 4, cols - cols / 4, rows / 4, rows - rows / 4);
+        for r in r_lo..r_hi.max(r_lo + 1).min(rows) {
+            for c in c_lo..c_hi.max(c_lo + 1).min(cols) {
+                let i = r * cols + c;
+                if usable(i) && self.grid[i].is_some_and(|(d, _)| (d - median).abs() <= step(median)) {
+                    keep[i] = true;
+                    queue.push_back(i);
+                }
+            }
+        }
+        while let Some(i) = queue.pop_front() {
+            let Some((d, _)) = self.grid[i] else { continue };
+            let (r, c) = (i / cols, i % cols);
+            let neighbours = [
+                (r > 0).then(|| i - cols),
+                (r + 1 < rows).then(|| i + cols),
+                (c > 0).then(|| i - 1),
+                (c + 1 < cols).then(|| i + 1),
+            ];
+            for j in neighbours.into_iter().flatten() {
+                if keep[j] || !usable(j) {
+                    continue;
+                }
+                if let Some((dj, _)) = self.grid[j] {
+                    if (dj - d).abs() <= step(d.min(dj)) {
+                        keep[j] = true;
+                        queue.push_back(j);
+                    }
+                }
+            }
+        }
+        keep
+    }
+
+    fn points(&self) -> Vec<Point3<f64>> {
+        self.grid.iter().zip(&self.keep).filter_map(|(g, k)| if *k { g.map(|(_, p)| p) } else { None }).collect()
+    }
+
+    /// The cloud cut again from the central median of the samples left after `masked`.
+    fn recut(&self, masked: &[bool], frame: &Frame, config: &LocalCloudConfig) -> Vec<Point3<f64>> {
+        let (cols, rows) = (self.cols, self.rows);
+        let (c_lo, c_hi, r_lo, r_hi) = (cols / 4, cols - cols / 4, rows / 4, rows - rows / 4);
+        let mut depths: Vec<f64> = Vec::new();
+        for r in r_lo..r_hi.max(r_lo + 1).min(rows) {
+            for c in c_lo..c_hi.max(c_lo + 1).min(cols) {
+                let i = r * cols + c;
+                if let (false, Some((d, _))) = (masked[i], self.grid[i]) {
+                    depths.push(d);
+                }
+            }
+        }
+        if depths.is_empty() {
+            return Vec::new();
+        }
+        let mid = depths.len() / 2;
+        let (_, m, _) = depths.select_nth_unstable_by(mid, f64::total_cmp);
+        let keep = self.flood(*m, Some(masked), frame, config);
+        self.grid.iter().zip(keep).filter_map(|(g, k)| if k { g.map(|(_, p)| p) } else { None }).collect()
+    }
+
+    /// Whether pixel `(u, v)` at depth `d` lies on this box's kept surface: a kept sample within
+    /// one stride in each direction and within `tol` in depth.
+    fn on_surface(&self, u: u32, v: u32, d: f64, tol: f64) -> bool {
+        let s = self.stride as i64;
+        let (cu, cv) = ((i64::from(u) - i64::from(self.u0)) / s, (i64::from(v) - i64::from(self.v0)) / s);
+        for dr in -1..=1 {
+            for dc in -1..=1 {
+                let (r, c) = (cv + dr, cu + dc);
+                if r < 0 || c < 0 || r >= self.rows as i64 || c >= self.cols as i64 {
+                    continue;
+                }
+                let i = r as usize * self.cols + c as usize;
+                if self.keep[i] && self.grid[i].is_some_and(|(dj, _)| (dj - d).abs() <= tol) {
+                    return true;
+                }
+            }
+        }
+        false
+    }
+}
+
+/// The samples of detection `i`'s surface that belong to a neighbouring detection `j` when `i`'s
+/// box centre sits on `j`'s surface (see [`LocalCloudConfig::claim_exclusion`]): most of `i`'s
+/// kept samples lie on `j`'s kept surface, and that surface reaches well beyond `i`'s box — an
+/// occluder crossing the box, not a part of `i`. `None` when no neighbour claims the box.
+fn claimed_by_neighbours(
+    i: usize,
+    surfaces: &[Option<BoxSurface>],
+    detections: &[crate::frame::Detection],
+    config: &LocalCloudConfig,
+) -> Option<Vec<bool>> {
+    let own = surfaces[i].as_ref()?;
+    let kept: Vec<usize> = (0..own.keep.len()).filter(|&k| own.keep[k]).collect();
+    if kept.is_empty() {
+        return None;
+    }
+    let bi = &detections[i].bbox;
+    let mut mask: Option<Vec<bool>> = None;
+    for (j, other) in surfaces.iter().enumerate() {
+        let Some(other) = other.as_ref().filter(|_| j != i) else { continue };
+        let bj = &detections[j].bbox;
+        if bj.max[0] <= bi.min[0] || bj.min[0] >= bi.max[0] || bj.max[1] <= bi.min[1] || bj.min[1] >= bi.max[1] {
+            continue;
+        }
+        let tol = config.connect_min_step_m;
+        let on_j: Vec<usize> = kept
+            .iter()
+            .copied()
+            .filter(|&k| {
+                let (u, v) = own.pixel(k);
+                own.grid[k].is_some_and(|(d, _)| other.on_surface(u, v, d, tol))
+            })
+            .collect();
+        if (on_j.len() as f64) < config.claim_share * kept.len() as f64 {
+            continue;
+        }
+        let j_kept = other.keep.iter().filter(|k| **k).count();
+        let j_outside = (0..other.keep.len())
+            .filter(|&k| other.keep[k])
+            .filter(|&k| {
+                let (u, v) = other.pixel(k);
+                let (u, v) = (f64::from(u), f64::from(v));
+                u < bi.min[0] || u >= bi.max[0] || v < bi.min[1] || v >= bi.max[1]
+            })
+            .count();
+        if (j_outside as f64) < config.claim_outside_share * j_kept as f64 {
+            continue;
+        }
+        let m = mask.get_or_insert_with(|| vec![false; own.keep.len()]);
+        // Mask every sample of the box on j's surface (kept by i's fill or not).
+        for (k, masked) in m.iter_mut().enumerate() {
+            let (u, v) = own.pixel(k);
+            if own.grid[k].is_some_and(|(d, _)| other.on_surface(u, v, d, tol)) {
+                *masked = true;
+            }
+        }
+    }
+    mask
 }
 
 /// Depth frames in, object map out, with the ensemble association.
@@ -265,6 +441,62 @@ mod tests {
         let all = &local_objects_from_frame(&frame, &gate_only)[0].points_in_world;
         let deeper = all.iter().filter(|p| (p.z - 0.06).abs() < 1e-6).count();
         assert!(deeper > 0 && all.len() == cut.len() + deeper, "{} {} {deeper}", all.len(), cut.len());
+    }
+
+    /// The frame of [`two_surfaces`] with the depth of surfaces at heights `top(u, v)` (table 0)
+    /// and the given block-labelled boxes.
+    fn frame_with(top: impl Fn(usize, usize) -> f64, boxes: &[Box2]) -> Frame {
+        let mut frame = two_surfaces();
+        let data: Vec<f32> = (0..120usize * 160).map(|i| (0.5 - top(i % 160, i / 160)) as f32).collect();
+        frame.depth = DepthImage::new(160, 120, data).unwrap_or_else(|e| panic!("{e}"));
+        frame.detections = boxes.iter().map(|b| Detection { bbox: *b, label: Label::Block, score: 0.9 }).collect();
+        frame
+    }
+
+    #[test]
+    fn an_occluder_crossing_the_box_centre_is_excluded() {
+        // A low block (top z = 0.04) over columns [70, 130) x rows [40, 80); a tall narrow
+        // object (top z = 0.15) over columns [90, 110) x rows [10, 110) crosses the block's box
+        // through its centre and reaches far above and below it.
+        let top = |u: usize, v: usize| {
+            if (90..110).contains(&u) && (10..110).contains(&v) {
+                0.15
+            } else if (70..130).contains(&u) && (40..80).contains(&v) {
+                0.04
+            } else {
+                0.0
+            }
+        };
+        let boxes = [Box2::new(70.0, 40.0, 130.0, 80.0), Box2::new(90.0, 10.0, 110.0, 110.0)];
+        let frame = frame_with(top, &boxes);
+        let off = LocalCloudConfig { claim_exclusion: false, ..LocalCloudConfig::default() };
+        let before = &local_objects_from_frame(&frame, &off)[0].points_in_world;
+        assert!(
+            !before.is_empty() && before.iter().all(|p| (p.z - 0.15).abs() < 1e-6),
+            "the seed sits on the occluder"
+        );
+        let locals = local_objects_from_frame(&frame, &LocalCloudConfig::default());
+        let block = &locals[0].points_in_world;
+        assert!(block.len() > 20, "{}", block.len());
+        assert!(block.iter().all(|p| (p.z - 0.04).abs() < 1e-6), "only the block's top is left");
+        // The occluder's own cloud is untouched (the block's surface does not reach beyond its box
+        // from its centre: the block is not on it).
+        let tall = &locals[1].points_in_world;
+        assert!(!tall.is_empty() && tall.iter().all(|p| (p.z - 0.15).abs() < 1e-6));
+    }
+
+    #[test]
+    fn a_box_around_the_object_is_not_an_occluder() {
+        // A second (false-positive) box encloses the block: its surface is the block's, all inside
+        // the block's box, so the block keeps its cloud.
+        let top = |u: usize, v: usize| if (70..130).contains(&u) && (40..80).contains(&v) { 0.04 } else { 0.0 };
+        let boxes = [Box2::new(70.0, 40.0, 130.0, 80.0), Box2::new(20.0, 10.0, 150.0, 110.0)];
+        let frame = frame_with(top, &boxes);
+        let off = LocalCloudConfig { claim_exclusion: false, ..LocalCloudConfig::default() };
+        let with = local_objects_from_frame(&frame, &LocalCloudConfig::default());
+        let without = local_objects_from_frame(&frame, &off);
+        assert!(with[0].points_in_world.len() > 100);
+        assert_eq!(with[0].points_in_world, without[0].points_in_world);
     }
 
     #[test]

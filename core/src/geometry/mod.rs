@@ -516,10 +516,113 @@ impl RadiusGrid {
     }
 }
 
+/// The main body of a cloud: points are voxelised into cells of `voxel_m`; occupied cells within
+/// `reach` cells of each other (per axis) are connected; the component with the most points is
+/// kept, and so is every other component with at least `keep_share` of its points. Returns one
+/// flag per point (non-finite points are never kept). A cloud with one component keeps everything;
+/// an empty cloud, a non-positive voxel or a negative reach keeps everything too (nothing to decide).
+pub fn main_components(points: &[Point3<f64>], voxel_m: f64, reach: i64, keep_share: f64) -> Vec<bool> {
+    let finite = |p: &Point3<f64>| p.coords.iter().all(|v| v.is_finite());
+    if points.is_empty() || !(voxel_m.is_finite() && voxel_m > 0.0) || reach < 0 {
+        return points.iter().map(finite).collect();
+    }
+    let cell = |p: &Point3<f64>| {
+        [(p.x / voxel_m).floor() as i64, (p.y / voxel_m).floor() as i64, (p.z / voxel_m).floor() as i64]
+    };
+    // Occupied cells with their point counts, in first-seen order (deterministic).
+    let mut index: std::collections::HashMap<[i64; 3], usize> = std::collections::HashMap::new();
+    let mut cells: Vec<([i64; 3], usize)> = Vec::new();
+    let mut point_cell: Vec<Option<usize>> = Vec::with_capacity(points.len());
+    for p in points {
+        if !finite(p) {
+            point_cell.push(None);
+            continue;
+        }
+        let c = cell(p);
+        let k = *index.entry(c).or_insert_with(|| {
+            cells.push((c, 0));
+            cells.len() - 1
+        });
+        cells[k].1 += 1;
+        point_cell.push(Some(k));
+    }
+    // Breadth-first components over cells.
+    let mut component = vec![usize::MAX; cells.len()];
+    let mut sizes: Vec<usize> = Vec::new();
+    for start in 0..cells.len() {
+        if component[start] != usize::MAX {
+            continue;
+        }
+        let id = sizes.len();
+        let mut size = 0;
+        component[start] = id;
+        let mut queue = std::collections::VecDeque::from([start]);
+        while let Some(k) = queue.pop_front() {
+            size += cells[k].1;
+            let c = cells[k].0;
+            for dx in -reach..=reach {
+                for dy in -reach..=reach {
+                    for dz in -reach..=reach {
+                        if let Some(&n) = index.get(&[c[0] + dx, c[1] + dy, c[2] + dz]) {
+                            if component[n] == usize::MAX {
+                                component[n] = id;
+                                queue.push_back(n);
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        sizes.push(size);
+    }
+    let largest = sizes.iter().copied().max().unwrap_or(0) as f64;
+    let keep: Vec<bool> = sizes.iter().map(|&s| s as f64 >= keep_share * largest).collect();
+    point_cell.iter().map(|k| k.is_some_and(|k| keep[component[k]])).collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use std::f64::consts::{FRAC_PI_2, FRAC_PI_4, PI};
+
+    #[test]
+    fn main_components_drop_a_separated_minority_cluster() {
+        // A 10 x 10 x 5 grid of points 5 mm apart (the object) and a 4 x 4 x 4 cluster 20 cm away.
+        let mut pts = Vec::new();
+        for i in 0..10 {
+            for j in 0..10 {
+                for k in 0..5 {
+                    pts.push(Point3::new(f64::from(i) * 0.005, f64::from(j) * 0.005, f64::from(k) * 0.005));
+                }
+            }
+        }
+        let n_main = pts.len();
+        for i in 0..4 {
+            for j in 0..4 {
+                for k in 0..4 {
+                    pts.push(Point3::new(0.2 + f64::from(i) * 0.005, f64::from(j) * 0.005, f64::from(k) * 0.005));
+                }
+            }
+        }
+        pts.push(Point3::new(f64::NAN, 0.0, 0.0));
+        let keep = main_components(&pts, 0.01, 2, 0.5);
+        assert_eq!(keep.len(), pts.len());
+        assert!(keep[..n_main].iter().all(|k| *k));
+        assert!(keep[n_main..].iter().all(|k| !*k));
+        // A gap of 2 cm is bridged (reach 2 cells of 1 cm): one body, all kept.
+        let bridged: Vec<Point3<f64>> =
+            pts[..n_main].iter().copied().chain([Point3::new(0.065, 0.0, 0.0), Point3::new(0.07, 0.0, 0.0)]).collect();
+        assert!(main_components(&bridged, 0.01, 2, 0.5).iter().all(|k| *k));
+        // Two comparable halves are both kept at keep_share 0.5.
+        let halves: Vec<Point3<f64>> = pts[..n_main]
+            .iter()
+            .chain(pts[..n_main].iter())
+            .enumerate()
+            .map(|(i, p)| if i < n_main { *p } else { p + Vector3::new(0.3, 0.0, 0.0) })
+            .collect();
+        assert!(main_components(&halves, 0.01, 2, 0.5).iter().all(|k| *k));
+        assert!(main_components(&[], 0.01, 2, 0.5).is_empty());
+    }
 
     fn cuboid(c: [f64; 3], yaw: f64, h: [f64; 3]) -> ObjectGeometry {
         ObjectGeometry { shape: Shape::Cuboid, center: Vector3::from(c), yaw_rad: yaw, half_extents: Vector3::from(h) }
