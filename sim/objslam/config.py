@@ -106,7 +106,7 @@ class ParamRunConfig:
 @dataclass(frozen=True)
 class PoseNoiseConfig:
     """Calibration-error model of the ``kinematics`` / ``slam`` pose sources (per-view bias, per-frame
-    jitter; seeded by the run seed)."""
+    jitter; seeded by the run seed mixed with the scene's seed, ``episode.kinematic_noise_seed``)."""
 
     bias_trans_m: float = 0.01
     """Per-view translation bias (standard deviation per axis), metres."""
