@@ -33,6 +33,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "experiments"))
 
 from sweep import BACKENDS, Job, run_sweep, scene_files  # noqa: E402
+
 STRATEGIES = ("object-driven", "random", "coverage", "init", "expected-gain")
 METRICS = ("iou3d", "iou2d", "cde_cm", "yae_deg")
 
@@ -59,9 +60,8 @@ def _row(m: dict[str, Any]) -> dict[str, Any]:
 
 def aligned_metrics(run_dir: str | Path) -> dict[str, float | None]:
     """3D IoU and CDE of a run's map after removing its global translation offset (module docs)."""
-    import tomllib
-
     import numpy as np
+    import tomllib
     from objslam import _native
     from objslam.scene import gt_objects, load_scene
 
