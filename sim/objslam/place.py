@@ -225,6 +225,9 @@ def run_place_task(
     session.hold(1.0, GRIPPER_OPEN_M)
     now = {g["id"]: g for g in gt_objects(scene, session.world.ground_truth())}
     placed: list[tuple[int, int]] = []  # (slot index, true id)
+    out["final"] = [
+        {"id": g["id"], "center": [round(v, 4) for v in now[g["id"]]["geometry"]["center"]]} for g in true_items
+    ]
     for g in true_items:
         c = now[g["id"]]["geometry"]["center"]
         upright = abs(c[2] - g["geometry"]["half_extents"][2]) < 0.01
