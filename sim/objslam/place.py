@@ -42,6 +42,13 @@ class PlaceConfig:
 
     slot_spacing_m: float = 0.10
     """Distance between neighbouring slots of a line, metres."""
+    tall_slot_spacing_m: float = 0.20
+    """Slot spacing when the tallest item of the line is at least ``tall_item_height_m`` (estimated):
+    the hand holds a tall item 4 cm below its top, so its body comes down beside a standing
+    neighbour taller than the fingers and knocked it over at 10 cm (bottles_by_height 0/6 with
+    10 cm, 4/6 with 20 cm on the maps of reports/grasping; cups keep 10 cm)."""
+    tall_item_height_m: float = 0.14
+    """Estimated height from which an item counts as tall, metres."""
     slot_clearance_m: float = 0.04
     """A slot is free when no map object's footprint comes closer than this to it, metres."""
     slot_tolerance_m: float = 0.04
@@ -83,11 +90,15 @@ def top_down(x: float, y: float, z: float, yaw: float) -> np.ndarray:
     return m
 
 
-def free_line(map_objects: list[dict[str, Any]], n: int, cfg: PlaceConfig) -> list[tuple[float, float]] | None:
-    """``n`` slots along y, centred on the first free line found (x from near to far, then y shifts)."""
+def free_line(
+    map_objects: list[dict[str, Any]], n: int, cfg: PlaceConfig, spacing_m: float | None = None
+) -> list[tuple[float, float]] | None:
+    """``n`` slots along y, ``spacing_m`` apart (default ``cfg.slot_spacing_m``), centred on the first
+    free line found (x from near to far, then y shifts)."""
+    spacing = cfg.slot_spacing_m if spacing_m is None else spacing_m
     for x in np.arange(0.28, 0.71, 0.03):
         for y0 in (0.0, -0.1, 0.1, -0.2, 0.2, -0.3, 0.3):
-            slots = [(float(x), float(y0 + (i - (n - 1) / 2) * cfg.slot_spacing_m)) for i in range(n)]
+            slots = [(float(x), float(y0 + (i - (n - 1) / 2) * spacing)) for i in range(n)]
             if any(abs(sy) > 0.45 for _, sy in slots):
                 continue
             ok = all(
@@ -205,7 +216,9 @@ def run_place_task(
         out["reason"] = "not_applicable"
         return out
     # The items themselves leave their places, so only the other objects must clear the line.
-    slots = free_line([o for o in objs if o["label"] != label], len(items), cfg)
+    tallest = max(2 * o["geometry"]["half_extents"][2] for o in items)
+    spacing = cfg.tall_slot_spacing_m if tallest >= cfg.tall_item_height_m else cfg.slot_spacing_m
+    slots = free_line([o for o in objs if o["label"] != label], len(items), cfg, spacing)
     if slots is None:
         out["reason"] = "no_free_line"
         return out
