@@ -1,5 +1,6 @@
 """Placement slot lines (pure geometry, no simulator)."""
 
+import itertools
 import math
 
 from objslam.place import PlaceConfig, free_line
@@ -15,7 +16,7 @@ def test_slots_are_spaced_as_asked_and_clear_the_map() -> None:
     for spacing in (cfg.slot_spacing_m, cfg.tall_slot_spacing_m):
         slots = free_line([], 3, cfg, spacing)
         assert slots is not None and len(slots) == 3
-        gaps = [math.dist(a, b) for a, b in zip(slots, slots[1:])]
+        gaps = [math.dist(a, b) for a, b in itertools.pairwise(slots)]
         assert all(abs(g - spacing) < 1e-9 for g in gaps)
     # An object on the nearest line pushes the line away from it by at least the clearance.
     blocked = free_line([_box(0.28, 0.0)], 3, cfg, cfg.tall_slot_spacing_m)
