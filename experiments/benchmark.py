@@ -70,12 +70,12 @@ def aligned_metrics(run_dir: str | Path) -> dict[str, float | None]:
     scene = Path(cfg["scene"])
     gt = gt_objects(load_scene(scene if scene.is_absolute() else REPO / scene))
     mp = json.loads((run / "map.json").read_text())
-    ev = json.loads(_native.evaluate_map(json.dumps(gt), json.dumps(mp)))
+    matched = json.loads((run / "metrics.json").read_text())["objects"]  # the run's own matching
     centre = {g["id"]: np.array(g["geometry"]["center"]) for g in gt}
     by_id = {o["id"]: o for o in mp["objects"]}
     offsets = [
         centre[o["gt_id"]] - np.array(by_id[o["est_id"]]["world_from_object"]["translation"])
-        for o in ev["objects"]
+        for o in matched
         if o.get("est_id") is not None and (o.get("iou3d") or 0.0) > 0.3
     ]
     if not offsets:
@@ -84,10 +84,10 @@ def aligned_metrics(run_dir: str | Path) -> dict[str, float | None]:
     for o in mp["objects"]:
         t = o["world_from_object"]["translation"]
         o["world_from_object"]["translation"] = [float(t[i] + off[i]) for i in range(3)]
-    ev2 = json.loads(_native.evaluate_map(json.dumps(gt), json.dumps(mp)))
+    ev = json.loads(_native.evaluate_map(json.dumps(gt), json.dumps(mp)))
     return {
-        "iou3d_aligned": ev2["mean"]["iou3d"],
-        "cde_aligned_cm": ev2["mean"]["cde_cm"],
+        "iou3d_aligned": ev["mean"]["iou3d"],
+        "cde_aligned_cm": ev["mean"]["cde_cm"],
         "map_offset_mm": float(np.linalg.norm(off) * 1000.0),
     }
 

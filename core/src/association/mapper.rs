@@ -99,11 +99,16 @@ fn central_median_depth(frame: &Frame, u0: u32, v0: u32, u1: u32, v1: u32, strid
             }
         }
     }
-    if depths.is_empty() {
+    median(depths)
+}
+
+/// The (upper) median of `values` (`None` when empty).
+fn median(mut values: Vec<f64>) -> Option<f64> {
+    if values.is_empty() {
         return None;
     }
-    let mid = depths.len() / 2;
-    let (_, m, _) = depths.select_nth_unstable_by(mid, f64::total_cmp);
+    let mid = values.len() / 2;
+    let (_, m, _) = values.select_nth_unstable_by(mid, f64::total_cmp);
     Some(*m)
 }
 
@@ -306,7 +311,12 @@ impl BoxSurface {
     }
 
     fn points(&self) -> Vec<Point3<f64>> {
-        self.grid.iter().zip(&self.keep).filter_map(|(g, k)| if *k { g.map(|(_, p)| p) } else { None }).collect()
+        self.points_where(&self.keep)
+    }
+
+    /// The world points of the samples flagged in `keep`.
+    fn points_where(&self, keep: &[bool]) -> Vec<Point3<f64>> {
+        self.grid.iter().zip(keep).filter_map(|(g, k)| if *k { g.map(|(_, p)| p) } else { None }).collect()
     }
 
     /// The cloud cut again from the central median of the samples left after `masked`.
@@ -322,13 +332,8 @@ impl BoxSurface {
                 }
             }
         }
-        if depths.is_empty() {
-            return Vec::new();
-        }
-        let mid = depths.len() / 2;
-        let (_, m, _) = depths.select_nth_unstable_by(mid, f64::total_cmp);
-        let keep = self.flood(*m, Some(masked), frame, config);
-        self.grid.iter().zip(keep).filter_map(|(g, k)| if k { g.map(|(_, p)| p) } else { None }).collect()
+        let Some(m) = median(depths) else { return Vec::new() };
+        self.points_where(&self.flood(m, Some(masked), frame, config))
     }
 
     /// Whether pixel `(u, v)` at depth `d` lies on this box's kept surface: a kept sample within
@@ -363,28 +368,28 @@ fn claimed_by_neighbours(
     config: &LocalCloudConfig,
 ) -> Option<Vec<bool>> {
     let own = surfaces[i].as_ref()?;
-    let kept: Vec<usize> = (0..own.keep.len()).filter(|&k| own.keep[k]).collect();
-    if kept.is_empty() {
+    let n_kept = own.keep.iter().filter(|k| **k).count();
+    if n_kept == 0 {
         return None;
     }
     let bi = &detections[i].bbox;
+    let tol = config.connect_min_step_m;
     let mut mask: Option<Vec<bool>> = None;
     for (j, other) in surfaces.iter().enumerate() {
         let Some(other) = other.as_ref().filter(|_| j != i) else { continue };
-        let bj = &detections[j].bbox;
-        if bj.max[0] <= bi.min[0] || bj.min[0] >= bi.max[0] || bj.max[1] <= bi.min[1] || bj.min[1] >= bi.max[1] {
+        if bi.intersection(&detections[j].bbox).is_none() {
             continue;
         }
-        let tol = config.connect_min_step_m;
-        let on_j: Vec<usize> = kept
-            .iter()
-            .copied()
-            .filter(|&k| {
+        // Every sample of the box on j's surface (kept by i's fill or not): the test's share and,
+        // when it holds, the mask.
+        let on_j: Vec<bool> = (0..own.grid.len())
+            .map(|k| {
                 let (u, v) = own.pixel(k);
                 own.grid[k].is_some_and(|(d, _)| other.on_surface(u, v, d, tol))
             })
             .collect();
-        if (on_j.len() as f64) < config.claim_share * kept.len() as f64 {
+        let kept_on_j = on_j.iter().zip(&own.keep).filter(|(o, k)| **o && **k).count();
+        if (kept_on_j as f64) < config.claim_share * n_kept as f64 {
             continue;
         }
         let j_kept = other.keep.iter().filter(|k| **k).count();
@@ -392,20 +397,15 @@ fn claimed_by_neighbours(
             .filter(|&k| other.keep[k])
             .filter(|&k| {
                 let (u, v) = other.pixel(k);
-                let (u, v) = (f64::from(u), f64::from(v));
-                u < bi.min[0] || u >= bi.max[0] || v < bi.min[1] || v >= bi.max[1]
+                !bi.contains(f64::from(u), f64::from(v))
             })
             .count();
         if (j_outside as f64) < config.claim_outside_share * j_kept as f64 {
             continue;
         }
         let m = mask.get_or_insert_with(|| vec![false; own.keep.len()]);
-        // Mask every sample of the box on j's surface (kept by i's fill or not).
-        for (k, masked) in m.iter_mut().enumerate() {
-            let (u, v) = own.pixel(k);
-            if own.grid[k].is_some_and(|(d, _)| other.on_surface(u, v, d, tol)) {
-                *masked = true;
-            }
+        for (masked, on) in m.iter_mut().zip(on_j) {
+            *masked |= on;
         }
     }
     mask
