@@ -177,6 +177,7 @@ def _rows(sessions: list[str]) -> list[dict[str, Any]]:
                     "closed_gap_m": r.get("closed_gap_m"),
                     "expected_closed_width_m": r.get("expected_closed_width_m"),
                     "rise_m": r.get("rise_m"),
+                    "deferred": r.get("deferred", 0),
                     "run_dir": d["map_run"],
                 }
             )
@@ -210,7 +211,9 @@ def write_reports(
         f"(scenes {', '.join(scenes)}; seeds {', '.join(map(str, seeds))}).",
         "",
         "One row per attempt: every map object the planner can fit in the gripper, grasped top-down one",
-        "after another (grasped objects set aside), plus one `not_in_map` row per",
+        "after another (grasped objects set aside; an object with no collision-free grasp among its",
+        "neighbours is deferred until an executed attempt has changed the scene, `deferred` in the rows),",
+        "plus one `not_in_map` row per",
         "graspable true object no map object targets, plus `too_wide` rows where the map made a graspable",
         "object too wide. Success = the true object ends ≥ 10 cm above its start after the lift and a",
         "1 s hold (SAPIEN ground truth). Sources: `estimated` = object-driven exploration map,",

@@ -5,7 +5,9 @@ the grasp physics settings, then every map object in turn: ``Planner.plan_grasp`
 estimates only: the target's estimate, the other estimates as obstacles) → fingers open to the
 planned width → pre-grasp trajectory → approach → close → lift → hold → judge from the simulator's
 ground truth → the grasped object is set aside (removed from the scene and from the obstacles) →
-open, back to the ready configuration, next object. Results: one row per attempt (and per
+open, back to the ready configuration, next object. An object the planner cannot reach among
+its neighbours is deferred until an executed attempt has changed the scene
+(``defer_unreachable``: the order a robot clearing a table would take). Results: one row per attempt (and per
 ground-truth graspable object the map gave no attempt for), written by the caller.
 
 Choices (config fields of :class:`GraspRunConfig`):
@@ -57,6 +59,9 @@ from .world import (
     panda_urdf_path,
 )
 
+#: Planning outcomes after which an object is deferred (see ``GraspRunConfig.defer_unreachable``).
+DEFERRABLE = ("no_ik", "no_path")
+
 #: Largest graspable width (gripper 8 cm minus the planner's 4 mm minimum clearance), metres.
 MAX_GRASP_WIDTH_M = 0.076
 
@@ -104,6 +109,12 @@ class GraspRunConfig:
     reobserve_replace_m: float = 0.15
     """Map objects within this x-y distance of the refined target are replaced, as obstacles, by
     the local map's objects (the close views see that neighbourhood), metres."""
+    defer_unreachable: bool = True
+    """An object the planner finds no collision-free grasp or path for (``no_ik`` / ``no_path``:
+    nothing moved) is put back in the queue and planned again after the next executed attempt, when
+    a neighbour may have been set aside; it is reported ``no_ik`` / ``no_path`` only if it is still
+    unreachable when no executed attempt is left. Every object still gets at most one physical
+    attempt; rows record how often it was deferred (``deferred``)."""
     planner: dict[str, Any] = field(
         default_factory=lambda: {"opening_clearance_m": 0.08, "max_grasp_depth_m": 0.04}
     )
@@ -449,7 +460,19 @@ def run_grasp_session(
     match = match_gt(map_objects, gt, cfg.match_radius_m)
     remaining = list(map_objects)
     rows: list[dict[str, Any]] = []
-    for k, target in enumerate(map_objects):
+    queue = list(map_objects)
+    # Objects the planner found no grasp for (nothing moved): retried after the next executed attempt.
+    deferred: list[tuple[dict[str, Any], dict[str, Any]]] = []
+    n_deferred: dict[int, int] = {}
+    k = 0
+    while queue or deferred:
+        if not queue:
+            # Nothing executed since these were deferred: the scene is unchanged, so they stay
+            # unreachable; their last planning outcome is the row.
+            for target, res in deferred:
+                rows.append(_row(target, res, gt_by_id, n_deferred.get(target["id"], 0)))
+            break
+        target = queue.pop(0)
         gt_id = match[target["id"]]
         neighbours = [m for m in remaining if m["id"] != target["id"]]
         if gt_id is not None and gt_id in session.removed:
@@ -460,16 +483,16 @@ def run_grasp_session(
             remaining = [m for m in remaining if m["id"] != target["id"]]
             continue
         res = session.attempt(k, target, neighbours, gt_id)
+        k += 1
+        executed = "open_width_m" in res
+        if cfg.defer_unreachable and not executed and res["cause"] in DEFERRABLE:
+            n_deferred[target["id"]] = n_deferred.get(target["id"], 0) + 1
+            deferred.append((target, res))
+            continue
         gt_id = res["gt_id"]
         if res["cause"] == "too_wide" and (gt_id is None or gt_id not in graspable_gt):
             res["skipped"] = True  # too wide in the map and in truth: not an attempt
-        row = {
-            "map_id": target["id"],
-            "map_label": target["label"],
-            "object": f"gt{gt_id}" if gt_id is not None else f"map{target['id']}",
-            "class": gt_by_id[gt_id]["label"] if gt_id is not None else target["label"],
-            **res,
-        }
+        row = _row(target, res, gt_by_id, n_deferred.get(target["id"], 0))
         rows.append(row)
         session._log("log_event", f"grasp {k} map {target['id']} ({target['label']}) → {row['object']}: "
                      f"{'success' if res['success'] else res['cause']}")
@@ -478,8 +501,11 @@ def run_grasp_session(
                 session.set_aside(oid)
         if res["success"]:
             remaining = [m for m in remaining if m["id"] != target["id"]]
-        if "open_width_m" in res:
+        if executed:
             session.go_ready([m["geometry"] for m in remaining])
+            # The scene changed (an object left, or was pushed): the deferred objects get another plan.
+            queue.extend(t for t, _ in deferred)
+            deferred = []
     attempted = {r["gt_id"] for r in rows if r["gt_id"] is not None}
     for gid in sorted(graspable_gt - attempted):
         rows.append(
@@ -487,6 +513,18 @@ def run_grasp_session(
              "success": False, "cause": "not_in_map", "gt_id": gid}
         )
     return rows
+
+
+def _row(target: dict[str, Any], res: dict[str, Any], gt_by_id: dict[int, Any], deferred: int) -> dict[str, Any]:
+    gt_id = res["gt_id"]
+    return {
+        "map_id": target["id"],
+        "map_label": target["label"],
+        "object": f"gt{gt_id}" if gt_id is not None else f"map{target['id']}",
+        "class": gt_by_id[gt_id]["label"] if gt_id is not None else target["label"],
+        "deferred": deferred,
+        **res,
+    }
 
 
 def config_dict(cfg: GraspRunConfig) -> dict[str, Any]:
