@@ -7,7 +7,6 @@ import json
 
 import numpy as np
 import pytest
-
 from objslam import _native
 from objslam.config import load_run_config
 from objslam.grasp import GraspRunConfig, GraspSession, run_grasp_session
