@@ -18,6 +18,7 @@ import shlex
 import sys
 from collections import Counter
 from pathlib import Path
+from typing import Any
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -51,6 +52,7 @@ def main(argv: list[str] | None = None) -> int:
         maps.append((d["scene"], d["seed"], Path(d["map_run"])))
     cfg = PlaceConfig(grasp=GraspRunConfig(reobserve=not a.no_reobserve))
     files = []
+    not_run: list[dict[str, Any]] = []
     for scene_name, seed, run_dir in sorted(set(maps)):
         scene = load_scene(REPO / "scenes" / f"{scene_name}.toml")
         run_cfg = load_run_config(
@@ -63,6 +65,8 @@ def main(argv: list[str] | None = None) -> int:
             except Exception as e:  # noqa: BLE001 - one failed task never stops the sweep
                 res = {"task": task, "success": False, "reason": f"error: {type(e).__name__}: {e}"}
             if res.get("reason") == "not_applicable":
+                if res.get("detail"):
+                    not_run.append({"task": task, "scene": scene_name, "seed": seed, "detail": res["detail"]})
                 continue
             res.update(scene=scene_name, seed=seed, map_run=str(run_dir), reobserve=not a.no_reobserve)
             f = run_dir / f"place_{task}.json"
@@ -72,7 +76,9 @@ def main(argv: list[str] | None = None) -> int:
     rows = [json.loads(Path(f).read_text()) for f in files]
     out = REPO / a.out
     out.mkdir(parents=True, exist_ok=True)
-    (out / "placement.json").write_text(json.dumps({"command": command, "files": files, "rows": rows}, indent=2) + "\n")
+    (out / "placement.json").write_text(
+        json.dumps({"command": command, "files": files, "rows": rows, "not_run": not_run}, indent=2) + "\n"
+    )
     lines = [
         "# Placement tasks from the estimated map",
         "",
@@ -96,6 +102,9 @@ def main(argv: list[str] | None = None) -> int:
     for t in a.tasks:
         for reason, c in sorted(Counter(x["reason"] for x in rows if x["task"] == t and not x["success"]).items()):
             lines.append(f"| {t} | {reason} | {c} |")
+    if not_run:
+        lines += ["", "## Not run (infeasible for the gripper)", "", "| task | scene | seed | why |", "|---|---|---:|---|"]
+        lines += [f"| {r['task']} | {r['scene']} | {r['seed']} | {r['detail']} |" for r in not_run]
     lines.append("")
     (out / "placement.md").write_text("\n".join(lines))
     print(f"{len(rows)} rows → {a.out}/placement.md")

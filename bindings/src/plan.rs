@@ -14,7 +14,7 @@ use numpy::ndarray::Array2;
 use numpy::{PyArray1, PyArray2, PyReadonlyArray1, ToPyArray};
 use objslam_core::geometry::{ObjectGeometry, Se3};
 use objslam_core::plan::{
-    GraspMotion, JointTrajectory, JointVector, MotionLimits, PlanError, Planner, PlannerConfig, ARM_DOF,
+    GraspMotion, HeldObject, JointTrajectory, JointVector, MotionLimits, PlanError, Planner, PlannerConfig, ARM_DOF,
 };
 use pyo3::create_exception;
 use pyo3::exceptions::PyTypeError;
@@ -35,7 +35,8 @@ fn cause_of(e: &PlanError) -> Option<&'static str> {
         | PlanError::GoalInCollision { .. }
         | PlanError::PlannerExhausted { .. }
         | PlanError::Timeout { .. }
-        | PlanError::NoGraspPath { .. } => Some("no_path"),
+        | PlanError::NoGraspPath { .. }
+        | PlanError::LinearPathBroken { .. } => Some("no_path"),
         PlanError::TooWide { .. } => Some("too_wide"),
         PlanError::Trajectory { .. } => Some("trajectory"),
         _ => None,
@@ -178,6 +179,8 @@ fn config_from_json(json: Option<&str>) -> PyResult<PlannerConfig> {
                     val.as_bool().ok_or_else(|| input_err(format!("config.{k}: expected a boolean, got {val}")))?
             }
             "cylinder_yaw_count" => c.grasp.cylinder_yaw_count = count()? as usize,
+            "linear_step_m" => c.linear_step_m = num()?,
+            "linear_max_joint_step_rad" => c.linear_max_joint_step_rad = num()?,
             _ => return Err(input_err(format!("config: unknown key {k:?}"))),
         }
     }
@@ -203,6 +206,21 @@ fn config_from_json(json: Option<&str>) -> PyResult<PlannerConfig> {
 #[pyclass(module = "objslam._native", name = "Planner")]
 pub struct PlannerPy {
     inner: Planner,
+}
+
+impl PlannerPy {
+    /// The planner carrying the held object, when one is given (both arguments or neither).
+    fn holding(&self, held_json: Option<&str>, held_world_from_tcp: Option<&Bound<'_, PyAny>>) -> PyResult<Option<Planner>> {
+        match (held_json, held_world_from_tcp) {
+            (None, None) => Ok(None),
+            (Some(g), Some(t)) => {
+                let held =
+                    HeldObject { geometry: geometry(g, "held_json")?, world_from_tcp_at_grasp: pose(t, "held_world_from_tcp")? };
+                self.inner.holding(&held).map(Some).map_err(plan_input_err)
+            }
+            _ => Err(input_err("held_json and held_world_from_tcp: give both or neither")),
+        }
+    }
 }
 
 #[pymethods]
@@ -241,34 +259,68 @@ impl PlannerPy {
 
     /// Collision-free, time-parameterised motion `q_start → q_goal` among `obstacles_json`:
     /// `{"ok": True, "times_s", "positions", "velocities", "waypoints", "dt_s", "duration_s"}` or
-    /// `{"ok": False, "cause", "message"}`.
+    /// `{"ok": False, "cause", "message"}`. With `held_json` (the ObjectGeometry of the object in the
+    /// hand, where it stood when grasped) and `held_world_from_tcp` (the TCP pose of that grasp,
+    /// 4x4), the held object is carried along and kept clear of the obstacles too.
+    #[pyo3(signature = (q_start, q_goal, obstacles_json, held_json = None, held_world_from_tcp = None))]
     fn plan_to_joints<'py>(
         &self,
         py: Python<'py>,
         q_start: &Bound<'py, PyAny>,
         q_goal: &Bound<'py, PyAny>,
         obstacles_json: &str,
+        held_json: Option<&str>,
+        held_world_from_tcp: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<Bound<'py, PyDict>> {
         let (a, b) = (joints(q_start, "q_start")?, joints(q_goal, "q_goal")?);
         let obstacles = geometries(obstacles_json, "obstacles_json")?;
-        match py.detach(|| self.inner.plan_to_joints(&a, &b, &obstacles)) {
+        let planner = self.holding(held_json, held_world_from_tcp)?;
+        match py.detach(|| planner.as_ref().unwrap_or(&self.inner).plan_to_joints(&a, &b, &obstacles)) {
             Ok(t) => ok_trajectory(py, &t),
             Err(e) => failure(py, e),
         }
     }
 
-    /// Collision-free motion from `q_start` to a TCP pose (4x4), same result as `plan_to_joints`.
+    /// Collision-free motion from `q_start` to a TCP pose (4x4), same result and `held_*` arguments
+    /// as `plan_to_joints`.
+    #[pyo3(signature = (q_start, world_from_tcp, obstacles_json, held_json = None, held_world_from_tcp = None))]
     fn plan_to_pose<'py>(
         &self,
         py: Python<'py>,
         q_start: &Bound<'py, PyAny>,
         world_from_tcp: &Bound<'py, PyAny>,
         obstacles_json: &str,
+        held_json: Option<&str>,
+        held_world_from_tcp: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<Bound<'py, PyDict>> {
         let a = joints(q_start, "q_start")?;
         let target = pose(world_from_tcp, "world_from_tcp")?;
         let obstacles = geometries(obstacles_json, "obstacles_json")?;
-        match py.detach(|| self.inner.plan_to_pose(&a, &target, &obstacles)) {
+        let planner = self.holding(held_json, held_world_from_tcp)?;
+        match py.detach(|| planner.as_ref().unwrap_or(&self.inner).plan_to_pose(&a, &target, &obstacles)) {
+            Ok(t) => ok_trajectory(py, &t),
+            Err(e) => failure(py, e),
+        }
+    }
+
+    /// Straight-line TCP motion from `q_start` to `world_from_tcp` (4x4; e.g. a descent to put an
+    /// object down, a retreat), same result and `held_*` arguments as `plan_to_joints`; a line that
+    /// cannot be followed (collision, joint jump) is `{"ok": False, "cause": "no_path"}`.
+    #[pyo3(signature = (q_start, world_from_tcp, obstacles_json, held_json = None, held_world_from_tcp = None))]
+    fn plan_linear<'py>(
+        &self,
+        py: Python<'py>,
+        q_start: &Bound<'py, PyAny>,
+        world_from_tcp: &Bound<'py, PyAny>,
+        obstacles_json: &str,
+        held_json: Option<&str>,
+        held_world_from_tcp: Option<&Bound<'py, PyAny>>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let a = joints(q_start, "q_start")?;
+        let target = pose(world_from_tcp, "world_from_tcp")?;
+        let obstacles = geometries(obstacles_json, "obstacles_json")?;
+        let planner = self.holding(held_json, held_world_from_tcp)?;
+        match py.detach(|| planner.as_ref().unwrap_or(&self.inner).plan_linear(&a, &target, &obstacles)) {
             Ok(t) => ok_trajectory(py, &t),
             Err(e) => failure(py, e),
         }

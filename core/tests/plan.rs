@@ -13,7 +13,8 @@ use std::path::PathBuf;
 use nalgebra::{Quaternion, Translation3, UnitQuaternion, Vector3};
 use objslam_core::geometry::{ObjectGeometry, Se3, Shape};
 use objslam_core::plan::{
-    joint_max_abs_diff, CollisionScene, IkConfig, JointVector, PlanError, Planner, PlannerConfig, ARM_DOF,
+    joint_max_abs_diff, CollisionScene, Contact, HeldObject, IkConfig, JointVector, PlanError, Planner, PlannerConfig,
+    ARM_DOF,
 };
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -256,6 +257,71 @@ fn planned_paths_never_intersect_the_objects() {
         q = goal;
     }
     assert!(planned >= 5, "only {planned} of 8 goals were plannable");
+}
+
+#[test]
+fn a_held_bottle_is_carried_around_a_standing_one() {
+    let planner = planner();
+    // An 18 cm bottle held 4 cm below its top, carried from y = +0.25 to y = −0.25 past a 20 cm
+    // bottle standing at y = 0: the hand clears the standing bottle, the held one would not.
+    let standing = vec![cylinder(0.5, 0.0, 0.03, 0.20)];
+    let held_geometry = ObjectGeometry { center: Vector3::new(0.5, 0.25, 0.09), ..cylinder(0.5, 0.25, 0.03, 0.18) };
+    let grasp = objslam_core::plan::grasp::top_down_pose(Vector3::new(0.5, 0.25, 0.14), 0.0);
+    let held = HeldObject { geometry: held_geometry, world_from_tcp_at_grasp: grasp };
+    let holding = planner.holding(&held).unwrap_or_else(|e| panic!("{e}"));
+    let scene = planner.scene(&standing).unwrap_or_else(|e| panic!("{e}"));
+    let high = |y: f64| objslam_core::plan::grasp::top_down_pose(Vector3::new(0.5, y, 0.26), 0.0);
+    let start = holding.inverse_tcp_free(&high(0.25), &Q_READY, &scene).unwrap_or_else(|e| panic!("{e}")).q;
+    let goal = holding.inverse_tcp_free(&high(-0.25), &start, &scene).unwrap_or_else(|e| panic!("{e}")).q;
+    // Without the held object the straight line is free; with it, the held bottle hits the standing one.
+    let bare = planner.plan_path(&start, &goal, &scene).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(bare.len(), 2, "the bare arm should go straight");
+    let hit = (0..=100).any(|k| {
+        let mut q = start;
+        for d in 0..ARM_DOF {
+            q[d] += k as f64 / 100.0 * (goal[d] - start[d]);
+        }
+        matches!(holding.first_contact(&q, &scene), Some(Contact::HeldObject { object: 0 }))
+    });
+    assert!(hit, "the held bottle should cross the standing one on the straight line");
+    let traj = holding.plan_to_joints(&start, &goal, &standing).unwrap_or_else(|e| panic!("{e}"));
+    assert!(traj.waypoints.len() >= 3);
+    assert_never_hits(&holding, &traj.positions, &standing);
+    // The held object is not tested against the table (it is put down on it): a pose whose held
+    // bottle reaches 2 cm below the table top is free, while the bare hand there is far above it.
+    let low = objslam_core::plan::grasp::top_down_pose(Vector3::new(0.5, 0.25, 0.12), 0.0);
+    let q_low = holding.inverse_tcp_free(&low, &start, &planner.scene(&[]).unwrap_or_else(|e| panic!("{e}")));
+    assert!(q_low.is_ok(), "{q_low:?}");
+    // Bad held geometry is a typed error.
+    let mut bad = held.clone();
+    bad.geometry.half_extents.z = f64::NAN;
+    assert!(matches!(planner.holding(&bad), Err(PlanError::InvalidHeldObject)));
+}
+
+#[test]
+fn linear_motions_follow_the_line_or_report_where_they_break() {
+    let planner = planner();
+    let top = |z: f64| objslam_core::plan::grasp::top_down_pose(Vector3::new(0.45, 0.1, z), 0.3);
+    let scene = planner.scene(&[]).unwrap_or_else(|e| panic!("{e}"));
+    let start = planner.inverse_tcp_free(&top(0.30), &Q_READY, &scene).unwrap_or_else(|e| panic!("{e}")).q;
+    let traj = planner.plan_linear(&start, &top(0.08), &[]).unwrap_or_else(|e| panic!("{e}"));
+    // Every sample's TCP stays on the vertical line, pointing down, within 1 mm / 0.1°.
+    for q in &traj.positions {
+        let p = planner.forward_tcp(q);
+        let v = p.translation.vector;
+        assert!((v.x - 0.45).hypot(v.y - 0.1) < 1e-3, "off the line at {v:?}");
+        assert!((0.08 - 1e-3..=0.30 + 1e-3).contains(&v.z), "outside the segment at {v:?}");
+        assert!(p.rotation.angle_to(&top(v.z).rotation) < 0.1f64.to_radians());
+    }
+    let goal = *traj.goal().unwrap_or_else(|| panic!("empty trajectory"));
+    assert!((planner.forward_tcp(&goal).translation.vector - top(0.08).translation.vector).norm() < 1e-3);
+    // A box wider than the open gripper standing on the line (12 cm tall, 13 cm with the margin):
+    // the finger tips (about 1 cm below the TCP) reach it with the TCP near 14 cm, 73 % of the way.
+    let block = vec![cuboid(0.45, 0.1, 0.0, [0.10, 0.10, 0.12])];
+    match planner.plan_linear(&start, &top(0.08), &block) {
+        Err(PlanError::LinearPathBroken { fraction, .. }) => assert!(fraction > 0.6 && fraction < 0.8, "{fraction}"),
+        other => panic!("expected a broken line, got {other:?}"),
+    }
 }
 
 /// Collision-free configurations with the TCP 15 cm high on either side of the wall.

@@ -134,16 +134,39 @@ class Planner:
     rrt_max_iterations, shortcut_iterations, rng_seed, ik_seed, ik_random_restarts, sample_dt_s,
     velocity_scale, acceleration_scale, jerk_scale, opening_clearance_m, max_grasp_depth_m,
     shallow_grasp_depth_m, min_tcp_height_m, pregrasp_height_m, lift_height_m, allow_long_side,
-    cylinder_yaw_count."""
+    cylinder_yaw_count, linear_step_m, linear_max_joint_step_rad. ``plan_linear`` moves the TCP
+    along a straight line (IK every ``linear_step_m`` continuing the previous solution; a line that
+    cannot be followed is ``no_path``). ``held_json`` (the ObjectGeometry of the object in the hand, where it stood
+    when grasped) with ``held_world_from_tcp`` (that grasp's TCP pose, 4x4): the held object moves
+    with the hand and is kept clear of the obstacles too (not of the table, where it is put down);
+    give both or neither (``InputError``)."""
 
     def __init__(self, urdf_path: str, config_json: str | None = None) -> None: ...
     def forward_tcp(self, q: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]: ...
     def link_poses(self, q: npt.NDArray[np.float64]) -> dict[str, npt.NDArray[np.float64]]: ...
     def joint_limits(self) -> npt.NDArray[np.float64]: ...
     def plan_to_joints(
-        self, q_start: npt.NDArray[np.float64], q_goal: npt.NDArray[np.float64], obstacles_json: str
+        self,
+        q_start: npt.NDArray[np.float64],
+        q_goal: npt.NDArray[np.float64],
+        obstacles_json: str,
+        held_json: str | None = None,
+        held_world_from_tcp: npt.NDArray[np.float64] | None = None,
     ) -> dict[str, Any]: ...
     def plan_to_pose(
-        self, q_start: npt.NDArray[np.float64], world_from_tcp: npt.NDArray[np.float64], obstacles_json: str
+        self,
+        q_start: npt.NDArray[np.float64],
+        world_from_tcp: npt.NDArray[np.float64],
+        obstacles_json: str,
+        held_json: str | None = None,
+        held_world_from_tcp: npt.NDArray[np.float64] | None = None,
+    ) -> dict[str, Any]: ...
+    def plan_linear(
+        self,
+        q_start: npt.NDArray[np.float64],
+        world_from_tcp: npt.NDArray[np.float64],
+        obstacles_json: str,
+        held_json: str | None = None,
+        held_world_from_tcp: npt.NDArray[np.float64] | None = None,
     ) -> dict[str, Any]: ...
     def plan_grasp(self, q_start: npt.NDArray[np.float64], target_json: str, neighbours_json: str) -> dict[str, Any]: ...

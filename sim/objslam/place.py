@@ -3,19 +3,27 @@
 Entry point: :func:`run_place_task` (``make place`` → ``experiments/place.py``). Tasks:
 
 - ``block_in_cup``: the smallest block (by estimated volume) goes onto the largest cup (by
-  estimated volume). The simulator's cups are solid cylinders, so "into" is "onto its top".
+  estimated volume); a neighbour in the way of its grasp is put down elsewhere first. The
+  simulator's cups are solid cylinders, so "into" is "onto its top".
   Success: the truly smallest block rests on the truly largest cup (its centre within the cup's
   true radius of the cup's axis, its bottom within 2 cm above the cup's top) after a 1 s wait.
 - ``cups_by_volume``: every cup of the map goes to a slot of a line (along y, 10 cm apart, the first
-  line found from the map clear of the other objects by 4 cm), ordered by estimated volume. Success: every true cup is
+  line found from the map whose items stand 2 cm clear of every object's footprint — the items'
+  own included, else of the other objects only — and whose slots the arm can put an item down on,
+  :meth:`Placer.can_place`), ordered by estimated volume; the items move in an order that never
+  puts one down next to an item still standing too close to its slot. Success: every true cup is
   upright within ``slot_tolerance_m`` of a slot and their true volumes increase along the line.
 - ``bottles_by_height``: the same with the bottles, ordered by estimated height.
 
+A line task is not applicable when a true item is wider than the gripper can take (the grasp
+experiment's rule; scene02's cups are 7.8 and 8.4 cm wide): the report lists it as not run.
+
 Every grasp goes through :class:`~objslam.grasp.GraspSession` (planner, PD drives, the grasp
-physics); a place motion is the planner's ``plan_to_pose`` to a pre-place pose 12 cm above the slot,
-a descent until the held object's estimated bottom is 1 cm above its support, opening, and a
-retreat straight up. Choices are fields of :class:`PlaceConfig`. A task whose classes the scene
-(or the map) lacks is not run.
+physics); a place motion is the planner's ``plan_to_pose`` to a pre-place pose 12 cm above the slot
+(carrying the held object's estimate, so that it too clears the map objects), a straight-line
+descent (``plan_linear``) until the held object's estimated bottom is 1 cm above its support,
+opening, and a straight retreat up, with the hand across the line. Choices are fields of
+:class:`PlaceConfig`. A task whose classes the scene (or the map) lacks is not run.
 """
 
 from __future__ import annotations
@@ -23,15 +31,16 @@ from __future__ import annotations
 import itertools
 import json
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
 from .config import RunConfig
-from .grasp import GraspRunConfig, GraspSession, match_gt
+from .grasp import MAX_GRASP_WIDTH_M, GraspRunConfig, GraspSession, match_gt, narrowest_width
 from .scene import SceneSpec, gt_objects
-from .world import GRIPPER_OPEN_M
+from .world import GRIPPER_OPEN_M, READY_QPOS
 
 TASKS = ("block_in_cup", "cups_by_volume", "bottles_by_height")
 
@@ -49,14 +58,21 @@ class PlaceConfig:
     10 cm, 4/6 with 20 cm on the maps of reports/grasping; cups keep 10 cm)."""
     tall_item_height_m: float = 0.14
     """Estimated height from which an item counts as tall, metres."""
-    slot_clearance_m: float = 0.04
-    """A slot is free when no map object's footprint comes closer than this to it, metres."""
+    slot_clearance_m: float = 0.02
+    """A slot is free when no map object's footprint comes closer than this to the item standing
+    there (the line's widest estimated footprint), metres."""
     slot_tolerance_m: float = 0.04
     """A true object counts as at its slot within this x-y distance, metres."""
     preplace_height_m: float = 0.12
     """Pre-place pose above the place pose, metres."""
     release_gap_m: float = 0.01
     """The held object's estimated bottom stops this far above its support, metres."""
+    clear_blockers: bool = True
+    """``block_in_cup``: when the chosen block has no collision-free grasp, the neighbour without
+    which it would have one is first put down elsewhere on the table (:meth:`Placer.move_aside`)."""
+    place_yaw_rad: float = math.pi / 2
+    """Hand yaw when putting an item down (π/2: fingers closing along x, so the 20 cm hand body lies
+    across a line along y, not toward the neighbouring slots); the grasp's yaw is the fallback."""
     grasp: GraspRunConfig = field(default_factory=GraspRunConfig)
     """Grasp settings (re-observation etc.)."""
 
@@ -91,10 +107,16 @@ def top_down(x: float, y: float, z: float, yaw: float) -> np.ndarray:
 
 
 def free_line(
-    map_objects: list[dict[str, Any]], n: int, cfg: PlaceConfig, spacing_m: float | None = None
+    map_objects: list[dict[str, Any]],
+    n: int,
+    cfg: PlaceConfig,
+    spacing_m: float | None = None,
+    reachable: Callable[[list[tuple[float, float]]], bool] | None = None,
+    item_radius_m: float = 0.0,
 ) -> list[tuple[float, float]] | None:
     """``n`` slots along y, ``spacing_m`` apart (default ``cfg.slot_spacing_m``), centred on the first
-    free line found (x from near to far, then y shifts)."""
+    free line found (x from near to far, then y shifts): every map object's footprint at least
+    ``item_radius_m + cfg.slot_clearance_m`` from every slot, and ``reachable`` (if given) accepts it."""
     spacing = cfg.slot_spacing_m if spacing_m is None else spacing_m
     for x in np.arange(0.28, 0.71, 0.03):
         for y0 in (0.0, -0.1, 0.1, -0.2, 0.2, -0.3, 0.3):
@@ -102,11 +124,12 @@ def free_line(
             if any(abs(sy) > 0.45 for _, sy in slots):
                 continue
             ok = all(
-                math.dist(s, o["geometry"]["center"][:2]) > footprint_radius(o["geometry"]) + cfg.slot_clearance_m
+                math.dist(s, o["geometry"]["center"][:2])
+                > footprint_radius(o["geometry"]) + item_radius_m + cfg.slot_clearance_m
                 for s in slots
                 for o in map_objects
             )
-            if ok:
+            if ok and (reachable is None or reachable(slots)):
                 return slots
     return None
 
@@ -117,35 +140,94 @@ class Placer:
     def __init__(self, session: GraspSession, cfg: PlaceConfig) -> None:
         self.s = session
         self.cfg = cfg
+        self.message = ""
+        """The planner's message of the last failed place."""
 
     def pick(self, target: dict[str, Any], obstacles: list[dict[str, Any]], gt_id: int | None) -> dict[str, Any]:
         """Grasp and lift ``target``; the result of :meth:`GraspSession.attempt`."""
         return self.s.attempt(self.s.frame, target, obstacles, gt_id)
 
+    def blocker(
+        self, target: dict[str, Any], candidates: list[dict[str, Any]], obstacles: list[dict[str, Any]]
+    ) -> dict[str, Any] | None:
+        """None when ``target`` has a collision-free grasp among ``obstacles``; else the nearest of
+        ``candidates`` without which it has one (None if no single one is in the way)."""
+        planner, q = self.s.planner, self.s.q_arm()
+        tg = json.dumps(target["geometry"])
+        if planner.plan_grasp(q, tg, json.dumps([o["geometry"] for o in obstacles]))["ok"]:
+            return None
+        c = target["geometry"]["center"][:2]
+        for m in sorted(candidates, key=lambda m: math.dist(c, m["geometry"]["center"][:2])):
+            rest = [o["geometry"] for o in obstacles if o["id"] != m["id"]]
+            if planner.plan_grasp(q, tg, json.dumps(rest))["ok"]:
+                return m
+        return None
+
+    def move_aside(self, o: dict[str, Any], objs: list[dict[str, Any]], gt_id: int | None) -> bool:
+        """Pick map object ``o`` and put it down on the first free, reachable spot of the table
+        (:func:`free_line` with one slot); its map geometry moves there. Whether it was put down."""
+        rest = [m for m in objs if m["id"] != o["id"]]
+        res = self.pick(o, rest, gt_id)
+        if res.get("open_width_m") is None:
+            return False
+        h, r = height(o["geometry"]), footprint_radius(o["geometry"])
+        spot = free_line(objs, 1, self.cfg, reachable=lambda sl: self.can_place(sl, [h], rest), item_radius_m=r)
+        ok = spot is not None and self.place(spot[0][0], spot[0][1], 0.0, rest) is None
+        if spot is not None:
+            o["geometry"] = {**o["geometry"], "center": [spot[0][0], spot[0][1], o["geometry"]["center"][2]]}
+        self.s.go_ready([m["geometry"] for m in objs])
+        return ok
+
+    def can_place(self, slots: list[tuple[float, float]], heights: list[float], obstacles: list[dict[str, Any]]) -> bool:
+        """Whether every slot can take its item (estimated height) among ``obstacles``: from the
+        ready configuration, a pre-place pose and a straight descent to the place pose (TCP
+        ``max_grasp_depth_m`` below the item's top, or its middle) are plannable with the hand
+        across the line (:attr:`PlaceConfig.place_yaw_rad`)."""
+        planner = self.s.planner
+        depth = float(self.s.cfg.planner.get("max_grasp_depth_m", 0.025))
+        obs = json.dumps([o["geometry"] for o in obstacles])
+        yaw = self.cfg.place_yaw_rad
+        for (x, y), h in zip(slots, heights):
+            z = max(h - depth, h / 2.0) + self.cfg.release_gap_m
+            pre = planner.plan_to_pose(READY_QPOS[:7], top_down(x, y, z + self.cfg.preplace_height_m, yaw), obs)
+            if not pre["ok"] or not planner.plan_linear(pre["positions"][-1], top_down(x, y, z, yaw), obs)["ok"]:
+                return False
+        return True
+
     def place(self, x: float, y: float, support_z: float, obstacles: list[dict[str, Any]]) -> str | None:
         """Put the held object down with its bottom at ``support_z`` (+ release gap) at (x, y);
-        returns None or the failing step."""
+        returns None or the failing step. The hand yaw is :attr:`PlaceConfig.place_yaw_rad` if the
+        motions are plannable with it, else the grasp's (the held object turns with the hand: its
+        collision model is round about the hand's axis)."""
         s, plan, held = self.s, self.s.last_plan, self.s.last_target
         if plan is None or held is None:
             return "no_grasp"
         g = held["geometry"]
+        held_args = (json.dumps(g), plan["world_from_tcp_grasp"])
         tcp_above_bottom = float(plan["world_from_tcp_grasp"][2, 3]) - (g["center"][2] - g["half_extents"][2])
-        yaw = float(plan["hand_yaw_rad"])
         z = support_z + tcp_above_bottom + self.cfg.release_gap_m
         obs = json.dumps([o["geometry"] for o in obstacles])
-        pre = s.planner.plan_to_pose(s.q_arm(), top_down(x, y, z + self.cfg.preplace_height_m, yaw), obs)
-        if not pre["ok"]:
-            return f"preplace_{pre['cause']}"
-        s.execute(pre, 0.0)
-        down = s.planner.plan_to_pose(s.q_arm(), top_down(x, y, z, yaw), "[]")
-        if not down["ok"]:
-            return f"descent_{down['cause']}"
-        s.execute(down, 0.0)
-        s.hold(0.5, GRIPPER_OPEN_M)
-        up = s.planner.plan_to_pose(s.q_arm(), top_down(x, y, z + self.cfg.preplace_height_m, yaw), "[]")
-        if up["ok"]:
-            s.execute(up, GRIPPER_OPEN_M)
-        return None
+        failed = "preplace_no_path"
+        for yaw in (self.cfg.place_yaw_rad, float(plan["hand_yaw_rad"])):
+            # The held object hangs below the hand: the transfer keeps it clear of the map objects
+            # too. Straight down and straight back up: a joint-space move between two IK solutions
+            # can swing the hand through its neighbours near the workspace's edge.
+            pre = s.planner.plan_to_pose(s.q_arm(), top_down(x, y, z + self.cfg.preplace_height_m, yaw), obs, *held_args)
+            if not pre["ok"]:
+                failed, self.message = f"preplace_{pre['cause']}", pre["message"]
+                continue
+            down = s.planner.plan_linear(pre["positions"][-1], top_down(x, y, z, yaw), obs, *held_args)
+            if not down["ok"]:
+                failed, self.message = f"descent_{down['cause']}", down["message"]
+                continue
+            s.execute(pre, 0.0)
+            s.execute(down, 0.0)
+            s.hold(0.5, GRIPPER_OPEN_M)
+            up = s.planner.plan_linear(s.q_arm(), top_down(x, y, z + self.cfg.preplace_height_m, yaw), obs)
+            if up["ok"]:
+                s.execute(up, GRIPPER_OPEN_M)
+            return None
+        return failed
 
 
 def _by_label(objs: list[dict[str, Any]], label: str) -> list[dict[str, Any]]:
@@ -177,6 +259,13 @@ def run_place_task(
             return out
         block = min(blocks, key=lambda o: volume(o["geometry"]))
         cup = max(cups, key=lambda o: volume(o["geometry"]))
+        if cfg.clear_blockers:
+            # The block has no collision-free grasp among its neighbours: set the one in the way
+            # aside first (never the cup).
+            blocker = placer.blocker(block, [m for m in others(block) if m["id"] != cup["id"]], others(block))
+            if blocker is not None:
+                moved = placer.move_aside(blocker, objs, match[blocker["id"]])
+                out["steps"].append({"set_aside": blocker["id"], "success": moved})
         res = placer.pick(block, others(block), match[block["id"]])
         out["steps"].append({"pick": block["id"], **{k: res.get(k) for k in ("success", "cause")}})
         if res.get("open_width_m") is None:  # nothing was grasped (planning failed)
@@ -215,15 +304,43 @@ def run_place_task(
     if len(items) < 2 or len(true_items) < 2:
         out["reason"] = "not_applicable"
         return out
-    # The items themselves leave their places, so only the other objects must clear the line.
+    too_wide = [g for g in true_items if narrowest_width(g["geometry"]) > MAX_GRASP_WIDTH_M]
+    if too_wide:
+        # The task cannot be done with this gripper whatever the map says (the simulator's cups are
+        # solid: no rim to hold): not run, and said so in the report.
+        widths = ", ".join(f"{100 * narrowest_width(g['geometry']):.1f}" for g in too_wide)
+        out.update(reason="not_applicable", detail=f"true {label}s {widths} cm wide: the gripper takes {100 * MAX_GRASP_WIDTH_M:.1f}")
+        return out
     tallest = max(2 * o["geometry"]["half_extents"][2] for o in items)
     spacing = cfg.tall_slot_spacing_m if tallest >= cfg.tall_item_height_m else cfg.slot_spacing_m
-    slots = free_line([o for o in objs if o["label"] != label], len(items), cfg, spacing)
+    heights = [height(o["geometry"]) for o in items]
+    rest = [o for o in objs if o["label"] != label]
+    item_r = max(footprint_radius(o["geometry"]) for o in items)
+    # A line clear of every object, the items included (they leave their places one at a time);
+    # failing that, clear of the other objects only.
+    slots = None
+    for clear_of in (objs, rest):
+        slots = free_line(clear_of, len(items), cfg, spacing, lambda sl, c=clear_of: placer.can_place(sl, heights, c), item_r)
+        if slots is not None:
+            break
     if slots is None:
         out["reason"] = "no_free_line"
         return out
     out["slots"] = slots
-    for o, (x, y) in zip(items, slots):
+    pending = list(zip(items, slots))
+    while pending:
+        # Slots are assigned in order; the moves go in an order that never puts an item down on a
+        # slot another item still stands too close to (else the first in line).
+        def blocked(o: dict[str, Any], slot: tuple[float, float]) -> bool:
+            return any(
+                math.dist(slot, m["geometry"]["center"][:2])
+                <= footprint_radius(m["geometry"]) + item_r + cfg.slot_clearance_m
+                for m, _ in pending
+                if m is not o
+            )
+
+        k = next((i for i, (o, sl) in enumerate(pending) if not blocked(o, sl)), 0)
+        o, (x, y) = pending.pop(k)
         res = placer.pick(o, others(o), match[o["id"]])
         out["steps"].append({"pick": o["id"], **{k: res.get(k) for k in ("success", "cause")}})
         if res.get("open_width_m") is None:  # nothing was grasped (planning failed)
@@ -232,6 +349,7 @@ def run_place_task(
         err = placer.place(x, y, 0.0, others(o))
         if err:
             out["reason"] = out["reason"] or err
+            out["steps"][-1].update(place=err, message=placer.message)
         # The map object now stands at its slot (for the later motions).
         o["geometry"] = {**o["geometry"], "center": [x, y, o["geometry"]["center"][2]]}
         session.go_ready([m["geometry"] for m in objs])

@@ -242,6 +242,11 @@ pub enum Contact {
         /// Object index.
         object: usize,
     },
+    /// The held object ([`ArmCollisionModel::with_attached`]) hits map object `object`.
+    HeldObject {
+        /// Object index.
+        object: usize,
+    },
     /// Two links of the arm hit each other.
     SelfCollision {
         /// First link.
@@ -255,7 +260,11 @@ pub enum Contact {
 #[derive(Debug, Clone)]
 pub struct ArmCollisionModel {
     /// Per capsule: index into `ArmChain::forward_all` (None = the root link) and the capsule.
+    /// The first `n_arm` are the arm's own; the rest are attached (a held object,
+    /// [`Self::with_attached`]).
     capsules: Vec<(Option<usize>, ArmCapsule)>,
+    /// Number of the arm's own capsules (the attached ones follow).
+    n_arm: usize,
     /// Capsule index pairs checked for self-collision.
     self_pairs: Vec<(usize, usize)>,
     /// Capsules exempt from the table test (the base).
@@ -296,7 +305,29 @@ impl ArmCollisionModel {
                 }
             }
         }
-        Ok(Self { capsules: bound, self_pairs: pairs, root_link: chain.root_link().to_string() })
+        let n_arm = bound.len();
+        Ok(Self { capsules: bound, n_arm, self_pairs: pairs, root_link: chain.root_link().to_string() })
+    }
+
+    /// This model with `capsule` attached to its link: a held object carried by the hand. Attached
+    /// capsules are checked against the map objects only, not against the table (a held object is
+    /// put down on it) nor against the arm (it sits between the fingers).
+    ///
+    /// Errors: [`PlanError::UnknownLink`] when the capsule's link is not in the chain.
+    pub fn with_attached(&self, chain: &ArmChain, capsule: ArmCapsule) -> Result<Self, PlanError> {
+        let idx = if capsule.link == chain.root_link() {
+            None
+        } else {
+            Some(chain.link_index(&capsule.link).ok_or_else(|| PlanError::UnknownLink { link: capsule.link.clone() })?)
+        };
+        let mut out = self.clone();
+        out.capsules.push((idx, capsule));
+        Ok(out)
+    }
+
+    /// The attached capsules (held objects), in their links' frames.
+    pub fn attached(&self) -> impl Iterator<Item = &ArmCapsule> {
+        self.capsules.iter().skip(self.n_arm).map(|(_, c)| c)
     }
 
     fn world_capsules(&self, links: &[Se3]) -> Vec<WorldCapsule> {
@@ -313,14 +344,14 @@ impl ArmCollisionModel {
     pub fn first_contact(&self, chain: &ArmChain, q: &JointVector, scene: &CollisionScene) -> Option<Contact> {
         let links = chain.forward_all(q);
         let caps = self.world_capsules(&links);
-        // Table (cheapest) first.
-        for (wc, (_, c)) in caps.iter().zip(self.capsules.iter()) {
+        // Table (cheapest) first; attached capsules are not tested against it.
+        for (wc, (_, c)) in caps.iter().zip(self.capsules.iter()).take(self.n_arm) {
             if c.link != self.root_link && wc.a.z.min(wc.b.z) - wc.r < scene.min_link_height_m {
                 return Some(Contact::Table { link: c.link.clone() });
             }
         }
         let identity = Pose::IDENTITY;
-        for (wc, (_, c)) in caps.iter().zip(self.capsules.iter()) {
+        for (i, (wc, (_, c))) in caps.iter().zip(self.capsules.iter()).enumerate() {
             for (k, o) in scene.obstacles.iter().enumerate() {
                 if !wc.aabb_overlaps(&o.aabb_min, &o.aabb_max) {
                     continue;
@@ -329,6 +360,9 @@ impl ArmCollisionModel {
                     .map(|r| r.intersecting)
                     .unwrap_or(true);
                 if hit {
+                    if i >= self.n_arm {
+                        return Some(Contact::HeldObject { object: k });
+                    }
                     return Some(Contact::Object { link: c.link.clone(), object: k });
                 }
             }
@@ -363,7 +397,7 @@ impl ArmCollisionModel {
     pub fn hand_clearance(&self, world_from_hand: &Se3, hand_link: &str, scene: &CollisionScene) -> f64 {
         let identity = Pose::IDENTITY;
         let mut best = f64::INFINITY;
-        for (_, c) in self.capsules.iter().filter(|(_, c)| c.link == hand_link) {
+        for (_, c) in self.capsules.iter().take(self.n_arm).filter(|(_, c)| c.link == hand_link) {
             let cap = Capsule::new(
                 vec_of(&(world_from_hand * Point3::from(c.a_in_link))),
                 vec_of(&(world_from_hand * Point3::from(c.b_in_link))),

@@ -130,6 +130,18 @@ pub enum PlanError {
         /// Index into the obstacle list.
         index: usize,
     },
+    /// A straight-line (Cartesian) TCP motion cannot be followed: no collision-free IK solution
+    /// continuing the previous one, or the joints would jump.
+    #[error("straight-line motion broken at {fraction:.2} of the way: {reason}")]
+    LinearPathBroken {
+        /// Fraction of the line reached (0 = start).
+        fraction: f64,
+        /// What failed.
+        reason: String,
+    },
+    /// A held object with a non-finite or non-positive size or a non-finite grasp pose.
+    #[error("held object: invalid geometry or grasp pose")]
+    InvalidHeldObject,
     /// IK did not converge from any seed (target unreachable, or every solution collides).
     #[error("IK failed from {seeds} seeds (best error {best_position_error_m} m, {best_orientation_error_rad} rad)")]
     IkNotConverged {
@@ -249,6 +261,17 @@ pub struct PlannerConfig {
     pub self_collision_pairs: Vec<(String, String)>,
     /// Grasp synthesis settings.
     pub grasp: GraspConfig,
+    /// Straight-line TCP motions ([`Planner::plan_linear`]): IK every this much of the line,
+    /// metres. Default 0.01.
+    pub linear_step_m: f64,
+    /// ... and every this much rotation, radians. Default 0.05.
+    pub linear_step_rad: f64,
+    /// Largest joint change between two IK steps of a straight line, radians: more means the
+    /// solution jumped to another branch and the line is broken. Default 0.15.
+    pub linear_max_joint_step_rad: f64,
+    /// Every this many IK steps becomes a trajectory waypoint (the joint-space segments between
+    /// them stay within a fraction of a millimetre of the line over 3 cm). Default 3.
+    pub linear_waypoint_every: usize,
 }
 
 impl Default for PlannerConfig {
@@ -272,6 +295,10 @@ impl Default for PlannerConfig {
             capsules: collision::panda_capsules(),
             self_collision_pairs: collision::panda_self_collision_pairs(),
             grasp: GraspConfig::default(),
+            linear_step_m: 0.01,
+            linear_step_rad: 0.05,
+            linear_max_joint_step_rad: 0.15,
+            linear_waypoint_every: 3,
         }
     }
 }
@@ -288,6 +315,44 @@ pub struct GraspMotion {
     pub approach: JointTrajectory,
     /// Grasp → lift.
     pub lift: JointTrajectory,
+}
+
+/// An object held in the gripper: the hand carries it, so motions must keep it clear of the map
+/// objects too ([`Planner::holding`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct HeldObject {
+    /// Its geometry (the map estimate grasped) in the world at the grasp.
+    pub geometry: ObjectGeometry,
+    /// The TCP pose at the grasp (the object moves rigidly with it afterwards).
+    pub world_from_tcp_at_grasp: Se3,
+}
+
+impl HeldObject {
+    /// The capsule around the object's vertical axis, in the hand frame: radius = the footprint's
+    /// circumradius (cylinder radius, cuboid half-diagonal), segment inset by the radius at both ends
+    /// so the capsule spans the object's height along its axis (a sphere of that radius at the
+    /// centre when the object is lower than it is wide).
+    fn capsule(&self, hand_link: &str, hand_from_tcp: &Se3) -> Result<ArmCapsule, PlanError> {
+        let g = &self.geometry;
+        let h = g.half_extents;
+        let ok = g.center.iter().all(|v| v.is_finite())
+            && h.iter().all(|v| v.is_finite() && *v > 0.0)
+            && self.world_from_tcp_at_grasp.translation.vector.iter().all(|v| v.is_finite())
+            && self.world_from_tcp_at_grasp.rotation.coords.iter().all(|v| v.is_finite());
+        if !ok {
+            return Err(PlanError::InvalidHeldObject);
+        }
+        let r = match g.shape {
+            crate::geometry::Shape::Cylinder => g.radius(),
+            crate::geometry::Shape::Cuboid => h.x.hypot(h.y),
+        };
+        let inset = (h.z - r).max(0.0);
+        let up = nalgebra::Vector3::z() * inset;
+        let hand_from_world = (self.world_from_tcp_at_grasp * hand_from_tcp.inverse()).inverse();
+        let a = hand_from_world * nalgebra::Point3::from(g.center + up);
+        let b = hand_from_world * nalgebra::Point3::from(g.center - up);
+        Ok(ArmCapsule { link: hand_link.to_string(), a_in_link: a.coords.into(), b_in_link: b.coords.into(), radius_m: r })
+    }
 }
 
 /// The planning facade: kinematics + collision model + planner settings.
@@ -314,6 +379,16 @@ impl Planner {
         let world_from_hand = links.get(hand_index).copied().unwrap_or_else(Se3::identity);
         let hand_from_tcp = world_from_hand.inverse() * chain.forward(&q0);
         Ok(Self { chain, model, config, hand_index, hand_from_tcp })
+    }
+
+    /// This planner with `held` in the hand: every collision test (IK filtering, paths) also keeps
+    /// the held object clear of the map objects (not of the table, where it is put down).
+    ///
+    /// Errors: [`PlanError::InvalidHeldObject`].
+    pub fn holding(&self, held: &HeldObject) -> Result<Self, PlanError> {
+        let capsule = held.capsule(&self.config.hand_link, &self.hand_from_tcp)?;
+        let model = self.model.with_attached(&self.chain, capsule)?;
+        Ok(Self { model, ..self.clone() })
     }
 
     /// The kinematic chain (to the TCP).
@@ -452,6 +527,67 @@ impl Planner {
         self.time_parameterize(&path)
     }
 
+    /// A straight-line motion of the TCP from where it is at `q_start` to `world_from_tcp_target`
+    /// (position along the segment, orientation by slerp), e.g. putting an object down or
+    /// retreating from it: IK every [`PlannerConfig::linear_step_m`] seeded by the previous step (no
+    /// random restarts, so the arm never changes branch), each solution collision-free among
+    /// `obstacles` and within [`PlannerConfig::linear_max_joint_step_rad`] of the previous one,
+    /// every segment checked; then time-parameterised.
+    ///
+    /// Errors: [`PlanError::LinearPathBroken`] (with how far it got), input and trajectory errors.
+    pub fn plan_linear(
+        &self,
+        q_start: &JointVector,
+        world_from_tcp_target: &Se3,
+        obstacles: &[ObjectGeometry],
+    ) -> Result<JointTrajectory, PlanError> {
+        let scene = self.scene(obstacles)?;
+        self.check_input(q_start, "start configuration")?;
+        let t = world_from_tcp_target.translation.vector;
+        let r = world_from_tcp_target.rotation;
+        if !(t.iter().all(|v| v.is_finite()) && r.coords.iter().all(|v| v.is_finite())) {
+            return Err(PlanError::NonFinite { what: "linear target" });
+        }
+        let mut q = *q_start;
+        self.chain.clamp(&mut q, 0.0);
+        if let Some(contact) = self.first_contact(&q, &scene) {
+            return Err(PlanError::StartInCollision { contact });
+        }
+        let from = self.forward_tcp(&q);
+        let c = &self.config;
+        let dist = (t - from.translation.vector).norm();
+        let angle = from.rotation.angle_to(&r);
+        let n = ((dist / c.linear_step_m.max(1e-4)).max(angle / c.linear_step_rad.max(1e-4))).ceil().max(1.0) as usize;
+        let ik = IkConfig { random_restarts: 0, ..c.ik.clone() };
+        let checker = self.checker(&scene);
+        let mut waypoints = vec![q];
+        for k in 1..=n {
+            let f = k as f64 / n as f64;
+            let pose = Se3::from_parts(
+                nalgebra::Translation3::from(from.translation.vector.lerp(&t, f)),
+                from.rotation.slerp(&r, f),
+            );
+            let broken = |reason: String| PlanError::LinearPathBroken { fraction: (k - 1) as f64 / n as f64, reason };
+            let next = self
+                .chain
+                .inverse_filtered(&pose, &q, &ik, |x| self.model.is_free(&self.chain, x, &scene))
+                .map_err(|e| broken(e.to_string()))?
+                .q;
+            let jump = joint_max_abs_diff(&q, &next);
+            if jump > c.linear_max_joint_step_rad {
+                return Err(broken(format!("joints jump by {jump:.3} rad")));
+            }
+            if !checker.segment_free(&q, &next) {
+                return Err(broken("segment in collision".into()));
+            }
+            q = next;
+            if k % c.linear_waypoint_every.max(1) == 0 || k == n {
+                waypoints.push(q);
+            }
+        }
+        self.time_parameterize(&waypoints)
+    }
+
     /// Grasp candidates for `object` (a map estimate) among `neighbours` (the other map objects),
     /// ranked: reachable first, then clearance (capped at `clearance_enough_m`), then short side
     /// before long side, deep before shallow, then smaller hand-yaw change from `q_current`.
@@ -525,7 +661,8 @@ impl Planner {
 
     /// Plans the motions of the best reachable grasp of `object`: start → pre-grasp among all
     /// objects, pre-grasp → grasp and grasp → lift among the neighbours only (the fingers straddle
-    /// the target). Tries the ranked candidates in order.
+    /// the target), both straight lines ([`Planner::plan_linear`]; a joint-space path when the line
+    /// cannot be followed). Tries the ranked candidates in order.
     ///
     /// Errors: those of [`Planner::grasp_candidates`], [`PlanError::NoReachableGrasp`] when no
     /// candidate has collision-free IK solutions, [`PlanError::NoGraspPath`] when some have but no
@@ -554,18 +691,25 @@ impl Planner {
             let Ok(path) = self.plan_path(q_start, &qp, &scene_all) else {
                 continue;
             };
-            let Ok(approach) = self.plan_path(&qp, &qg, &scene_neigh) else {
-                continue;
+            // Approach and lift along the straight vertical line (the fingers straddle the target
+            // with a few millimetres to spare; a joint-space line between the two IK solutions can
+            // stray by a centimetre); the joint-space line is the fallback.
+            let approach = match self.plan_linear(&qp, &c.world_from_tcp_grasp, neighbours) {
+                Ok(t) => t,
+                Err(_) => match self.plan_path(&qp, &qg, &scene_neigh) {
+                    Ok(path) => self.time_parameterize(&path)?,
+                    Err(_) => continue,
+                },
             };
-            let Ok(lift) = self.plan_path(&qg, &ql, &scene_neigh) else {
-                continue;
+            let q_grasp = approach.goal().copied().unwrap_or(qg);
+            let lift = match self.plan_linear(&q_grasp, &c.world_from_tcp_lift, neighbours) {
+                Ok(t) => t,
+                Err(_) => match self.plan_path(&q_grasp, &ql, &scene_neigh) {
+                    Ok(path) => self.time_parameterize(&path)?,
+                    Err(_) => continue,
+                },
             };
-            return Ok(GraspMotion {
-                to_pregrasp: self.time_parameterize(&path)?,
-                approach: self.time_parameterize(&approach)?,
-                lift: self.time_parameterize(&lift)?,
-                candidate: c,
-            });
+            return Ok(GraspMotion { to_pregrasp: self.time_parameterize(&path)?, approach, lift, candidate: c });
         }
         if reachable == 0 {
             Err(PlanError::NoReachableGrasp { candidates: n })
