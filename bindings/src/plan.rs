@@ -303,6 +303,62 @@ impl PlannerPy {
         }
     }
 
+    /// Collision-free IK (table, `obstacles_json`, self) for a TCP pose (4x4) from `seed` (7,):
+    /// the joints (7,), or None when no solution is found. `restarts=False`: from the seed only
+    /// (stays on its branch, for following a path); else also from the configured random restarts.
+    #[pyo3(signature = (world_from_tcp, seed, obstacles_json = "[]", restarts = true))]
+    fn inverse_tcp<'py>(
+        &self,
+        py: Python<'py>,
+        world_from_tcp: &Bound<'py, PyAny>,
+        seed: &Bound<'py, PyAny>,
+        obstacles_json: &str,
+        restarts: bool,
+    ) -> PyResult<Option<Bound<'py, PyArray1<f64>>>> {
+        let target = pose(world_from_tcp, "world_from_tcp")?;
+        let q0 = joints(seed, "seed")?;
+        let obstacles = geometries(obstacles_json, "obstacles_json")?;
+        let scene = self.inner.scene(&obstacles).map_err(plan_input_err)?;
+        let r = py.detach(|| {
+            if restarts {
+                self.inner.inverse_tcp_free(&target, &q0, &scene)
+            } else {
+                self.inner.inverse_tcp_free_seeded(&target, &q0, &scene)
+            }
+        });
+        match r {
+            Ok(sol) => Ok(Some(PyArray1::from_slice(py, &sol.q))),
+            Err(e) if cause_of(&e).is_some() => Ok(None),
+            Err(e) => Err(plan_input_err(e)),
+        }
+    }
+
+    /// Whether a joint path (k, 7) is collision-free among `obstacles_json` (table and self
+    /// included), every segment checked at the configured resolution.
+    fn path_is_free<'py>(&self, py: Python<'py>, positions: &Bound<'py, PyAny>, obstacles_json: &str) -> PyResult<bool> {
+        let arr: numpy::PyReadonlyArray2<'_, f64> = positions
+            .extract()
+            .map_err(|_| PyTypeError::new_err("positions: expected a float64 array of shape (k, 7)"))?;
+        let a = arr.as_array();
+        if a.ncols() != ARM_DOF || a.nrows() == 0 {
+            return Err(input_err(format!("positions: expected shape (k >= 1, {ARM_DOF}), got {:?}", a.shape())));
+        }
+        let mut rows = Vec::with_capacity(a.nrows());
+        for r in a.rows() {
+            let mut q = [0.0; ARM_DOF];
+            for (d, v) in q.iter_mut().zip(r.iter()) {
+                if !v.is_finite() {
+                    return Err(input_err("positions: non-finite value"));
+                }
+                *d = *v;
+            }
+            rows.push(q);
+        }
+        let obstacles = geometries(obstacles_json, "obstacles_json")?;
+        let scene = self.inner.scene(&obstacles).map_err(plan_input_err)?;
+        Ok(py.detach(|| self.inner.path_is_free(&rows, &scene)))
+    }
+
     /// Straight-line TCP motion from `q_start` to `world_from_tcp` (4x4; e.g. a descent to put an
     /// object down, a retreat), same result and `held_*` arguments as `plan_to_joints`; a line that
     /// cannot be followed (collision, joint jump) is `{"ok": False, "cause": "no_path"}`.

@@ -161,6 +161,14 @@ class Planner:
         held_json: str | None = None,
         held_world_from_tcp: npt.NDArray[np.float64] | None = None,
     ) -> dict[str, Any]: ...
+    def inverse_tcp(
+        self,
+        world_from_tcp: npt.NDArray[np.float64],
+        seed: npt.NDArray[np.float64],
+        obstacles_json: str = "[]",
+        restarts: bool = True,
+    ) -> npt.NDArray[np.float64] | None: ...
+    def path_is_free(self, positions: npt.NDArray[np.float64], obstacles_json: str) -> bool: ...
     def plan_linear(
         self,
         q_start: npt.NDArray[np.float64],

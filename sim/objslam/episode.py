@@ -323,6 +323,8 @@ def run_episode(
         rec.log_scalar("explore/mean_normalized_entropy", mapper.entropy_curve()[-1])
         stop_reason = "strategy_done"
         while True:
+            # Candidate views are reachable only with a collision-free arm among the mapped objects.
+            world.set_obstacles(mapper.objects_json())
             decision = mapper.next_view(
                 intrinsics=world.intrinsics,
                 width=cfg.camera.width,

@@ -5,7 +5,13 @@ Entry point: :class:`SimWorld` (build from a :class:`~objslam.scene.SceneSpec`),
 :meth:`SimWorld.ground_truth` (what only evaluation sees), and :meth:`SimWorld.move_camera_to`,
 which solves IK for a camera pose and executes a smooth trajectory along a Cartesian camera path
 (the camera keeps looking at the scene) with the PD drives while emitting frames at a fixed rate
-(a video stream, as SLAM needs).
+(a video stream, as SLAM needs). Forward kinematics, IK and the collision checks of every camera
+move are the core planner's (``objslam_core::plan``: table, self-collision and the obstacles of
+:meth:`SimWorld.set_obstacles`); a camera path that is not free falls back to the planner's joint
+path (RRT-Connect when the straight line collides). Camera moves are timed by one minimum-jerk
+profile over the whole waypoint path, not by the planner's Ruckig moves: those are rest-to-rest
+per waypoint (the Ruckig crate's intermediate waypoints need its web service), which would stop
+the camera every 2 cm of a Cartesian path; grasp and place motions use the Ruckig trajectories.
 
 Rendering is CPU-only (Mesa lavapipe ≥ 24.3; see ECOSYSTEM.md). Physics runs at 240 Hz with the
 solver settings ManiSkill uses for reliable grasps.
@@ -14,6 +20,7 @@ solver settings ManiSkill uses for reliable grasps.
 from __future__ import annotations
 
 import importlib.util
+import json
 import math
 import os
 from collections.abc import Callable, Iterator
@@ -23,6 +30,7 @@ from pathlib import Path
 import numpy as np
 import sapien
 
+from . import _native
 from .camera import SAPIEN_FROM_CV, CameraConfig
 from .scene import SceneSpec
 from .textures import object_texture, table_texture
@@ -43,14 +51,14 @@ READY_QPOS = np.array([0.0, -0.6, 0.0, -2.4, 0.0, 1.8, math.pi / 4, GRIPPER_OPEN
 
 
 class UnreachablePoseError(RuntimeError):
-    """IK found no joint configuration for a requested camera pose."""
+    """IK found no collision-free joint configuration for a requested camera pose."""
 
-    def __init__(self, what: str, position: np.ndarray, error: float) -> None:
+    def __init__(self, what: str, position: np.ndarray) -> None:
         super().__init__(
-            f"{what}: camera pose at {np.round(position, 3).tolist()} is unreachable (IK residual {error:.3g})"
+            f"{what}: camera pose at {np.round(position, 3).tolist()} is unreachable "
+            "(no collision-free IK solution)"
         )
         self.position = position
-        self.residual = error
 
 
 class MotionError(RuntimeError):
@@ -100,11 +108,6 @@ class SensorFrame:
 def pose_to_matrix(p: sapien.Pose) -> np.ndarray:
     """4x4 homogeneous matrix of a SAPIEN pose."""
     return np.asarray(p.to_transformation_matrix(), dtype=np.float64)
-
-
-def matrix_to_pose(m: np.ndarray) -> sapien.Pose:
-    """SAPIEN pose of a 4x4 rigid matrix."""
-    return sapien.Pose(m)
 
 
 def look_at(eye: np.ndarray, target: np.ndarray, up_hint: np.ndarray | None = None) -> np.ndarray:
@@ -179,6 +182,8 @@ class SimWorld:
         self._build_robot()
         mount = sapien.Pose(list(camera.mount_xyz), list(camera.mount_wxyz))
         self.hand_from_sapien_camera = pose_to_matrix(mount)
+        self._tcp_from_camera = np.linalg.inv(self._hand_from_tcp) @ self.hand_from_camera_cv()
+        self._camera_from_tcp = np.linalg.inv(self._tcp_from_camera)
         self.camera = scene.add_mounted_camera(
             "hand_camera",
             self.hand.entity,
@@ -268,9 +273,14 @@ class SimWorld:
             )
         links = robot.get_links()
         self.hand = next(link for link in links if link.name == "panda_hand")
-        self.hand_index = links.index(self.hand)
-        self.pinocchio = robot.create_pinocchio_model()
         self.qlimits = np.asarray(robot.get_qlimits(), dtype=np.float64)
+        # Kinematics, IK and collision checks of every camera move go through the core's planner
+        # (the same one that plans the grasps), against the table, the arm itself and the obstacles
+        # of :meth:`set_obstacles` (the current map's objects during an episode).
+        self.planner = _native.Planner(str(panda_urdf_path()))
+        q0 = np.zeros(7)
+        self._hand_from_tcp = np.linalg.inv(self.planner.link_poses(q0)["panda_hand"]) @ self.planner.forward_tcp(q0)
+        self.obstacles_json = "[]"
         self.set_qpos(READY_QPOS)
 
     # ----- state ----------------------------------------------------------------------------------
@@ -307,51 +317,34 @@ class SimWorld:
         return m
 
     def world_from_camera_fk(self, q: np.ndarray) -> np.ndarray:
-        """Camera pose (OpenCV axes) from forward kinematics of joint positions ``q``."""
-        self.pinocchio.compute_forward_kinematics(q)
-        world_from_hand = pose_to_matrix(self.pinocchio.get_link_pose(self.hand_index))
-        return world_from_hand @ self.hand_from_camera_cv()
+        """Camera pose (OpenCV axes) from forward kinematics of joint positions ``q`` (the core's
+        chain from the URDF)."""
+        q7 = np.clip(np.asarray(q, dtype=np.float64)[:7], self.qlimits[:7, 0], self.qlimits[:7, 1])
+        return self.planner.forward_tcp(q7) @ self._tcp_from_camera
+
+    def set_obstacles(self, objects_json: str) -> None:
+        """The objects the arm must keep clear of when moving the camera: a JSON list of map
+        object records (with ``"geometry"``) or of ObjectGeometry dicts. Forgets cached IK."""
+        objs = json.loads(objects_json)
+        self.obstacles_json = json.dumps([o.get("geometry", o) for o in objs])
+        self._ik_cache.clear()
 
     def world_from_camera_gt(self) -> np.ndarray:
         """True camera pose from the renderer (OpenCV axes)."""
         world_from_gl = np.asarray(self.camera.get_model_matrix(), dtype=np.float64)
         return world_from_gl @ np.diag([1.0, -1.0, -1.0, 1.0])
 
-    def _within_limits(self, q: np.ndarray) -> bool:
-        return bool(
-            np.all(q[:7] >= self.qlimits[:7, 0] - 1e-4) and np.all(q[:7] <= self.qlimits[:7, 1] + 1e-4)
+    def _ik_from(self, world_from_camera: np.ndarray, seed: np.ndarray, restarts: bool = False) -> np.ndarray | None:
+        """Collision-free IK (core planner) for a camera pose from ``seed`` (``restarts``: also from
+        the planner's random restarts); the full joint vector with the gripper open, or ``None``."""
+        lo, hi = self.qlimits[:7, 0], self.qlimits[:7, 1]
+        q7 = self.planner.inverse_tcp(
+            world_from_camera @ self._camera_from_tcp, np.clip(np.asarray(seed, dtype=np.float64)[:7], lo, hi),
+            self.obstacles_json, restarts,
         )
-
-    def _ik_attempt(
-        self, world_from_camera: np.ndarray, seed: np.ndarray, iterations: int, check_limits: bool = True
-    ) -> tuple[np.ndarray | None, float]:
-        """One IK solve for a camera pose from one seed: (joint positions or ``None`` when it fails
-        or, with ``check_limits``, leaves the joint limits; the residual norm)."""
-        world_from_hand = world_from_camera @ np.linalg.inv(self.hand_from_camera_cv())
-        mask = np.array([1] * 7 + [0, 0], dtype=np.int32)
-        q, ok, err = self.pinocchio.compute_inverse_kinematics(
-            self.hand_index,
-            matrix_to_pose(world_from_hand),
-            initial_qpos=seed,
-            active_qmask=mask,
-            max_iterations=iterations,
-        )
-        q = np.asarray(q, dtype=np.float64)
-        if not ok or (check_limits and not self._within_limits(q)):
-            return None, float(np.linalg.norm(err))
-        q[7:] = GRIPPER_OPEN_M
-        return q, float(np.linalg.norm(err))
-
-    def _ik_from(
-        self,
-        world_from_camera: np.ndarray,
-        seed: np.ndarray,
-        iterations: int = 100,
-        check_limits: bool = True,
-    ) -> np.ndarray | None:
-        """IK for a camera pose from one seed (no retries); ``None`` when it fails or (with
-        ``check_limits``) leaves the joint limits."""
-        return self._ik_attempt(world_from_camera, seed, iterations, check_limits)[0]
+        if q7 is None:
+            return None
+        return np.concatenate([np.asarray(q7, dtype=np.float64), [GRIPPER_OPEN_M, GRIPPER_OPEN_M]])
 
     def camera_path(
         self, q0: np.ndarray, world_from_camera: np.ndarray, q_goal: np.ndarray | None = None
@@ -365,7 +358,8 @@ class SimWorld:
         With ``q_goal`` (an IK solution of the goal), the camera's roll about its optical axis is
         not slerped but follows the wrist joint from its start to its goal value (the optical axis
         is the last joint's axis): the slerp's shortest roll can need the wrist beyond its limits,
-        and roll does not change what the camera sees. ``None`` when none works."""
+        and roll does not change what the camera sees. Every waypoint is collision-free IK and every
+        leg is checked segment by segment (core planner). ``None`` when none works."""
         q7_end = None if q_goal is None else float(q_goal[6])
         direct = self._line_path(q0, world_from_camera, q7_end)
         if direct is not None:
@@ -420,36 +414,46 @@ class SimWorld:
                     if q7_end is None
                     else self._ik_roll(t, path[-1], (1 - s) * q0[6] + s * q7_end)
                 )
-                if q is None:
-                    q = self._ik_from(t, path[-1], iterations=400)
                 if q is None or float(np.max(np.abs(q[:7] - path[-1][:7]))) > 0.35:
                     break
                 path.append(q)
             else:
                 if q7_end is not None and abs(path[-1][6] - q7_end) > math.radians(3.0):
                     return None
+                if not self.planner.path_is_free(np.array(path)[:, :7], self.obstacles_json):
+                    continue
                 return np.array(path)
         return None
 
     def _ik_roll(self, world_from_camera: np.ndarray, seed: np.ndarray, q7: float) -> np.ndarray | None:
         """IK for a camera pose up to its roll about the optical axis, chosen so the wrist joint
         ends near ``q7`` (two corrections: the optical axis is the wrist's axis up to the camera's
-        mounting offset)."""
-        q = self._ik_from(world_from_camera, seed, check_limits=False)
-        t = world_from_camera
+        mounting offset). The first solve asks for the roll the seed's camera has plus the wanted
+        wrist change, so it starts next to the seed whatever roll the target was given."""
+
+        def turned(t: np.ndarray, phi: float) -> np.ndarray:
+            c, s = math.cos(phi), math.sin(phi)
+            rz = np.eye(4)
+            rz[:2, :2] = [[c, -s], [s, c]]
+            return t @ rz
+
+        t = np.asarray(world_from_camera, dtype=np.float64)
+        z = t[:3, 2]
+        x_seed = self.world_from_camera_fk(seed)[:3, 0]
+        x_seed = x_seed - float(np.dot(x_seed, z)) * z
+        if float(np.linalg.norm(x_seed)) > 1e-6:
+            x_seed /= np.linalg.norm(x_seed)
+            t = turned(t, math.atan2(float(np.dot(np.cross(t[:3, 0], x_seed), z)), float(np.dot(t[:3, 0], x_seed))))
+        t = turned(t, q7 - float(seed[6]))
+        q = self._ik_from(t, seed)
         for _ in range(2):
             if q is None:
                 return None
             phi = q7 - float(q[6])
             if abs(phi) < 1e-3:
                 break
-            c, s = math.cos(phi), math.sin(phi)
-            rz = np.eye(4)
-            rz[:2, :2] = [[c, -s], [s, c]]
-            t = t @ rz
-            q = self._ik_from(t, q, check_limits=False)
-        if q is None or not self._within_limits(q):
-            return None
+            t = turned(t, phi)
+            q = self._ik_from(t, q)
         return q
 
     def solve_ik(self, world_from_camera: np.ndarray, what: str = "view") -> np.ndarray:
@@ -460,13 +464,14 @@ class SimWorld:
             s = READY_QPOS.copy()
             s[0] = [-0.8, 0.8, -0.4, 0.4][k]
             seeds.append(s)
-        best_err = math.inf
         for seed in seeds:
-            q, err = self._ik_attempt(world_from_camera, seed, iterations=300)
+            q = self._ik_from(world_from_camera, seed)
             if q is not None:
                 return q
-            best_err = min(best_err, err)
-        raise UnreachablePoseError(what, world_from_camera[:3, 3], best_err)
+        q = self._ik_from(world_from_camera, self.qpos(), restarts=True)
+        if q is not None:
+            return q
+        raise UnreachablePoseError(what, world_from_camera[:3, 3])
 
     def is_reachable(self, world_from_camera: np.ndarray) -> bool:
         """Whether IK reaches a camera pose (the solution is kept for the move that follows)."""
@@ -532,9 +537,10 @@ class SimWorld:
         what: str = "view",
         path: str = "cartesian",
     ) -> Iterator[SensorFrame]:
-        """Move the camera to a pose: IK, then (``path="cartesian"``) the joint waypoints of
-        :meth:`camera_path` or (``"joint"``, or when no Cartesian path is found) one joint-space
-        move, timed by one minimum-jerk profile and tracked by the PD drives
+        """Move the camera to a pose: collision-free IK, then (``path="cartesian"``) the joint
+        waypoints of :meth:`camera_path` or (``"joint"``, or when no free Cartesian path is found)
+        the core planner's collision-free joint path, timed by one minimum-jerk profile and tracked
+        by the PD drives
         (:attr:`last_move_path` says which); yields a rendered frame every ``1 / frame_rate_hz``
         simulated seconds and one after settling. Raises :class:`UnreachablePoseError` before
         moving if IK fails."""
@@ -547,7 +553,14 @@ class SimWorld:
         waypoints = self.camera_path(self.qpos(), world_from_camera, q_goal) if path == "cartesian" else None
         self.last_move_path = "joint" if waypoints is None else "cartesian"
         if waypoints is None:
-            waypoints = np.array([self.qpos(), q_goal])
+            # The core planner's collision-free joint path (a straight line when free, else RRT-Connect).
+            lo, hi = self.qlimits[:7, 0], self.qlimits[:7, 1]
+            r = self.planner.plan_to_joints(np.clip(self.qpos()[:7], lo, hi), q_goal[:7], self.obstacles_json)
+            if not r["ok"]:
+                raise UnreachablePoseError(what, world_from_camera[:3, 3])
+            w = np.asarray(r["waypoints"], dtype=np.float64)
+            waypoints = np.concatenate([w, np.full((len(w), 2), GRIPPER_OPEN_M)], axis=1)
+            waypoints[0] = self.qpos()
         yield from self.move_along(
             waypoints, frame_rate_hz=frame_rate_hz, max_joint_speed=max_joint_speed, settle_s=settle_s
         )

@@ -447,6 +447,25 @@ impl Planner {
             .inverse_filtered(world_from_tcp, seed, &self.config.ik, |q| self.model.is_free(&self.chain, q, scene))
     }
 
+    /// IK for the TCP from `seed` only (no random restarts, and steps of at most 0.1 rad so the
+    /// iteration does not wander off the seed's branch), collision-free in `scene`: for following
+    /// a path waypoint by waypoint.
+    pub fn inverse_tcp_free_seeded(
+        &self,
+        world_from_tcp: &Se3,
+        seed: &JointVector,
+        scene: &CollisionScene,
+    ) -> Result<IkSolution, PlanError> {
+        let base = &self.config.ik;
+        let ik = IkConfig {
+            random_restarts: 0,
+            max_step_rad: base.max_step_rad.min(0.1),
+            max_iterations: base.max_iterations.max(300),
+            ..base.clone()
+        };
+        self.chain.inverse_filtered(world_from_tcp, seed, &ik, |q| self.model.is_free(&self.chain, q, scene))
+    }
+
     fn check_input(&self, q: &JointVector, what: &'static str) -> Result<(), PlanError> {
         if q.iter().any(|v| !v.is_finite()) {
             return Err(PlanError::NonFinite { what });
@@ -558,7 +577,6 @@ impl Planner {
         let dist = (t - from.translation.vector).norm();
         let angle = from.rotation.angle_to(&r);
         let n = ((dist / c.linear_step_m.max(1e-4)).max(angle / c.linear_step_rad.max(1e-4))).ceil().max(1.0) as usize;
-        let ik = IkConfig { random_restarts: 0, ..c.ik.clone() };
         let checker = self.checker(&scene);
         let mut waypoints = vec![q];
         for k in 1..=n {
@@ -568,11 +586,7 @@ impl Planner {
                 from.rotation.slerp(&r, f),
             );
             let broken = |reason: String| PlanError::LinearPathBroken { fraction: (k - 1) as f64 / n as f64, reason };
-            let next = self
-                .chain
-                .inverse_filtered(&pose, &q, &ik, |x| self.model.is_free(&self.chain, x, &scene))
-                .map_err(|e| broken(e.to_string()))?
-                .q;
+            let next = self.inverse_tcp_free_seeded(&pose, &q, &scene).map_err(|e| broken(e.to_string()))?.q;
             let jump = joint_max_abs_diff(&q, &next);
             if jump > c.linear_max_joint_step_rad {
                 return Err(broken(format!("joints jump by {jump:.3} rad")));
