@@ -210,12 +210,18 @@ pub struct PlannerPy {
 
 impl PlannerPy {
     /// The planner carrying the held object, when one is given (both arguments or neither).
-    fn holding(&self, held_json: Option<&str>, held_world_from_tcp: Option<&Bound<'_, PyAny>>) -> PyResult<Option<Planner>> {
+    fn holding(
+        &self,
+        held_json: Option<&str>,
+        held_world_from_tcp: Option<&Bound<'_, PyAny>>,
+    ) -> PyResult<Option<Planner>> {
         match (held_json, held_world_from_tcp) {
             (None, None) => Ok(None),
             (Some(g), Some(t)) => {
-                let held =
-                    HeldObject { geometry: geometry(g, "held_json")?, world_from_tcp_at_grasp: pose(t, "held_world_from_tcp")? };
+                let held = HeldObject {
+                    geometry: geometry(g, "held_json")?,
+                    world_from_tcp_at_grasp: pose(t, "held_world_from_tcp")?,
+                };
                 self.inner.holding(&held).map(Some).map_err(plan_input_err)
             }
             _ => Err(input_err("held_json and held_world_from_tcp: give both or neither")),
@@ -335,7 +341,12 @@ impl PlannerPy {
 
     /// Whether a joint path (k, 7) is collision-free among `obstacles_json` (table and self
     /// included), every segment checked at the configured resolution.
-    fn path_is_free<'py>(&self, py: Python<'py>, positions: &Bound<'py, PyAny>, obstacles_json: &str) -> PyResult<bool> {
+    fn path_is_free<'py>(
+        &self,
+        py: Python<'py>,
+        positions: &Bound<'py, PyAny>,
+        obstacles_json: &str,
+    ) -> PyResult<bool> {
         let arr: numpy::PyReadonlyArray2<'_, f64> = positions
             .extract()
             .map_err(|_| PyTypeError::new_err("positions: expected a float64 array of shape (k, 7)"))?;

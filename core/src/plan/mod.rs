@@ -351,7 +351,12 @@ impl HeldObject {
         let hand_from_world = (self.world_from_tcp_at_grasp * hand_from_tcp.inverse()).inverse();
         let a = hand_from_world * nalgebra::Point3::from(g.center + up);
         let b = hand_from_world * nalgebra::Point3::from(g.center - up);
-        Ok(ArmCapsule { link: hand_link.to_string(), a_in_link: a.coords.into(), b_in_link: b.coords.into(), radius_m: r })
+        Ok(ArmCapsule {
+            link: hand_link.to_string(),
+            a_in_link: a.coords.into(),
+            b_in_link: b.coords.into(),
+            radius_m: r,
+        })
     }
 }
 
