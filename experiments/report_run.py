@@ -14,9 +14,8 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "experiments"))
 
-from bench import machine  # noqa: E402
-
-from objslam.episode import format_table  # noqa: E402
+from bench import machine
+from objslam.episode import format_table
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -7,9 +7,8 @@ import math
 from pathlib import Path
 
 import numpy as np
-import pytest
-
 import objslam
+import pytest
 from objslam.scene import gt_objects, load_scene
 
 K = np.array([[100.0, 0, 32], [0, 100.0, 24], [0, 0, 1]])
@@ -17,7 +16,7 @@ POSE = np.eye(4)
 
 
 def _update(mapper, **kw):
-    args = dict(index=0, intrinsics=K, depth=np.full((48, 64), 0.5, np.float32), world_from_camera=POSE, detections=[])
+    args = {"index": 0, "intrinsics": K, "depth": np.full((48, 64), 0.5, np.float32), "world_from_camera": POSE, "detections": []}
     args.update(kw)
     return mapper.update(**args)
 

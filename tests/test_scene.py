@@ -6,7 +6,6 @@ import math
 from pathlib import Path
 
 import pytest
-
 from objslam.scene import (
     CLASSES,
     SceneFileError,

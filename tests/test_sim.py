@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
 from objslam.camera import CameraConfig, DepthNoiseConfig
 from objslam.scene import load_scene
 from objslam.world import SimWorld, UnreachablePoseError, look_at
