@@ -50,6 +50,7 @@ __all__ = [
     "generate_scene",
     "load_map",
     "load_run_config",
+    "load_scene",
     "map_objects_json",
     "match_maps",
     "relocalise",

@@ -1,7 +1,7 @@
 """Type stubs of the private native module (checked against the compiled module by stubtest)."""
 
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import Any, TypeAlias
 
 import numpy as np
 import numpy.typing as npt
@@ -13,7 +13,7 @@ class InputError(ObjslamError): ...
 class MapFileError(ObjslamError): ...
 class RecordingError(ObjslamError): ...
 
-Det = tuple[float, float, float, float, str, float]
+Det: TypeAlias = tuple[float, float, float, float, str, float]
 
 class NaiveMapper:
     def __init__(self, config_json: str | None = None) -> None: ...

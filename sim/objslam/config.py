@@ -11,10 +11,11 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import tomllib
 from dataclasses import dataclass, field, fields, is_dataclass
 from pathlib import Path
 from typing import Any, get_type_hints
+
+import tomllib
 
 from .camera import CameraConfig, DepthNoiseConfig
 from .detector import DetectorConfig
@@ -276,7 +277,7 @@ def _build(cls: type, data: dict[str, Any], prefix: str) -> Any:
     names = {f.name for f in fields(cls)}
     unknown = set(data) - names
     if unknown:
-        raise ConfigError(f"{prefix}{sorted(unknown)[0]}: unknown key (known: {', '.join(sorted(names))})")
+        raise ConfigError(f"{prefix}{min(unknown)}: unknown key (known: {', '.join(sorted(names))})")
     kwargs: dict[str, Any] = {}
     for f in fields(cls):
         if f.name not in data:

@@ -79,7 +79,7 @@ class DetectorConfig:
             raise ValueError("detector.min_pixels: must be ≥ 1")
 
     @staticmethod
-    def perfect() -> "DetectorConfig":
+    def perfect() -> DetectorConfig:
         """A noise-free detector (for ablations and tests)."""
         return DetectorConfig(
             miss_rate=0.0, box_jitter_frac=0.0, label_confusion_rate=0.0, false_positives_per_frame=0.0,

@@ -16,6 +16,7 @@ from __future__ import annotations
 import json
 import os
 import statistics
+import sys
 import time
 import traceback
 from collections.abc import Callable
@@ -408,8 +409,8 @@ def run_episode(
             if mapper is not None:
                 (run_dir / "map.json.partial").write_text(mapper.map_json())
             rec.close()
-        except Exception:  # noqa: BLE001 - best effort while already failing
-            pass
+        except Exception as cleanup:  # noqa: BLE001 - best effort while already failing
+            print(f"run folder {run_dir}: could not save the partial map: {cleanup}", file=sys.stderr)
         _write_json(
             run_dir / "status.json",
             {"status": "failed", "error": f"{type(e).__name__}: {e}", "traceback": traceback.format_exc()},
@@ -424,10 +425,12 @@ def format_table(metrics: dict[str, Any]) -> str:
         return "-" if v is None else format(v, spec)
 
     lines = [
-        f"scene {metrics['scene']}  strategy {metrics['strategy']}  seed {metrics['seed']}  "
-        f"views {metrics['views']}  frames {metrics['frames']}  objects est/gt "
-        f"{metrics['n_objects_est']}/{metrics['n_objects_gt']}  path {metrics['path_length_m']:.2f} m  "
-        f"wall {metrics['wall_s']:.1f} s",
+        (
+            f"scene {metrics['scene']}  strategy {metrics['strategy']}  seed {metrics['seed']}  "
+            f"views {metrics['views']}  frames {metrics['frames']}  objects est/gt "
+            f"{metrics['n_objects_est']}/{metrics['n_objects_gt']}  path {metrics['path_length_m']:.2f} m  "
+            f"wall {metrics['wall_s']:.1f} s"
+        ),
         f"{'gt':>3} {'class':<9} {'est':>4} {'IoU3D':>6} {'IoU2D':>6} {'CDE cm':>7} {'YAE deg':>8}",
     ]
     for o in metrics["objects"]:

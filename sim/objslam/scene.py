@@ -33,12 +33,12 @@ z up. Every error names the file, the field and the reason (:class:`SceneFileErr
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+import tomllib
 
 CUBOID_CLASSES = ("block", "book", "keyboard")
 CYLINDER_CLASSES = ("cup", "can", "bottle", "bowl", "ball")
