@@ -204,11 +204,21 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--set", action="append", default=[])
     ap.add_argument("--out", default=str(REPO / "reports"))
     ap.add_argument("--report-only", action="store_true", help="rebuild the reports from <out>/exploration.json")
+    ap.add_argument(
+        "--also", nargs="*", default=[], metavar="JSON",
+        help="with --report-only: rows of other sweeps' exploration.json (e.g. more seeds) join the tables",
+    )
     a = ap.parse_args(argv)
     if a.report_only:
         old = json.loads((Path(a.out) / "exploration.json").read_text())
-        rows = [r if "error" in r else {**r, **aligned_metrics(r["run_dir"])} for r in old["rows"]]
-        write_reports(rows, Path(a.out), old["command"])
+        extra = [json.loads(Path(f).read_text()) for f in a.also]
+        rows = [
+            r if "error" in r else {**r, **aligned_metrics(r["run_dir"])}
+            for r in old["rows"] + [r for e in extra for r in e["rows"]]
+        ]
+        rows.sort(key=lambda r: (r["scene"], STRATEGIES.index(r["strategy"]) if r["strategy"] in STRATEGIES else 99, r["seed"]))
+        command = " + ".join([old["command"], *(e["command"] for e in extra)])
+        write_reports(rows, Path(a.out), command)
         print(f"{len(rows)} episodes → {a.out}/exploration.md")
         return 0
     jobs = [
