@@ -86,6 +86,29 @@ fn joints(obj: &Bound<'_, PyAny>, field: &str) -> PyResult<JointVector> {
     Ok(q)
 }
 
+/// A (k ≥ 1, 7) float64 array of joint vectors.
+fn joint_rows(obj: &Bound<'_, PyAny>, field: &str) -> PyResult<Vec<JointVector>> {
+    let arr: numpy::PyReadonlyArray2<'_, f64> = obj
+        .extract()
+        .map_err(|_| PyTypeError::new_err(format!("{field}: expected a float64 array of shape (k, {ARM_DOF})")))?;
+    let a = arr.as_array();
+    if a.ncols() != ARM_DOF || a.nrows() == 0 {
+        return Err(input_err(format!("{field}: expected shape (k >= 1, {ARM_DOF}), got {:?}", a.shape())));
+    }
+    let mut rows = Vec::with_capacity(a.nrows());
+    for r in a.rows() {
+        let mut q = [0.0; ARM_DOF];
+        for (d, v) in q.iter_mut().zip(r.iter()) {
+            if !v.is_finite() {
+                return Err(input_err(format!("{field}: non-finite value")));
+            }
+            *d = *v;
+        }
+        rows.push(q);
+    }
+    Ok(rows)
+}
+
 fn geometries(json: &str, field: &str) -> PyResult<Vec<ObjectGeometry>> {
     serde_json::from_str(json).map_err(|e| json_err(field, e))
 }
@@ -339,6 +362,21 @@ impl PlannerPy {
         }
     }
 
+    /// Times a joint path (k, 7) through its waypoints without stopping: one time-optimal,
+    /// jerk-limited Ruckig move of the path parameter (cumulative max-joint distance) under the
+    /// configured limits; same result as `plan_to_joints` (no collision check: see `path_is_free`).
+    fn time_parameterize_path<'py>(
+        &self,
+        py: Python<'py>,
+        positions: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let rows = joint_rows(positions, "positions")?;
+        match self.inner.time_parameterize_path(&rows) {
+            Ok(t) => ok_trajectory(py, &t),
+            Err(e) => failure(py, e),
+        }
+    }
+
     /// Whether a joint path (k, 7) is collision-free among `obstacles_json` (table and self
     /// included), every segment checked at the configured resolution.
     fn path_is_free<'py>(
@@ -347,24 +385,7 @@ impl PlannerPy {
         positions: &Bound<'py, PyAny>,
         obstacles_json: &str,
     ) -> PyResult<bool> {
-        let arr: numpy::PyReadonlyArray2<'_, f64> = positions
-            .extract()
-            .map_err(|_| PyTypeError::new_err("positions: expected a float64 array of shape (k, 7)"))?;
-        let a = arr.as_array();
-        if a.ncols() != ARM_DOF || a.nrows() == 0 {
-            return Err(input_err(format!("positions: expected shape (k >= 1, {ARM_DOF}), got {:?}", a.shape())));
-        }
-        let mut rows = Vec::with_capacity(a.nrows());
-        for r in a.rows() {
-            let mut q = [0.0; ARM_DOF];
-            for (d, v) in q.iter_mut().zip(r.iter()) {
-                if !v.is_finite() {
-                    return Err(input_err("positions: non-finite value"));
-                }
-                *d = *v;
-            }
-            rows.push(q);
-        }
+        let rows = joint_rows(positions, "positions")?;
         let obstacles = geometries(obstacles_json, "obstacles_json")?;
         let scene = self.inner.scene(&obstacles).map_err(plan_input_err)?;
         Ok(py.detach(|| self.inner.path_is_free(&rows, &scene)))

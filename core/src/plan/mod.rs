@@ -63,7 +63,7 @@ pub use collision::{ArmCapsule, ArmCollisionModel, CollisionScene, Contact};
 pub use grasp::{GraspCandidate, GraspConfig};
 pub use kinematics::{ArmChain, IkConfig, IkSolution, JointInfo, JointVector, ARM_DOF};
 pub use rrt::{joint_distance, joint_max_abs_diff};
-pub use trajectory::{JointTrajectory, MotionLimits};
+pub use trajectory::{time_parameterize_path, JointTrajectory, MotionLimits};
 
 use crate::geometry::{ObjectGeometry, Se3};
 
@@ -522,6 +522,12 @@ impl Planner {
     /// Time-parameterises joint waypoints with the configured limits and sample period.
     pub fn time_parameterize(&self, waypoints: &[JointVector]) -> Result<JointTrajectory, PlanError> {
         trajectory::time_parameterize(waypoints, &self.config.limits, self.config.sample_dt_s)
+    }
+
+    /// Times a dense joint path through its waypoints without stopping
+    /// ([`trajectory::time_parameterize_path`]) with the configured limits and sample period.
+    pub fn time_parameterize_path(&self, waypoints: &[JointVector]) -> Result<JointTrajectory, PlanError> {
+        trajectory::time_parameterize_path(waypoints, &self.config.limits, self.config.sample_dt_s)
     }
 
     /// Plans a collision-free, time-parameterised motion `q_start → q_goal` among `obstacles`.
