@@ -231,6 +231,47 @@ pub struct PlannerPy {
     inner: Planner,
 }
 
+/// The parsed arguments of a motion to a TCP pose (`plan_to_pose`, `plan_linear`).
+struct PoseMotion {
+    q_start: JointVector,
+    target: Se3,
+    obstacles: Vec<ObjectGeometry>,
+    /// The planner with the held object, if one was given.
+    holding: Option<Planner>,
+}
+
+impl PoseMotion {
+    fn parse(
+        planner: &PlannerPy,
+        q_start: &Bound<'_, PyAny>,
+        world_from_tcp: &Bound<'_, PyAny>,
+        obstacles_json: &str,
+        held_json: Option<&str>,
+        held_world_from_tcp: Option<&Bound<'_, PyAny>>,
+    ) -> PyResult<Self> {
+        Ok(Self {
+            q_start: joints(q_start, "q_start")?,
+            target: pose(world_from_tcp, "world_from_tcp")?,
+            obstacles: geometries(obstacles_json, "obstacles_json")?,
+            holding: planner.holding(held_json, held_world_from_tcp)?,
+        })
+    }
+
+    /// Runs `motion` (without the GIL) on the holding planner or the plain one.
+    fn run<'py>(
+        &self,
+        py: Python<'py>,
+        planner: &PlannerPy,
+        motion: impl Fn(&Planner, &JointVector, &Se3, &[ObjectGeometry]) -> Result<JointTrajectory, PlanError> + Send + Sync,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let p = self.holding.as_ref().unwrap_or(&planner.inner);
+        match py.detach(|| motion(p, &self.q_start, &self.target, &self.obstacles)) {
+            Ok(t) => ok_trajectory(py, &t),
+            Err(e) => failure(py, e),
+        }
+    }
+}
+
 impl PlannerPy {
     /// The planner carrying the held object, when one is given (both arguments or neither).
     fn holding(
@@ -322,14 +363,8 @@ impl PlannerPy {
         held_json: Option<&str>,
         held_world_from_tcp: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<Bound<'py, PyDict>> {
-        let a = joints(q_start, "q_start")?;
-        let target = pose(world_from_tcp, "world_from_tcp")?;
-        let obstacles = geometries(obstacles_json, "obstacles_json")?;
-        let planner = self.holding(held_json, held_world_from_tcp)?;
-        match py.detach(|| planner.as_ref().unwrap_or(&self.inner).plan_to_pose(&a, &target, &obstacles)) {
-            Ok(t) => ok_trajectory(py, &t),
-            Err(e) => failure(py, e),
-        }
+        let args = PoseMotion::parse(self, q_start, world_from_tcp, obstacles_json, held_json, held_world_from_tcp)?;
+        args.run(py, self, Planner::plan_to_pose)
     }
 
     /// Collision-free IK (table, `obstacles_json`, self) for a TCP pose (4x4) from `seed` (7,):
@@ -404,14 +439,8 @@ impl PlannerPy {
         held_json: Option<&str>,
         held_world_from_tcp: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<Bound<'py, PyDict>> {
-        let a = joints(q_start, "q_start")?;
-        let target = pose(world_from_tcp, "world_from_tcp")?;
-        let obstacles = geometries(obstacles_json, "obstacles_json")?;
-        let planner = self.holding(held_json, held_world_from_tcp)?;
-        match py.detach(|| planner.as_ref().unwrap_or(&self.inner).plan_linear(&a, &target, &obstacles)) {
-            Ok(t) => ok_trajectory(py, &t),
-            Err(e) => failure(py, e),
-        }
+        let args = PoseMotion::parse(self, q_start, world_from_tcp, obstacles_json, held_json, held_world_from_tcp)?;
+        args.run(py, self, Planner::plan_linear)
     }
 
     /// Plans a top-down grasp of `target_json` (one ObjectGeometry from the map) among

@@ -719,20 +719,17 @@ impl Planner {
             // Approach and lift along the straight vertical line (the fingers straddle the target
             // with a few millimetres to spare; a joint-space line between the two IK solutions can
             // stray by a centimetre); the joint-space line is the fallback.
-            let approach = match self.plan_linear(&qp, &c.world_from_tcp_grasp, neighbours) {
-                Ok(t) => t,
-                Err(_) => match self.plan_path(&qp, &qg, &scene_neigh) {
-                    Ok(path) => self.time_parameterize(&path)?,
-                    Err(_) => continue,
-                },
+            let straight_or_path = |from: &JointVector, pose: &Se3, to: &JointVector| -> Option<JointTrajectory> {
+                self.plan_linear(from, pose, neighbours).ok().or_else(|| {
+                    self.plan_path(from, to, &scene_neigh).ok().and_then(|path| self.time_parameterize(&path).ok())
+                })
+            };
+            let Some(approach) = straight_or_path(&qp, &c.world_from_tcp_grasp, &qg) else {
+                continue;
             };
             let q_grasp = approach.goal().copied().unwrap_or(qg);
-            let lift = match self.plan_linear(&q_grasp, &c.world_from_tcp_lift, neighbours) {
-                Ok(t) => t,
-                Err(_) => match self.plan_path(&q_grasp, &ql, &scene_neigh) {
-                    Ok(path) => self.time_parameterize(&path)?,
-                    Err(_) => continue,
-                },
+            let Some(lift) = straight_or_path(&q_grasp, &c.world_from_tcp_lift, &ql) else {
+                continue;
             };
             return Ok(GraspMotion { to_pregrasp: self.time_parameterize(&path)?, approach, lift, candidate: c });
         }

@@ -127,22 +127,66 @@ fn solve_move(from: &JointVector, to: &JointVector, limits: &MotionLimits) -> Re
             .map(|(l, u)| l / u.abs())
             .fold(f64::INFINITY, f64::min)
     };
+    let limits = [&limits.max_velocity_rad_s, &limits.max_acceleration_rad_s2, &limits.max_jerk_rad_s3].map(project);
+    let (trajectory, duration_s) = rest_to_rest(length, limits)?;
+    Ok(Segment { trajectory, duration_s, from: *from, direction })
+}
+
+/// The time-optimal rest-to-rest 1-DOF Ruckig move from 0 to `length` under `[velocity,
+/// acceleration, jerk]` limits, and its duration.
+fn rest_to_rest(length: f64, limits: [f64; 3]) -> Result<(Trajectory, f64), PlanError> {
+    let [v, a, j] = limits;
     let mut input = InputParameter::new(1);
     input.current_position = vec![0.0];
     input.target_position = vec![length];
-    input.max_velocity = vec![project(&limits.max_velocity_rad_s)];
-    input.max_acceleration = vec![project(&limits.max_acceleration_rad_s2)];
-    input.max_jerk = vec![project(&limits.max_jerk_rad_s3)];
+    input.max_velocity = vec![v];
+    input.max_acceleration = vec![a];
+    input.max_jerk = vec![j];
     let mut ruckig = Ruckig::new_direct_and_offline(1);
     let mut trajectory = Trajectory::new_direct(1);
-    let result = ruckig.calculate(&mut input, &mut trajectory);
-    match result {
+    match ruckig.calculate(&mut input, &mut trajectory) {
         RuckigResult::Working | RuckigResult::Finished => {
             let duration_s = trajectory.get_duration();
-            Ok(Segment { trajectory, duration_s, from: *from, direction })
+            Ok((trajectory, duration_s))
         }
         other => Err(PlanError::Trajectory { reason: format!("ruckig: {other:?}") }),
     }
+}
+
+/// The first waypoint, after checking the inputs every time parameterisation shares.
+fn check_inputs<'a>(
+    waypoints: &'a [JointVector],
+    limits: &MotionLimits,
+    dt_s: f64,
+) -> Result<&'a JointVector, PlanError> {
+    let Some(first) = waypoints.first() else {
+        return Err(PlanError::Trajectory { reason: "no waypoints".into() });
+    };
+    if !(dt_s.is_finite() && dt_s > 0.0 && limits.valid()) {
+        return Err(PlanError::Trajectory { reason: "sample period and limits must be finite and positive".into() });
+    }
+    if waypoints.iter().any(|q| q.iter().any(|v| !v.is_finite())) {
+        return Err(PlanError::NonFinite { what: "trajectory waypoint" });
+    }
+    Ok(first)
+}
+
+/// The sampled trajectory, landing exactly on the goal at rest.
+fn finish(
+    dt_s: f64,
+    times_s: Vec<f64>,
+    mut positions: Vec<JointVector>,
+    mut velocities: Vec<JointVector>,
+    waypoints: &[JointVector],
+    duration_s: f64,
+) -> JointTrajectory {
+    if let (Some(last), Some(goal)) = (positions.last_mut(), waypoints.last()) {
+        *last = *goal;
+    }
+    if let Some(last) = velocities.last_mut() {
+        *last = [0.0; ARM_DOF];
+    }
+    JointTrajectory { dt_s, times_s, positions, velocities, waypoints: waypoints.to_vec(), duration_s }
 }
 
 /// Time-parameterises `waypoints` (chained rest-to-rest moves) and samples every `dt_s` seconds.
@@ -154,15 +198,7 @@ pub fn time_parameterize(
     limits: &MotionLimits,
     dt_s: f64,
 ) -> Result<JointTrajectory, PlanError> {
-    let Some(first) = waypoints.first() else {
-        return Err(PlanError::Trajectory { reason: "no waypoints".into() });
-    };
-    if !(dt_s.is_finite() && dt_s > 0.0 && limits.valid()) {
-        return Err(PlanError::Trajectory { reason: "sample period and limits must be finite and positive".into() });
-    }
-    if waypoints.iter().any(|q| q.iter().any(|v| !v.is_finite())) {
-        return Err(PlanError::NonFinite { what: "trajectory waypoint" });
-    }
+    let first = check_inputs(waypoints, limits, dt_s)?;
     let mut segments = Vec::with_capacity(waypoints.len().saturating_sub(1));
     for pair in waypoints.windows(2) {
         if let [a, b] = pair {
@@ -193,14 +229,7 @@ pub fn time_parameterize(
         positions.push(p);
         velocities.push(v);
     }
-    // Land exactly on the goal.
-    if let (Some(last), Some(goal)) = (positions.last_mut(), waypoints.last()) {
-        *last = *goal;
-    }
-    if let Some(last) = velocities.last_mut() {
-        *last = [0.0; ARM_DOF];
-    }
-    Ok(JointTrajectory { dt_s, times_s, positions, velocities, waypoints: waypoints.to_vec(), duration_s })
+    Ok(finish(dt_s, times_s, positions, velocities, waypoints, duration_s))
 }
 
 /// Time-optimal, jerk-limited timing of a dense joint path *through* its waypoints (no stops):
@@ -217,15 +246,7 @@ pub fn time_parameterize_path(
     limits: &MotionLimits,
     dt_s: f64,
 ) -> Result<JointTrajectory, PlanError> {
-    let Some(first) = waypoints.first() else {
-        return Err(PlanError::Trajectory { reason: "no waypoints".into() });
-    };
-    if !(dt_s.is_finite() && dt_s > 0.0 && limits.valid()) {
-        return Err(PlanError::Trajectory { reason: "sample period and limits must be finite and positive".into() });
-    }
-    if waypoints.iter().any(|q| q.iter().any(|v| !v.is_finite())) {
-        return Err(PlanError::NonFinite { what: "trajectory waypoint" });
-    }
+    let first = check_inputs(waypoints, limits, dt_s)?;
     let mut cum = vec![0.0];
     for w in waypoints.windows(2) {
         if let [a, b] = w {
@@ -245,18 +266,10 @@ pub fn time_parameterize_path(
         });
     }
     let tightest = |l: &JointVector| l.iter().copied().fold(f64::INFINITY, f64::min);
-    let mut input = InputParameter::new(1);
-    input.current_position = vec![0.0];
-    input.target_position = vec![length];
-    input.max_velocity = vec![tightest(&limits.max_velocity_rad_s)];
-    input.max_acceleration = vec![tightest(&limits.max_acceleration_rad_s2)];
-    input.max_jerk = vec![tightest(&limits.max_jerk_rad_s3)];
-    let mut ruckig = Ruckig::new_direct_and_offline(1);
-    let mut trajectory = Trajectory::new_direct(1);
-    let duration_s = match ruckig.calculate(&mut input, &mut trajectory) {
-        RuckigResult::Working | RuckigResult::Finished => trajectory.get_duration(),
-        other => return Err(PlanError::Trajectory { reason: format!("ruckig: {other:?}") }),
-    };
+    let (trajectory, duration_s) = rest_to_rest(
+        length,
+        [&limits.max_velocity_rad_s, &limits.max_acceleration_rad_s2, &limits.max_jerk_rad_s3].map(tightest),
+    )?;
     let n = (duration_s / dt_s).ceil() as usize;
     let mut times_s = Vec::with_capacity(n + 1);
     let mut positions = Vec::with_capacity(n + 1);
@@ -286,13 +299,7 @@ pub fn time_parameterize_path(
         positions.push(q);
         velocities.push(v);
     }
-    if let (Some(last), Some(goal)) = (positions.last_mut(), waypoints.last()) {
-        *last = *goal;
-    }
-    if let Some(last) = velocities.last_mut() {
-        *last = [0.0; ARM_DOF];
-    }
-    Ok(JointTrajectory { dt_s, times_s, positions, velocities, waypoints: waypoints.to_vec(), duration_s })
+    Ok(finish(dt_s, times_s, positions, velocities, waypoints, duration_s))
 }
 
 #[cfg(test)]
