@@ -399,14 +399,20 @@ impl PlannerPy {
 
     /// Times a joint path (k, 7) through its waypoints without stopping: one time-optimal,
     /// jerk-limited Ruckig move of the path parameter (cumulative max-joint distance) under the
-    /// configured limits; same result as `plan_to_joints` (no collision check: see `path_is_free`).
+    /// configured limits, every joint's velocity capped at `max_joint_speed` (rad/s) when given;
+    /// same result as `plan_to_joints` (no collision check: see `path_is_free`).
+    #[pyo3(signature = (positions, max_joint_speed=None))]
     fn time_parameterize_path<'py>(
         &self,
         py: Python<'py>,
         positions: &Bound<'py, PyAny>,
+        max_joint_speed: Option<f64>,
     ) -> PyResult<Bound<'py, PyDict>> {
         let rows = joint_rows(positions, "positions")?;
-        match self.inner.time_parameterize_path(&rows) {
+        if let Some(v) = max_joint_speed.filter(|v| !(v.is_finite() && *v > 0.0)) {
+            return Err(input_err(format!("max_joint_speed: expected a finite number > 0, got {v}")));
+        }
+        match self.inner.time_parameterize_path(&rows, max_joint_speed) {
             Ok(t) => ok_trajectory(py, &t),
             Err(e) => failure(py, e),
         }

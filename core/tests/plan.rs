@@ -325,6 +325,28 @@ fn linear_motions_follow_the_line_or_report_where_they_break() {
 }
 
 /// Collision-free configurations with the TCP 15 cm high on either side of the wall.
+#[test]
+fn a_speed_cap_slows_a_timed_path_and_bad_caps_are_typed() {
+    let planner = planner();
+    let mut far = Q_READY;
+    far[0] += 1.0;
+    far[3] += 0.4;
+    let path = [Q_READY, far];
+    let peak = |cap: Option<f64>| {
+        let t = planner.time_parameterize_path(&path, cap).unwrap_or_else(|e| panic!("{e}"));
+        let v = t.velocities.iter().flat_map(|v| v.iter()).fold(0.0f64, |m, x| m.max(x.abs()));
+        (v, t.duration_s)
+    };
+    let (v_free, d_free) = peak(None);
+    let (v_cap, d_cap) = peak(Some(0.3));
+    // Joint 0 moves 1 rad: capped at 0.3 rad/s the move takes at least 1 / 0.3 s.
+    assert!(v_cap <= 0.3 + 1e-9 && v_cap > 0.29, "capped peak {v_cap}");
+    assert!(v_free > 0.5 && d_cap > d_free && d_cap >= 1.0 / 0.3, "{v_free} {d_free} {d_cap}");
+    for bad in [0.0, -1.0, f64::NAN, f64::INFINITY] {
+        assert!(matches!(planner.time_parameterize_path(&path, Some(bad)), Err(PlanError::Trajectory { .. })));
+    }
+}
+
 fn wall_sides(planner: &Planner, wall: &[ObjectGeometry]) -> (JointVector, JointVector) {
     let scene = planner.scene(wall).unwrap_or_else(|e| panic!("{e}"));
     let pose = |y: f64| objslam_core::plan::grasp::top_down_pose(Vector3::new(0.5, y, 0.15), 0.0);

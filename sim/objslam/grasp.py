@@ -161,29 +161,13 @@ class GraspSession:
         q = self.world.qpos()
         return float(q[7] + q[8])
 
-    def _targets(self, q_arm: np.ndarray, finger_m: float, dq_arm: np.ndarray | None = None) -> None:
-        for i, j in enumerate(self.world.joints):
-            if i < 7:
-                j.set_drive_target(float(q_arm[i]))
-                j.set_drive_velocity_target(float(dq_arm[i]) if dq_arm is not None else 0.0)
-            else:
-                j.set_drive_target(float(finger_m))
-
     def execute(self, traj: dict[str, Any], finger_m: float, on_step: Callable[[], None] | None = None) -> float:
-        """Track a sampled joint trajectory with the PD drives (linear interpolation of the samples at
-        the physics rate, velocity feed-forward), then settle; returns the final joint error, rad."""
-        t, pos, vel = traj["times_s"], traj["positions"], traj["velocities"]
-        n = math.ceil(float(traj["duration_s"]) * PHYSICS_HZ)
-        for k in range(1, n + 1):
-            tk = k / PHYSICS_HZ
-            q = np.array([np.interp(tk, t, pos[:, i]) for i in range(7)])
-            dq = np.array([np.interp(tk, t, vel[:, i]) for i in range(7)])
-            self._targets(q, finger_m, dq)
-            self.world._step()
+        """Track a planned joint trajectory (:meth:`SimWorld.track`), then settle; returns the final
+        joint error, rad."""
+        for _ in self.world.track(traj, finger_m):
             if on_step is not None:
                 on_step()
-        goal = pos[-1]
-        self._targets(goal, finger_m)
+        goal = np.asarray(traj["positions"], dtype=np.float64)[-1]
         for _ in range(int(self.cfg.settle_s * PHYSICS_HZ)):
             self.world._step()
             if on_step is not None:
@@ -195,7 +179,7 @@ class GraspSession:
     def hold(self, seconds: float, finger_m: float, on_step: Callable[[], None] | None = None) -> None:
         """Keep the current arm targets and the finger target for ``seconds``."""
         q = self.world.qpos()[:7]
-        self._targets(q, finger_m)
+        self.world.set_arm_targets(q, finger_m)
         for _ in range(int(seconds * PHYSICS_HZ)):
             self.world._step()
             if on_step is not None:

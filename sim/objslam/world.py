@@ -8,10 +8,12 @@ which solves IK for a camera pose and executes a smooth trajectory along a Carte
 (a video stream, as SLAM needs). Forward kinematics, IK and the collision checks of every camera
 move are the core planner's (``objslam_core::plan``: table, self-collision and the obstacles of
 :meth:`SimWorld.set_obstacles`); a camera path that is not free falls back to the planner's joint
-path (RRT-Connect when the straight line collides). Camera moves are timed by one minimum-jerk
-profile over the whole waypoint path, not by the planner's Ruckig moves: those are rest-to-rest
-per waypoint (the Ruckig crate's intermediate waypoints need its web service), which would stop
-the camera every 2 cm of a Cartesian path; grasp and place motions use the Ruckig trajectories.
+path (RRT-Connect when the straight line collides). Every move is timed by the planner's Ruckig
+trajectories (jerk- and acceleration-limited, joint speed capped by the run's ``max_joint_speed``)
+and tracked by the PD drives with velocity feed-forward: a dense Cartesian camera path as one
+Ruckig move of its path parameter, so the camera does not stop at its waypoints
+(``Planner.time_parameterize_path``; the Ruckig crate's own intermediate waypoints need its web
+service), a joint-path fallback rest-to-rest between its corners.
 
 Rendering is CPU-only (Mesa lavapipe ≥ 24.3; see ECOSYSTEM.md). Physics runs at 240 Hz with the
 solver settings ManiSkill uses for reliable grasps.
@@ -26,6 +28,7 @@ import os
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import sapien
@@ -539,8 +542,7 @@ class SimWorld:
     ) -> Iterator[SensorFrame]:
         """Move the camera to a pose: collision-free IK, then (``path="cartesian"``) the joint
         waypoints of :meth:`camera_path` or (``"joint"``, or when no free Cartesian path is found)
-        the core planner's collision-free joint path, timed by one minimum-jerk profile and tracked
-        by the PD drives
+        the core planner's collision-free joint path, executed by :meth:`move_along`
         (:attr:`last_move_path` says which); yields a rendered frame every ``1 / frame_rate_hz``
         simulated seconds and one after settling. Raises :class:`UnreachablePoseError` before
         moving if IK fails."""
@@ -562,19 +564,40 @@ class SimWorld:
             waypoints = np.concatenate([w, np.full((len(w), 2), GRIPPER_OPEN_M)], axis=1)
             waypoints[0] = self.qpos()
         yield from self.move_along(
-            waypoints, frame_rate_hz=frame_rate_hz, max_joint_speed=max_joint_speed, settle_s=settle_s
-        )
-
-    def move_joints_to(
-        self, q_goal: np.ndarray, *, frame_rate_hz: float, max_joint_speed: float = 1.0, settle_s: float = 0.3
-    ) -> Iterator[SensorFrame]:
-        """Execute a minimum-jerk joint move (see :meth:`move_camera_to`)."""
-        yield from self.move_along(
-            np.array([self.qpos(), q_goal]),
+            waypoints,
             frame_rate_hz=frame_rate_hz,
             max_joint_speed=max_joint_speed,
             settle_s=settle_s,
+            stop_at_waypoints=self.last_move_path == "joint",
         )
+
+    def set_arm_targets(self, q_arm: np.ndarray, finger_m: float, dq_arm: np.ndarray | None = None) -> None:
+        """PD drive targets: arm joints ``q_arm`` (7) with velocity feed-forward ``dq_arm`` (zero when
+        ``None``), both fingers at ``finger_m``."""
+        for i, j in enumerate(self.joints):
+            if i < 7:
+                j.set_drive_target(float(q_arm[i]))
+                j.set_drive_velocity_target(float(dq_arm[i]) if dq_arm is not None else 0.0)
+            else:
+                j.set_drive_target(float(finger_m))
+
+    def track(self, traj: dict[str, Any], finger_m: float) -> Iterator[int]:
+        """Track a sampled joint trajectory of the core planner (``times_s``, ``positions``,
+        ``velocities``, ``duration_s``) with the PD drives: the samples interpolated linearly at the
+        physics rate, velocity feed-forward, fingers at ``finger_m``. Yields the number of physics
+        steps taken after each step; leaves the last sample as the target (the caller settles)."""
+        t = np.asarray(traj["times_s"], dtype=np.float64)
+        pos = np.asarray(traj["positions"], dtype=np.float64)
+        vel = np.asarray(traj["velocities"], dtype=np.float64)
+        n = math.ceil(float(traj["duration_s"]) * PHYSICS_HZ)
+        for k in range(1, n + 1):
+            tk = k / PHYSICS_HZ
+            q = np.array([np.interp(tk, t, pos[:, i]) for i in range(7)])
+            dq = np.array([np.interp(tk, t, vel[:, i]) for i in range(7)])
+            self.set_arm_targets(q, finger_m, dq)
+            self._step()
+            yield k
+        self.set_arm_targets(pos[-1], finger_m)
 
     def move_along(
         self,
@@ -583,39 +606,32 @@ class SimWorld:
         frame_rate_hz: float,
         max_joint_speed: float = 1.0,
         settle_s: float = 0.3,
+        stop_at_waypoints: bool = False,
     ) -> Iterator[SensorFrame]:
-        """Execute a joint path (k ≥ 2 waypoints, the first the current configuration): piecewise
-        linear in joint space, parameterised by its cumulative max-joint distance and timed by one
-        minimum-jerk profile over the whole path (peak joint speed ``max_joint_speed``); yields a
-        frame every ``1 / frame_rate_hz`` simulated seconds and one after settling at the last
-        waypoint. Two waypoints give the plain minimum-jerk joint move."""
+        """Execute a joint path (k ≥ 2 waypoints of 9 joints, the first the current configuration,
+        the fingers held at the last waypoint's) timed by the core planner's Ruckig trajectories
+        under its jerk and acceleration limits, every joint's speed capped at ``max_joint_speed``:
+        through the waypoints without stopping (``Planner.time_parameterize_path``, for dense
+        paths such as a Cartesian camera path) or, with ``stop_at_waypoints``, rest-to-rest from
+        waypoint to waypoint (a sparse path whose corners matter: RRT-Connect's). Yields a frame
+        every ``1 / frame_rate_hz`` simulated seconds and one after settling at the last waypoint."""
         w = np.asarray(waypoints, dtype=np.float64)
-        seg = np.max(np.abs(np.diff(w[:, :7], axis=0)), axis=1)
-        cum = np.concatenate([[0.0], np.cumsum(seg)])
-        total = float(cum[-1])
-        q_goal = w[-1]
-        # Minimum jerk peaks at 1.875x the mean speed.
-        duration = max(0.5, 1.875 * total / max_joint_speed)
-        n_steps = math.ceil(duration * PHYSICS_HZ)
+        q7 = np.clip(w[:, :7], self.qlimits[:7, 0], self.qlimits[:7, 1])
+        pieces = [q7[i : i + 2] for i in range(len(q7) - 1)] if stop_at_waypoints else [q7]
+        finger_m = float(w[-1, 7])
         steps_per_frame = max(1, round(PHYSICS_HZ / frame_rate_hz))
-        for i in range(1, n_steps + 1):
-            s = i / n_steps
-            blend = 10 * s**3 - 15 * s**4 + 6 * s**5
-            if total <= 0.0:
-                target = q_goal
-            else:
-                d = blend * total
-                j = min(int(np.searchsorted(cum, d, side="right")) - 1, len(w) - 2)
-                u = 0.0 if seg[j] <= 0.0 else (d - cum[j]) / seg[j]
-                target = w[j] + min(max(u, 0.0), 1.0) * (w[j + 1] - w[j])
-            self._set_targets(target)
-            self._step()
-            if i % steps_per_frame == 0 and i < n_steps:
-                yield self.render()
-        self._set_targets(q_goal)
+        steps = 0
+        for piece in pieces:
+            traj = self.planner.time_parameterize_path(piece, max_joint_speed)
+            for _ in self.track(traj, finger_m):
+                steps += 1
+                if steps % steps_per_frame == 0:
+                    yield self.render()
+        q_goal = q7[-1]
+        self.set_arm_targets(q_goal, finger_m)
         for _ in range(int(settle_s * PHYSICS_HZ)):
             self._step()
-        err = float(np.max(np.abs(self.qpos()[:7] - q_goal[:7])))
+        err = float(np.max(np.abs(self.qpos()[:7] - q_goal)))
         if err > 0.02:
             raise MotionError(f"arm stopped {err:.3f} rad from its joint target")
         yield self.render()

@@ -525,9 +525,26 @@ impl Planner {
     }
 
     /// Times a dense joint path through its waypoints without stopping
-    /// ([`trajectory::time_parameterize_path`]) with the configured limits and sample period.
-    pub fn time_parameterize_path(&self, waypoints: &[JointVector]) -> Result<JointTrajectory, PlanError> {
-        trajectory::time_parameterize_path(waypoints, &self.config.limits, self.config.sample_dt_s)
+    /// ([`trajectory::time_parameterize_path`]) with the configured limits and sample period;
+    /// `max_joint_speed` (rad/s) caps every joint's velocity limit (a slower camera motion).
+    ///
+    /// Errors: as [`trajectory::time_parameterize_path`]; a cap that is not finite and positive is
+    /// a [`PlanError::Trajectory`].
+    pub fn time_parameterize_path(
+        &self,
+        waypoints: &[JointVector],
+        max_joint_speed: Option<f64>,
+    ) -> Result<JointTrajectory, PlanError> {
+        let mut limits = self.config.limits.clone();
+        if let Some(cap) = max_joint_speed {
+            if !(cap.is_finite() && cap > 0.0) {
+                return Err(PlanError::Trajectory { reason: format!("max_joint_speed must be finite and > 0, got {cap}") });
+            }
+            for v in &mut limits.max_velocity_rad_s {
+                *v = v.min(cap);
+            }
+        }
+        trajectory::time_parameterize_path(waypoints, &limits, self.config.sample_dt_s)
     }
 
     /// Plans a collision-free, time-parameterised motion `q_start → q_goal` among `obstacles`.
