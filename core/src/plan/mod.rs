@@ -538,7 +538,9 @@ impl Planner {
         let mut limits = self.config.limits.clone();
         if let Some(cap) = max_joint_speed {
             if !(cap.is_finite() && cap > 0.0) {
-                return Err(PlanError::Trajectory { reason: format!("max_joint_speed must be finite and > 0, got {cap}") });
+                return Err(PlanError::Trajectory {
+                    reason: format!("max_joint_speed must be finite and > 0, got {cap}"),
+                });
             }
             for v in &mut limits.max_velocity_rad_s {
                 *v = v.min(cap);
