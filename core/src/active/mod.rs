@@ -19,7 +19,8 @@
 //!     the objects still to explore, the utility's argmax among the reachable ones.
 //!
 //! Every strategy stops at `explore.max_views` views after Init (paper: 10), so the comparison is
-//! at an equal or smaller view budget. Reachability is a callback (the simulator side or the
+//! at an equal or smaller view budget ([`ActiveConfig::stop_when_explored`] `= false` makes it
+//! equal). Reachability is a callback (the simulator side or the
 //! `plan` module's IK decides); candidates that are unreachable are skipped in utility order.
 
 use serde::{Deserialize, Serialize};
@@ -70,6 +71,11 @@ pub struct ActiveConfig {
     pub done_normalized_entropy: f64,
     /// expected-gain: motion cost, bits per metre.
     pub motion_cost_bits_per_m: f64,
+    /// object-driven / expected-gain: stop once s(x) = 0 for every object (the paper's rule;
+    /// default). `false` keeps choosing views by the same utility with s(x) = 1 for every object
+    /// until `max_views` — an equal-budget comparison with random and coverage, which always spend
+    /// the budget (stop reason `max_views`).
+    pub stop_when_explored: bool,
 }
 
 impl Default for ActiveConfig {
@@ -93,6 +99,7 @@ impl Default for ActiveConfig {
             done_occupied_ratio: e.done_occupied_ratio,
             done_normalized_entropy: e.done_normalized_entropy,
             motion_cost_bits_per_m: e.motion_cost_bits_per_m,
+            stop_when_explored: true,
         }
     }
 }
@@ -302,11 +309,13 @@ impl ActiveSession {
                 })
             }
             Strategy::ObjectDriven | Strategy::ExpectedGain => {
-                let ctx = UtilityContext::new(map, &self.grids, &self.history, camera, &self.explore)?;
-                let features = ctx.features();
-                if let Some(r) = stop_reason(&features, self.views_taken, &self.explore) {
-                    return Ok(NextView::Stop { reason: r.into() });
+                let mut ctx = UtilityContext::new(map, &self.grids, &self.history, camera, &self.explore)?;
+                match stop_reason(&ctx.features(), self.views_taken, &self.explore) {
+                    Some(StopReason::AllExplored) if !self.config.stop_when_explored => ctx.explore_every_object(),
+                    Some(r) => return Ok(NextView::Stop { reason: r.into() }),
+                    None => {}
                 }
+                let features = ctx.features();
                 let around: Vec<u32> = features.iter().filter(|f| f.explore).map(|f| f.object_id).collect();
                 // The argmax rule over reachable views: sample without the reachability filter,
                 // score all, then ask reachability in utility order, so IK runs only for the best.

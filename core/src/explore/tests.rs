@@ -327,6 +327,17 @@ fn volume_convergence_and_s_rule() {
     assert!(f1[0].normalized_entropy < 0.5 && f1[0].volume_probability > 0.99, "{:?}", f1[0]);
     assert_eq!(stop_reason(&f1, 3, &cfg), Some(StopReason::AllExplored));
     assert_eq!(stop_reason(&[], 3, &cfg), None);
+    // Done objects count for nothing (s = 0) unless every object is counted again (the
+    // equal-budget mode of the active session): then the view facing the block scores its terms.
+    let mut ctx = UtilityContext::new(&map, &grids, &hist, &camera(), &cfg).unwrap_or_else(|e| panic!("{e}"));
+    let facing = view(eye_around([0.5, 0.0, 0.05], 180.0, 40.0, 0.45), [0.5, 0.0, 0.05]);
+    let done = ctx.score(&facing, Strategy::ObjectDriven, None).unwrap_or_else(|e| panic!("{e}"));
+    assert!(done.objects.iter().all(|t| t.s == 0.0) && done.utility == 0.0, "{done:?}");
+    ctx.explore_every_object();
+    assert!(ctx.features().iter().all(|f| f.explore));
+    let again = ctx.score(&facing, Strategy::ObjectDriven, None).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(again.objects.len(), 1);
+    assert!(again.objects[0].s == 1.0 && again.utility > 0.0, "{again:?}");
 }
 
 #[test]

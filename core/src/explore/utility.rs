@@ -286,6 +286,14 @@ impl UtilityContext {
         self.objects.iter().map(|o| o.features).collect()
     }
 
+    /// Count every object as still to explore (s(x) = 1), e.g. to keep refining the map after
+    /// the stopping rule would end exploration.
+    pub fn explore_every_object(&mut self) {
+        for o in &mut self.objects {
+            o.features.explore = true;
+        }
+    }
+
     /// Score one candidate `world_from_camera` with a utility strategy
     /// ([`Strategy::ObjectDriven`] or [`Strategy::ExpectedGain`]; the view-generator baselines
     /// are scored like object-driven). `current` is the camera pose now (motion cost of
