@@ -192,6 +192,17 @@ def _plots(ok: list[dict[str, Any]], strategies: list[str], out: Path, command: 
     plt.close(fig)
 
 
+def _other_sweep(spec: str) -> dict[str, Any]:
+    """``--also FILE`` or ``FILE:strategy,strategy``: another sweep's rows (only those strategies)."""
+    path, _, only = spec.partition(":")
+    sweep = json.loads(Path(path).read_text())
+    if only:
+        keep = only.split(",")
+        sweep["rows"] = [r for r in sweep["rows"] if r["strategy"] in keep]
+        sweep["command"] = f"{sweep['command']} (its {', '.join(keep)} rows)"
+    return sweep
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--scenes", nargs="*", default=scene_files())
@@ -206,12 +217,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--report-only", action="store_true", help="rebuild the reports from <out>/exploration.json")
     ap.add_argument(
         "--also", nargs="*", default=[], metavar="JSON",
-        help="with --report-only: rows of other sweeps' exploration.json (e.g. more seeds) join the tables",
+        help="with --report-only: rows of other sweeps' exploration.json (e.g. more seeds) join the tables; "
+        "FILE:s1,s2 takes only those strategies' rows",
     )
     a = ap.parse_args(argv)
     if a.report_only:
         old = json.loads((Path(a.out) / "exploration.json").read_text())
-        extra = [json.loads(Path(f).read_text()) for f in a.also]
+        extra = [_other_sweep(spec) for spec in a.also]
         rows = [
             r if "error" in r else {**r, **aligned_metrics(r["run_dir"])}
             for r in old["rows"] + [r for e in extra for r in e["rows"]]
