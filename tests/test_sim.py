@@ -102,3 +102,9 @@ def test_cartesian_move_keeps_the_table_in_view(scene1_world) -> None:
     # Executed by the PD drives: every streamed frame still looks at the table centre.
     assert max(off_target_deg(f.world_from_camera_gt) for f in frames) < 5.0
     assert np.allclose(frames[-1].world_from_camera_gt[:3, 3], p1, atol=5e-3)
+    # Timed as one Ruckig move of the path parameter: the camera speeds up once and slows down
+    # once (no stop at the 2 cm waypoints): frame-to-frame steps are unimodal.
+    steps = np.linalg.norm(np.diff([f.world_from_camera_gt[:3, 3] for f in frames[:-1]], axis=0), axis=1)
+    peak, tol = int(np.argmax(steps)), 0.1 * float(steps.max())
+    assert len(steps) >= 6 and steps.max() > 0.01, steps
+    assert np.all(np.diff(steps[: peak + 1]) > -tol) and np.all(np.diff(steps[peak:]) < tol), steps.round(4)
