@@ -60,6 +60,10 @@ class ExploreRunConfig:
     done_occupied_ratio: float = 0.5
     done_normalized_entropy: float = 0.5
     motion_cost_bits_per_m: float = 20.0
+    stop_when_explored: bool = True
+    """object-driven / expected-gain: stop once every object is explored (the paper's rule).
+    ``false``: keep choosing views by the same utility, every object counted (s(x) = 1), until
+    ``max_views`` — the equal-budget comparison with random and coverage."""
 
 
 @dataclass(frozen=True)
