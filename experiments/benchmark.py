@@ -16,7 +16,10 @@ again against the scene file's poses. With the SLAM pose source the map's placem
 comes from averaging the views' kinematic-prior biases (1 cm / 1° per view), a draw shared by every
 object of an episode — and by every scene for strategies whose views do not depend on the scene
 (coverage, init) — so the aligned metrics isolate what the views did for the map's shape.
-``--report-only`` rebuilds the reports from ``<out>/exploration.json`` and its run folders.
+``--report-only`` rebuilds the reports from ``<out>/exploration.json`` and its run folders;
+``--also FILE[:strategies]`` joins other sweeps' rows (more seeds, or the baselines of the main
+report next to a variant: ``--set explore.stop_when_explored=false`` runs the utility strategies
+on the full view budget, as random and coverage always are).
 """
 
 from __future__ import annotations
