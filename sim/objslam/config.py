@@ -168,12 +168,14 @@ class RunConfig:
     frame_rate_hz: float = 4.0
     """Frames rendered per simulated second while the arm moves."""
     max_joint_speed: float = 1.0
-    """Peak joint speed of camera moves, rad/s."""
+    """Speed cap of every joint during camera moves, rad/s (the planner's limits apply below it:
+    half the Panda's datasheet velocity, 1.09 rad/s for joints 1-4)."""
     camera_path: str = "cartesian"
     """How the arm moves between views: ``cartesian`` (the camera travels the straight line between
     the two views with its orientation slerped, IK every 2 cm / 5°, so the tracker keeps the scene in
-    view; falls back to ``joint`` when a waypoint is unreachable) or ``joint`` (one minimum-jerk
-    joint-space move, during which the camera can swing off the table)."""
+    view; falls back to ``joint`` when a waypoint is unreachable) or ``joint`` (the planner's
+    joint-space path, during which the camera can swing off the table); both timed by the planner's
+    Ruckig trajectories (``SimWorld.move_along``)."""
     association_mode: str = "ensemble"
     """Association: ``naive`` (the foundation baseline), ``iou``, ``iou_np``, ``iou_t`` or
     ``ensemble`` (the paper's method; see the core's ``association`` module)."""
