@@ -290,8 +290,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument(
         "--reobserve", nargs="*", default=[], choices=SOURCES,
         help=(
-            "map sources whose grasps re-observe the target first (default: none; with the current "
-            "maps re-observation lowered estimated-map success from 83.7 %% to 70.2 %%, reports/grasping.md)"
+            "map sources whose grasps re-observe the target first (default: none; on the estimated "
+            "maps of seeds 0-1 re-observation gave 102/105 against 100 %% without, reports/grasping.md)"
         ),
     )
     ap.add_argument("--tag", default="", help="suffix of the session files (grasp_<source><tag>.json)")
