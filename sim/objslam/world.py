@@ -590,13 +590,13 @@ class SimWorld:
         pos = np.asarray(traj["positions"], dtype=np.float64)
         vel = np.asarray(traj["velocities"], dtype=np.float64)
         n = math.ceil(float(traj["duration_s"]) * PHYSICS_HZ)
-        for k in range(1, n + 1):
-            tk = k / PHYSICS_HZ
-            q = np.array([np.interp(tk, t, pos[:, i]) for i in range(7)])
-            dq = np.array([np.interp(tk, t, vel[:, i]) for i in range(7)])
-            self.set_arm_targets(q, finger_m, dq)
+        tk = np.arange(1, n + 1) / PHYSICS_HZ
+        q = np.stack([np.interp(tk, t, pos[:, i]) for i in range(7)], axis=1)
+        dq = np.stack([np.interp(tk, t, vel[:, i]) for i in range(7)], axis=1)
+        for k in range(n):
+            self.set_arm_targets(q[k], finger_m, dq[k])
             self._step()
-            yield k
+            yield k + 1
         self.set_arm_targets(pos[-1], finger_m)
 
     def move_along(
