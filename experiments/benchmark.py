@@ -57,15 +57,16 @@ def _row(m: dict[str, Any]) -> dict[str, Any]:
         "n_objects_est": m["n_objects_est"],
         "n_objects_gt": m["n_objects_gt"],
         "entropy_curve": m["entropy_curve"],
+        "accuracy_curve": m.get("accuracy_curve"),
         **aligned_metrics(m["run_dir"]),
     }
 
 
 def aligned_metrics(run_dir: str | Path) -> dict[str, float | None]:
-    """3D IoU and CDE of a run's map after removing its global translation offset (module docs)."""
-    import numpy as np
+    """3D IoU and CDE of a run's map after removing its global translation offset (module docs),
+    against the scene file's poses, keeping the run's own matching."""
     import tomllib
-    from objslam import _native
+    from objslam.evaluation import offset_removed
     from objslam.scene import gt_objects, load_scene
 
     run = REPO / run_dir if not Path(run_dir).is_absolute() else Path(run_dir)
@@ -73,26 +74,8 @@ def aligned_metrics(run_dir: str | Path) -> dict[str, float | None]:
     scene = Path(cfg["scene"])
     gt = gt_objects(load_scene(scene if scene.is_absolute() else REPO / scene))
     mp = json.loads((run / "map.json").read_text())
-    matched = json.loads((run / "metrics.json").read_text())["objects"]  # the run's own matching
-    centre = {g["id"]: np.array(g["geometry"]["center"]) for g in gt}
-    by_id = {o["id"]: o for o in mp["objects"]}
-    offsets = [
-        centre[o["gt_id"]] - np.array(by_id[o["est_id"]]["world_from_object"]["translation"])
-        for o in matched
-        if o.get("est_id") is not None and (o.get("iou3d") or 0.0) > 0.3
-    ]
-    if not offsets:
-        return {"iou3d_aligned": None, "cde_aligned_cm": None, "map_offset_mm": None}
-    off = np.median(np.array(offsets), axis=0)
-    for o in mp["objects"]:
-        t = o["world_from_object"]["translation"]
-        o["world_from_object"]["translation"] = [float(t[i] + off[i]) for i in range(3)]
-    ev = json.loads(_native.evaluate_map(json.dumps(gt), json.dumps(mp)))
-    return {
-        "iou3d_aligned": ev["mean"]["iou3d"],
-        "cde_aligned_cm": ev["mean"]["cde_cm"],
-        "map_offset_mm": float(np.linalg.norm(off) * 1000.0),
-    }
+    matched = json.loads((run / "metrics.json").read_text())["objects"]
+    return offset_removed(gt, mp, matched)
 
 
 def _fmt(values: list[float | None], spec: str) -> str:
@@ -151,12 +134,82 @@ def write_reports(rows: list[dict[str, Any]], out: Path, command: str) -> None:
             ]
             lines.append(f"| {s} | " + " | ".join(cells) + f" | {_fmt(seed_means, spec)} |")
         lines.append("")
+    lines += _accuracy_tables(ok, strategies)
     failed = [r for r in rows if "error" in r]
     if failed:
         lines += ["## Failed episodes", ""] + [f"- {r['strategy']} {r['scene']} seed {r['seed']}: {r['error']}" for r in failed]
     lines += ["", "![metrics per strategy](exploration_metrics.png)", "", "![entropy vs views](exploration_entropy.png)"]
+    if any(r.get("accuracy_curve") for r in ok):
+        lines += ["", "![accuracy vs views](exploration_accuracy.png)"]
     (out / "exploration.md").write_text("\n".join(lines) + "\n")
     _plots(ok, strategies, out, command)
+
+
+def curve_value(curve: list[dict[str, Any]], k: int, metric: str) -> float | None:
+    """A run's ``metric`` after ``k`` views: its last snapshot with at most ``k`` views done (an
+    episode that stopped earlier keeps the map it stopped with); None before its first view."""
+    v = None
+    for p in curve:
+        if p["views"] <= k:
+            v = p.get(metric)
+    return v
+
+
+def _accuracy_tables(ok: list[dict[str, Any]], strategies: list[str]) -> list[str]:
+    """Metrics after k views (from each run's ``accuracy_curve``) and the paired difference to
+    random at equal views: the kinematic biases are drawn per (seed, scene, view index), so at the
+    same k two strategies' maps share the SLAM gauge's draw and the difference isolates the views."""
+    with_curve = [r for r in ok if r.get("accuracy_curve")]
+    if not with_curve:
+        return []
+    kmax = max(p["views"] for r in with_curve for p in r["accuracy_curve"])
+    ks = list(range(1, kmax + 1))
+    head = "| strategy | " + " | ".join(str(k) for k in ks) + " |"
+    sep = "|---" * (len(ks) + 1) + "|"
+    lines = [
+        "## Accuracy after k views (all scenes and seeds)",
+        "",
+        "Each run's map is evaluated after every view (`accuracy_curve` in its metrics.json); an",
+        "episode that stopped before k views keeps the map it stopped with. Mean over scenes and seeds.",
+        "",
+    ]
+    for metric, spec, title in (
+        ("iou3d", ".3f", "3D IoU"),
+        ("iou3d_aligned", ".3f", "3D IoU after removing the map's global offset"),
+        ("cde_cm", ".2f", "CDE, cm"),
+    ):
+        lines += [f"### {title}", "", head, sep]
+        for s in strategies:
+            runs = [r for r in with_curve if r["strategy"] == s]
+            cells = [_fmt([_mean([curve_value(r["accuracy_curve"], k, metric) for r in runs])], spec) for k in ks]
+            lines.append(f"| {s} | " + " | ".join(cells) + " |")
+        lines.append("")
+    if "random" in strategies:
+        lines += [
+            "### 3D IoU minus random's at equal views (paired by scene and seed: mean ± standard error)",
+            "",
+            head,
+            sep,
+        ]
+        ref = {(r["scene"], r["seed"]): r["accuracy_curve"] for r in with_curve if r["strategy"] == "random"}
+        for s in strategies:
+            if s == "random":
+                continue
+            cells = []
+            for k in ks:
+                d = [
+                    a - b
+                    for r in with_curve
+                    if r["strategy"] == s and (r["scene"], r["seed"]) in ref
+                    for a, b in [(curve_value(r["accuracy_curve"], k, "iou3d"), curve_value(ref[(r["scene"], r["seed"])], k, "iou3d"))]
+                    if a is not None and b is not None
+                ]
+                cells.append(
+                    f"{statistics.mean(d):+.3f} ± {statistics.stdev(d) / len(d) ** 0.5:.3f}" if len(d) > 1 else "-"
+                )
+            lines.append(f"| {s} | " + " | ".join(cells) + " |")
+        lines.append("")
+    return lines
 
 
 def _plots(ok: list[dict[str, Any]], strategies: list[str], out: Path, command: str) -> None:
@@ -192,6 +245,27 @@ def _plots(ok: list[dict[str, Any]], strategies: list[str], out: Path, command: 
     ax.set_title(command, fontsize=8)
     fig.tight_layout()
     fig.savefig(out / "exploration_entropy.png", dpi=110)
+    plt.close(fig)
+    with_curve = [r for r in ok if r.get("accuracy_curve")]
+    if not with_curve:
+        return
+    kmax = max(p["views"] for r in with_curve for p in r["accuracy_curve"])
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4))
+    for ax, (metric, label) in zip(axes, (("iou3d", "3D IoU"), ("iou3d_aligned", "3D IoU, global offset removed"))):
+        for s in strategies:
+            runs = [r for r in with_curve if r["strategy"] == s]
+            ks = [k for k in range(1, kmax + 1)]
+            ys = [_mean([curve_value(r["accuracy_curve"], k, metric) for r in runs]) for k in ks]
+            pts = [(k, y) for k, y in zip(ks, ys) if y is not None]
+            if pts:
+                ax.plot([p[0] for p in pts], [p[1] for p in pts], marker="o", ms=3, label=s)
+        ax.set_xlabel("views (Init + NBV)")
+        ax.set_ylabel(label)
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=8)
+    fig.suptitle(f"map accuracy after k views (stopped episodes keep their map) — {command}", fontsize=8)
+    fig.tight_layout()
+    fig.savefig(out / "exploration_accuracy.png", dpi=110)
     plt.close(fig)
 
 

@@ -30,6 +30,7 @@ import numpy as np
 from . import _native
 from .config import REPO_ROOT, RunConfig, to_dict
 from .detector import Detection, SimulatedDetector
+from .evaluation import offset_removed
 from .scene import SceneSpec, gt_objects, load_scene
 from .world import MotionError, SensorFrame, SimWorld, UnreachablePoseError
 
@@ -217,6 +218,7 @@ def run_episode(
     assignments: list[tuple[int, int | None]] = []
     view_counter = [0]
     move_paths: dict[str, int] = {"cartesian": 0, "joint": 0}
+    accuracy_curve: list[dict[str, Any]] = []
     try:
         mapper = new_mapper(cfg, scene)
         rng_sensor = np.random.default_rng([cfg.seed, 1])
@@ -286,6 +288,25 @@ def run_episode(
             if bar is not None:
                 bar.set_postfix(frames=frames, objects=len(mapper))
 
+        gt_scene_file = gt_objects(scene)
+
+        def snapshot() -> None:
+            """Evaluate the map as it stands after a view (``accuracy_curve`` in metrics.json)."""
+            map_json = mapper.map_json()
+            ev = json.loads(
+                _native.evaluate_map(
+                    json.dumps(gt_objects(scene, world.ground_truth())), map_json, json.dumps(to_dict(cfg.eval))
+                )
+            )
+            accuracy_curve.append(
+                {
+                    "views": views_done,
+                    **{k: ev["mean"][k] for k in ("iou3d", "iou2d", "cde_cm")},
+                    "n_objects_est": ev["n_objects_est"],
+                    **offset_removed(gt_scene_file, json.loads(map_json), ev["objects"]),
+                }
+            )
+
         def execute(view: np.ndarray, what: str) -> bool:
             """Move to a view while fusing the streamed frames; False if it was skipped."""
             try:
@@ -321,6 +342,7 @@ def run_episode(
         for vi, view in enumerate(init_views):
             views_done += execute(view, f"init view {vi}")
             mapper.view_done(False)
+            snapshot()
         rec.log_scalar("explore/mean_normalized_entropy", mapper.entropy_curve()[-1])
         stop_reason = "strategy_done"
         while True:
@@ -340,6 +362,7 @@ def run_episode(
             _log_decision(rec, decision)
             views_done += execute(decision["world_from_camera"], f"view {mapper.views_taken() + 1}")
             mapper.view_done(True)
+            snapshot()
             rec.log_scalar("explore/mean_normalized_entropy", mapper.entropy_curve()[-1])
             if cfg.record.grids:
                 pts, states = mapper.grid_cells()
@@ -393,6 +416,7 @@ def run_episode(
             "stages": stages,
             "stop_reason": stop_reason,
             "entropy_curve": mapper.entropy_curve(),
+            "accuracy_curve": accuracy_curve,
             "timings_ms_median": {s: (statistics.median(v) if v else None) for s, v in times.items()},
             "events": events,
         }
