@@ -102,6 +102,12 @@ def test_object_driven_episode_takes_next_best_views(tmp_path, ci_overlay) -> No
     curve = m["entropy_curve"]
     assert len(curve) == 4 + m["nbv_views"]  # after each Init view and each NBV view
     assert all(0.0 <= h <= 1.0 for h in curve), curve
+    # The map is evaluated after every view; the last snapshot is the final map's evaluation.
+    acc = m["accuracy_curve"]
+    assert len(acc) == len(curve) and [p["views"] for p in acc] == sorted(p["views"] for p in acc)
+    assert acc[-1]["views"] == m["views"]
+    assert acc[-1]["iou3d"] == pytest.approx(m["mean"]["iou3d"], abs=1e-12)
+    assert acc[-1]["cde_cm"] == pytest.approx(m["mean"]["cde_cm"], abs=1e-12)
     # The map found the scene's objects (NBV views add frames on top of the Init ones).
     assert m["frames"] > 10 and sum(o["est_id"] is not None for o in m["objects"]) >= 3
 
