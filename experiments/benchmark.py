@@ -209,6 +209,38 @@ def _accuracy_tables(ok: list[dict[str, Any]], strategies: list[str]) -> list[st
                 )
             lines.append(f"| {s} | " + " | ".join(cells) + " |")
         lines.append("")
+        lines += [
+            "### Each episode against random after the same number of views (paired by scene and seed)",
+            "",
+            "An episode's final map (n views) against random's map after n views on the same scene and seed",
+            "(differences: mean ± standard error).",
+            "",
+            "| strategy | views | 3D IoU | random's after as many views | difference | CDE cm | random's | difference |",
+            "|---|---|---|---|---|---|---|---|",
+        ]
+        for s in strategies:
+            if s == "random":
+                continue
+            pairs = [
+                (r, ref[(r["scene"], r["seed"])])
+                for r in with_curve
+                if r["strategy"] == s and (r["scene"], r["seed"]) in ref
+            ]
+            if len(pairs) < 2:
+                continue
+            cells = [f"{statistics.mean(r['views'] for r, _ in pairs):.1f}"]
+            for metric in ("iou3d", "cde_cm"):
+                own = [r[metric] for r, _ in pairs]
+                other = [curve_value(c, r["views"], metric) for r, c in pairs]
+                d = [a - b for a, b in zip(own, other) if a is not None and b is not None]
+                spec = ".3f" if metric == "iou3d" else ".2f"
+                cells += [
+                    format(_mean(own), spec),
+                    format(_mean(other), spec),
+                    f"{statistics.mean(d):+{spec}} ± {statistics.stdev(d) / len(d) ** 0.5:{spec}}",
+                ]
+            lines.append(f"| {s} | " + " | ".join(cells) + " |")
+        lines.append("")
     return lines
 
 
