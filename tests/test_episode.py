@@ -142,6 +142,7 @@ def test_object_clouds_from_slam_map_points(tmp_path, ci_overlay) -> None:
     )
     assert out.returncode == 0, out.stderr
     assert "world/map/points" in out.stdout + out.stderr
+    assert "eval/iou3d" in out.stdout + out.stderr  # the per-view evaluation, plotted by the viewer
 
 
 def test_map_follows_the_slam_gauge(tmp_path, ci_overlay) -> None:

@@ -306,6 +306,10 @@ def run_episode(
                     **offset_removed(gt_scene_file, json.loads(map_json), ev["objects"]),
                 }
             )
+            # Evaluation against ground truth, on its own entity paths (the viewer plots it over time).
+            for k in ("iou3d", "cde_cm", "iou3d_aligned"):
+                if accuracy_curve[-1][k] is not None:
+                    rec.log_scalar(f"eval/{k}", accuracy_curve[-1][k])
 
         def execute(view: np.ndarray, what: str) -> bool:
             """Move to a view while fusing the streamed frames; False if it was skipped."""
@@ -466,6 +470,9 @@ def format_table(metrics: dict[str, Any]) -> str:
     lines.append(
         f"{'mean':<18} {m['iou3d']:>6.3f} {m['iou2d']:>6.3f} {f(m['cde_cm'], '.2f'):>7} {f(m['yae_deg'], '.1f'):>8}"
     )
+    curve = metrics.get("accuracy_curve") or []
+    if curve:
+        lines.append("3D IoU after each view: " + " ".join(format(p["iou3d"], ".3f") for p in curve))
     t = metrics.get("timings_ms_median", {})
     lines.append("median ms/frame: " + "  ".join(f"{k} {f(v, '.1f')}" for k, v in t.items()))
     return "\n".join(lines)
