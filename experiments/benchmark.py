@@ -16,6 +16,11 @@ again against the scene file's poses. With the SLAM pose source the map's placem
 comes from averaging the views' kinematic-prior biases (1 cm / 1° per view), a draw shared by every
 object of an episode — and by every scene for strategies whose views do not depend on the scene
 (coverage, init) — so the aligned metrics isolate what the views did for the map's shape.
+Every episode also evaluates its map after each view (``accuracy_curve`` in its metrics.json); the
+report gives the metrics after k views per strategy, and 3D IoU differences to random at equal view
+counts, paired by scene and seed. The kinematic biases are drawn per (seed, scene, view index), so
+at the same k two strategies' maps share the gauge's draw and the paired difference isolates what
+the choice of views did; an episode that stopped earlier keeps the map it stopped with.
 ``--report-only`` rebuilds the reports from ``<out>/exploration.json`` and its run folders;
 ``--also FILE[:strategies]`` joins other sweeps' rows (more seeds, or the baselines of the main
 report next to a variant: ``--set explore.stop_when_explored=false`` runs the utility strategies
