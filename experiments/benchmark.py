@@ -160,15 +160,32 @@ def curve_value(curve: list[dict[str, Any]], k: int, metric: str) -> float | Non
     return v
 
 
+def _curves(ok: list[dict[str, Any]]) -> tuple[list[dict[str, Any]], list[int]]:
+    """The rows that carry an ``accuracy_curve`` and the view counts 1..k_max they span."""
+    with_curve = [r for r in ok if r.get("accuracy_curve")]
+    kmax = max((p["views"] for r in with_curve for p in r["accuracy_curve"]), default=0)
+    return with_curve, list(range(1, kmax + 1))
+
+
+def _mean_after(runs: list[dict[str, Any]], k: int, metric: str) -> float | None:
+    """Mean of ``metric`` after ``k`` views over ``runs`` (see :func:`curve_value`)."""
+    return _mean([curve_value(r["accuracy_curve"], k, metric) for r in runs])
+
+
+def _mean_se(d: list[float], spec: str) -> str:
+    """``mean ± standard error`` of paired differences (``-`` with fewer than two)."""
+    if len(d) < 2:
+        return "-"
+    return f"{statistics.mean(d):+{spec}} ± {statistics.stdev(d) / len(d) ** 0.5:{spec}}"
+
+
 def _accuracy_tables(ok: list[dict[str, Any]], strategies: list[str]) -> list[str]:
     """Metrics after k views (from each run's ``accuracy_curve``) and the paired difference to
     random at equal views: the kinematic biases are drawn per (seed, scene, view index), so at the
     same k two strategies' maps share the SLAM gauge's draw and the difference isolates the views."""
-    with_curve = [r for r in ok if r.get("accuracy_curve")]
+    with_curve, ks = _curves(ok)
     if not with_curve:
         return []
-    kmax = max(p["views"] for r in with_curve for p in r["accuracy_curve"])
-    ks = list(range(1, kmax + 1))
     head = "| strategy | " + " | ".join(str(k) for k in ks) + " |"
     sep = "|---" * (len(ks) + 1) + "|"
     lines = [
@@ -186,66 +203,45 @@ def _accuracy_tables(ok: list[dict[str, Any]], strategies: list[str]) -> list[st
         lines += [f"### {title}", "", head, sep]
         for s in strategies:
             runs = [r for r in with_curve if r["strategy"] == s]
-            cells = [_fmt([_mean([curve_value(r["accuracy_curve"], k, metric) for r in runs])], spec) for k in ks]
-            lines.append(f"| {s} | " + " | ".join(cells) + " |")
+            lines.append(f"| {s} | " + " | ".join(_fmt([_mean_after(runs, k, metric)], spec) for k in ks) + " |")
         lines.append("")
-    if "random" in strategies:
-        lines += [
-            "### 3D IoU minus random's at equal views (paired by scene and seed: mean ± standard error)",
-            "",
-            head,
-            sep,
-        ]
-        ref = {(r["scene"], r["seed"]): r["accuracy_curve"] for r in with_curve if r["strategy"] == "random"}
-        for s in strategies:
-            if s == "random":
-                continue
-            cells = []
-            for k in ks:
-                d = [
-                    a - b
-                    for r in with_curve
-                    if r["strategy"] == s and (r["scene"], r["seed"]) in ref
-                    for a, b in [(curve_value(r["accuracy_curve"], k, "iou3d"), curve_value(ref[(r["scene"], r["seed"])], k, "iou3d"))]
-                    if a is not None and b is not None
-                ]
-                cells.append(
-                    f"{statistics.mean(d):+.3f} ± {statistics.stdev(d) / len(d) ** 0.5:.3f}" if len(d) > 1 else "-"
-                )
-            lines.append(f"| {s} | " + " | ".join(cells) + " |")
-        lines.append("")
-        lines += [
-            "### Each episode against random after the same number of views (paired by scene and seed)",
-            "",
-            "An episode's final map (n views) against random's map after n views on the same scene and seed",
-            "(differences: mean ± standard error).",
-            "",
-            "| strategy | views | 3D IoU | random's after as many views | difference | CDE cm | random's | difference |",
-            "|---|---|---|---|---|---|---|---|",
-        ]
-        for s in strategies:
-            if s == "random":
-                continue
-            pairs = [
-                (r, ref[(r["scene"], r["seed"])])
-                for r in with_curve
-                if r["strategy"] == s and (r["scene"], r["seed"]) in ref
-            ]
-            if len(pairs) < 2:
-                continue
-            cells = [f"{statistics.mean(r['views'] for r, _ in pairs):.1f}"]
-            for metric in ("iou3d", "cde_cm"):
-                own = [r[metric] for r, _ in pairs]
-                other = [curve_value(c, r["views"], metric) for r, c in pairs]
-                d = [a - b for a, b in zip(own, other) if a is not None and b is not None]
-                spec = ".3f" if metric == "iou3d" else ".2f"
-                cells += [
-                    format(_mean(own), spec),
-                    format(_mean(other), spec),
-                    f"{statistics.mean(d):+{spec}} ± {statistics.stdev(d) / len(d) ** 0.5:{spec}}",
-                ]
-            lines.append(f"| {s} | " + " | ".join(cells) + " |")
-        lines.append("")
+    if "random" not in strategies:
+        return lines
+    ref = {(r["scene"], r["seed"]): r["accuracy_curve"] for r in with_curve if r["strategy"] == "random"}
+    # Each other strategy's runs with random's curve on the same scene and seed.
+    pairs = {
+        s: [(r, ref[(r["scene"], r["seed"])]) for r in with_curve if r["strategy"] == s and (r["scene"], r["seed"]) in ref]
+        for s in strategies
+        if s != "random"
+    }
+    lines += ["### 3D IoU minus random's at equal views (paired by scene and seed: mean ± standard error)", "", head, sep]
+    for s, ps in pairs.items():
+        cells = []
+        for k in ks:
+            both = [(curve_value(r["accuracy_curve"], k, "iou3d"), curve_value(c, k, "iou3d")) for r, c in ps]
+            cells.append(_mean_se([a - b for a, b in both if a is not None and b is not None], ".3f"))
+        lines.append(f"| {s} | " + " | ".join(cells) + " |")
+    lines += [
+        "",
+        "### Each episode against random after the same number of views (paired by scene and seed)",
+        "",
+        "An episode's final map (n views) against random's map after n views on the same scene and seed",
+        "(differences: mean ± standard error).",
+        "",
+        "| strategy | views | 3D IoU | random's after as many views | difference | CDE cm | random's | difference |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for s, ps in pairs.items():
+        if len(ps) < 2:
+            continue
+        cells = [f"{statistics.mean(r['views'] for r, _ in ps):.1f}"]
+        for metric, spec in (("iou3d", ".3f"), ("cde_cm", ".2f")):
+            own = [r[metric] for r, _ in ps]
+            other = [curve_value(c, r["views"], metric) for r, c in ps]
+            d = [a - b for a, b in zip(own, other) if a is not None and b is not None]
+            cells += [format(_mean(own), spec), format(_mean(other), spec), _mean_se(d, spec)]
+        lines.append(f"| {s} | " + " | ".join(cells) + " |")
+    lines.append("")
     return lines
 
 
@@ -283,16 +279,14 @@ def _plots(ok: list[dict[str, Any]], strategies: list[str], out: Path, command: 
     fig.tight_layout()
     fig.savefig(out / "exploration_entropy.png", dpi=110)
     plt.close(fig)
-    with_curve = [r for r in ok if r.get("accuracy_curve")]
+    with_curve, ks = _curves(ok)
     if not with_curve:
         return
-    kmax = max(p["views"] for r in with_curve for p in r["accuracy_curve"])
     fig, axes = plt.subplots(1, 2, figsize=(11, 4))
     for ax, (metric, label) in zip(axes, (("iou3d", "3D IoU"), ("iou3d_aligned", "3D IoU, global offset removed"))):
         for s in strategies:
             runs = [r for r in with_curve if r["strategy"] == s]
-            ks = [k for k in range(1, kmax + 1)]
-            ys = [_mean([curve_value(r["accuracy_curve"], k, metric) for r in runs]) for k in ks]
+            ys = [_mean_after(runs, k, metric) for k in ks]
             pts = [(k, y) for k, y in zip(ks, ys) if y is not None]
             if pts:
                 ax.plot([p[0] for p in pts], [p[1] for p in pts], marker="o", ms=3, label=s)
