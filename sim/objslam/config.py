@@ -106,6 +106,10 @@ class ParamRunConfig:
     """Beyond the paper: the ``refined`` stage of cylinders is a circle fitted to their side-wall
     points with the height centred on the points' vertical extent (``core/src/objects/cylinder.rs``);
     False = the paper (cylinders end at the iForest mean and axis-aligned extent)."""
+    cylinder_consensus_iterations: int = 200
+    """Circles through three random side-wall points tried as a second start of the cylinder fit
+    (the one with more points on the circle is kept); 0 = the algebraic start only (before
+    2026-12-02: a neighbour's points merged into a bottle's cloud pulled that start off the wall)."""
 
 
 @dataclass(frozen=True)
@@ -254,6 +258,8 @@ class RunConfig:
             raise ConfigError("param.iforest_passes: must be ≥ 1")
         if self.param.iforest_readmit_rings < 0:
             raise ConfigError("param.iforest_readmit_rings: must be ≥ 0")
+        if self.param.cylinder_consensus_iterations < 0:
+            raise ConfigError("param.cylinder_consensus_iterations: must be ≥ 0")
         if not (self.param.iforest_readmit_gap > 0 and math.isfinite(self.param.iforest_readmit_gap)):
             raise ConfigError("param.iforest_readmit_gap: must be a finite number > 0")
         if self.min_observations < 1:

@@ -165,7 +165,10 @@ def new_mapper(cfg: RunConfig, scene: SceneSpec) -> Any:
                         "readmit_rings": cfg.param.iforest_readmit_rings,
                         "readmit_gap_factor": cfg.param.iforest_readmit_gap,
                     },
-                    "cylinder": {"enabled": cfg.param.cylinder_fit},
+                    "cylinder": {
+                        "enabled": cfg.param.cylinder_fit,
+                        "consensus_iterations": cfg.param.cylinder_consensus_iterations,
+                    },
                     "refine": {
                         "refine_center": cfg.param.refine_center,
                         "prior_px_per_m": cfg.param.refine_prior_px_per_m,
