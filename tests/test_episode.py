@@ -91,6 +91,10 @@ def test_bad_config_names_the_key(ci_overlay) -> None:
         load_run_config(overrides=['strategy="teleport"'])
     with pytest.raises(ConfigError, match="detector.miss_rate"):
         load_run_config(overrides=["detector.miss_rate=2.0"])
+    with pytest.raises(ConfigError, match="param.support_snap_m"):
+        load_run_config(overrides=["param.support_snap_m=-0.01"])
+    with pytest.raises(ConfigError, match="param.cylinder_consensus_iterations"):
+        load_run_config(overrides=["param.cylinder_consensus_iterations=-1"])
 
 
 def test_object_driven_episode_takes_next_best_views(tmp_path, ci_overlay) -> None:

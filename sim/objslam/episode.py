@@ -165,6 +165,12 @@ def new_mapper(cfg: RunConfig, scene: SceneSpec) -> Any:
                         "readmit_rings": cfg.param.iforest_readmit_rings,
                         "readmit_gap_factor": cfg.param.iforest_readmit_gap,
                     },
+                    # The table top is z = 0 (scene files); 0 = no support snap.
+                    **(
+                        {"support_z_m": 0.0, "support_snap_m": cfg.param.support_snap_m}
+                        if cfg.param.support_snap_m > 0.0
+                        else {}
+                    ),
                     "cylinder": {
                         "enabled": cfg.param.cylinder_fit,
                         "consensus_iterations": cfg.param.cylinder_consensus_iterations,
