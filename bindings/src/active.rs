@@ -277,6 +277,12 @@ impl ActiveMapperPy {
         self.session.entropy_curve().to_vec()
     }
 
+    /// Fraction of the table top known (seen, or under a mapped object) after each view, Init
+    /// views included.
+    fn table_known_curve(&self) -> Vec<f64> {
+        self.session.table_known_curve().to_vec()
+    }
+
     /// The map as versioned JSON.
     fn map_json(&self) -> String {
         self.mapper.map().to_json()

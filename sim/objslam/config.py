@@ -64,6 +64,17 @@ class ExploreRunConfig:
     """object-driven / expected-gain: stop once every object is explored (the paper's rule).
     ``false``: keep choosing views by the same utility, every object counted (s(x) = 1), until
     ``max_views`` — the equal-budget comparison with random and coverage."""
+    discovery_weight: float = 0.0
+    """object-driven / expected-gain, beyond the paper: weight of the table discovery term (bits
+    per cm² of table top not yet seen, added to f) and its stopping extension (do not stop while a
+    view would still see ``discovery_min_new_cells`` unseen cells). 0 = the paper. The paper's
+    utility knows only the objects already mapped; an object the Init views missed is never
+    looked for (core ``explore::discovery`` module docs)."""
+    discovery_cell_m: float = 0.02
+    """Table coverage cell, metres."""
+    discovery_min_new_cells: int = 25
+    """Cells a view must newly see to keep exploring after every object is done (25 × 2 cm × 2 cm
+    = 100 cm², about the footprint of the smallest object class)."""
 
 
 @dataclass(frozen=True)

@@ -429,6 +429,7 @@ def run_episode(
             "stages": stages,
             "stop_reason": stop_reason,
             "entropy_curve": mapper.entropy_curve(),
+            "table_known_curve": mapper.table_known_curve(),
             "accuracy_curve": accuracy_curve,
             "timings_ms_median": {s: (statistics.median(v) if v else None) for s, v in times.items()},
             "events": events,

@@ -16,7 +16,10 @@
 //!   - `coverage`: the Boustrophedon scan views in order (unreachable ones skipped), then stop;
 //!   - `random`: one random reachable view per step (seeded by `seed` and the step);
 //!   - `object-driven` / `expected-gain`: the paper's stopping rule, candidate views sampled around
-//!     the objects still to explore, the utility's argmax among the reachable ones.
+//!     the objects still to explore, the utility's argmax among the reachable ones. With
+//!     `discovery_weight` > 0 (beyond the paper), also candidates aimed at unseen table cells, the
+//!     discovery term added to the utility, and no stop on "all explored" while a reachable view
+//!     would still see `discovery_min_new_cells` unseen cells ([`explore::TableCoverage`]).
 //!
 //! Every strategy stops at `explore.max_views` views after Init (paper: 10), so the comparison is
 //! at an equal or smaller view budget ([`ActiveConfig::stop_when_explored`] `= false` makes it
@@ -26,9 +29,9 @@
 use serde::{Deserialize, Serialize};
 
 use crate::explore::{
-    self, coverage_views, random_views, sample_candidates_around, stop_reason, CandidateConfig, ExplorationGrids,
-    ExploreConfig, ExploreError, HistoryBook, ObservedPoints, Reachability, StopReason, Strategy, TableRect,
-    UtilityContext,
+    self, coverage_views, discovery_targets, random_views, sample_candidates_around, sample_candidates_at, stop_reason,
+    visible_unknown_cells, CandidateConfig, CandidateView, ExplorationGrids, ExploreConfig, ExploreError, HistoryBook,
+    ObservedPoints, Occluders, Reachability, StopReason, Strategy, TableCoverage, TableRect, UtilityContext,
 };
 use crate::frame::Frame;
 use crate::geometry::{PinholeCamera, Se3};
@@ -76,6 +79,14 @@ pub struct ActiveConfig {
     /// until `max_views` — an equal-budget comparison with random and coverage, which always spend
     /// the budget (stop reason `max_views`).
     pub stop_when_explored: bool,
+    /// object-driven / expected-gain: weight w of the table discovery term (beyond the paper;
+    /// 0 = the paper's utility and stopping rule; `explore::discovery` module docs).
+    pub discovery_weight: f64,
+    /// Table coverage cell, metres.
+    pub discovery_cell_m: f64,
+    /// After every object is done, keep looking while a candidate sees at least this many unseen
+    /// table cells.
+    pub discovery_min_new_cells: usize,
 }
 
 impl Default for ActiveConfig {
@@ -100,9 +111,15 @@ impl Default for ActiveConfig {
             done_normalized_entropy: e.done_normalized_entropy,
             motion_cost_bits_per_m: e.motion_cost_bits_per_m,
             stop_when_explored: true,
+            discovery_weight: e.discovery.weight,
+            discovery_cell_m: e.discovery.cell_m,
+            discovery_min_new_cells: e.discovery.min_new_cells,
         }
     }
 }
+
+/// Mixed into the step seed for the candidates aimed at unseen table cells.
+const TABLE_CANDIDATE_SEED: u64 = 0x7AB1_E5EE;
 
 /// What the session decided.
 #[derive(Debug, Clone, PartialEq)]
@@ -170,6 +187,8 @@ pub struct ActiveSession {
     views_taken: usize,
     coverage_queue: Option<Vec<Se3>>,
     entropy_curve: Vec<f64>,
+    table_coverage: TableCoverage,
+    table_curve: Vec<f64>,
 }
 
 impl ActiveSession {
@@ -182,6 +201,9 @@ impl ActiveSession {
         explore.done_occupied_ratio = config.done_occupied_ratio;
         explore.done_normalized_entropy = config.done_normalized_entropy;
         explore.motion_cost_bits_per_m = config.motion_cost_bits_per_m;
+        explore.discovery.weight = config.discovery_weight;
+        explore.discovery.cell_m = config.discovery_cell_m;
+        explore.discovery.min_new_cells = config.discovery_min_new_cells;
         explore.validate()?;
         let candidates = CandidateConfig {
             views_per_object: config.views_per_object,
@@ -196,6 +218,7 @@ impl ActiveSession {
         };
         candidates.validate()?;
         table.validate()?;
+        let table_coverage = TableCoverage::new(&table, explore.discovery.cell_m)?;
         Ok(Self {
             config,
             strategy,
@@ -207,6 +230,8 @@ impl ActiveSession {
             views_taken: 0,
             coverage_queue: None,
             entropy_curve: Vec::new(),
+            table_coverage,
+            table_curve: Vec::new(),
         })
     }
 
@@ -230,6 +255,17 @@ impl ActiveSession {
         &self.entropy_curve
     }
 
+    /// Fraction of the table top known (seen, or under a mapped object) after each view, Init
+    /// views included (every strategy; `explore::discovery`).
+    pub fn table_known_curve(&self) -> &[f64] {
+        &self.table_curve
+    }
+
+    /// The table coverage grid (for recording).
+    pub fn table_coverage(&self) -> &TableCoverage {
+        &self.table_coverage
+    }
+
     /// The Init views (four table corners), shared by every strategy.
     pub fn initial_views(&self) -> Result<Vec<Se3>, ExploreError> {
         explore::init_views(&self.table, &self.candidates)
@@ -242,6 +278,12 @@ impl ActiveSession {
         frame: &Frame,
         observed: &[ObservedPoints],
     ) -> Result<(), ExploreError> {
+        self.table_coverage.integrate_depth(
+            &frame.camera,
+            &frame.world_from_camera,
+            &frame.depth,
+            &self.explore.discovery,
+        )?;
         self.grids
             .integrate_frame(
                 map,
@@ -258,6 +300,7 @@ impl ActiveSession {
     /// the Init views (they do not use the budget).
     pub fn view_done(&mut self, map: &ObjectMap, counts_as_view: bool) {
         self.history.record(map);
+        self.table_curve.push(self.table_coverage.known_fraction(&Occluders::from_map(map, &self.explore.grid)));
         if counts_as_view {
             self.views_taken += 1;
         }
@@ -310,8 +353,14 @@ impl ActiveSession {
             }
             Strategy::ObjectDriven | Strategy::ExpectedGain => {
                 let mut ctx = UtilityContext::new(map, &self.grids, &self.history, camera, &self.explore)?;
+                let disc = &self.explore.discovery;
+                let occluders = Occluders::from_map(map, &self.explore.grid);
+                let unknown = if disc.enabled() { self.table_coverage.unknown_cells(&occluders) } else { Vec::new() };
+                // With discovery on, "every object done" still looks at the unseen table first.
+                let mut table_only = false;
                 match stop_reason(&ctx.features(), self.views_taken, &self.explore) {
                     Some(StopReason::AllExplored) if !self.config.stop_when_explored => ctx.explore_every_object(),
+                    Some(StopReason::AllExplored) if unknown.len() >= disc.min_new_cells => table_only = true,
                     Some(r) => return Ok(NextView::Stop { reason: r.into() }),
                     None => {}
                 }
@@ -320,22 +369,54 @@ impl ActiveSession {
                 // The argmax rule over reachable views: sample without the reachability filter,
                 // score all, then ask reachability in utility order, so IK runs only for the best.
                 let always = |_: &Se3| true;
-                let views = sample_candidates_around(
-                    map,
-                    Some(&around),
-                    &self.candidates,
-                    &self.explore.grid,
-                    &always,
-                    step_seed,
-                )?;
+                let mut views: Vec<CandidateView> = if table_only {
+                    Vec::new()
+                } else {
+                    sample_candidates_around(
+                        map,
+                        Some(&around),
+                        &self.candidates,
+                        &self.explore.grid,
+                        &always,
+                        step_seed,
+                    )?
+                };
+                if !unknown.is_empty() {
+                    let targets = discovery_targets(&unknown, disc.targets, step_seed);
+                    views.extend(sample_candidates_at(
+                        &targets,
+                        map,
+                        &self.candidates,
+                        &self.explore.grid,
+                        &always,
+                        step_seed ^ TABLE_CANDIDATE_SEED,
+                    )?);
+                }
                 let poses: Vec<Se3> = views.iter().map(|v| v.world_from_camera).collect();
                 let scores = ctx.score_all(&poses, self.strategy, Some(current))?;
+                let new_cells: Vec<usize> = poses
+                    .iter()
+                    .map(|p| {
+                        if unknown.is_empty() {
+                            0
+                        } else {
+                            visible_unknown_cells(&unknown, camera, p, &occluders, &self.explore.grid)
+                        }
+                    })
+                    .collect();
+                let bits_per_cell = disc.weight * self.table_coverage.bits_per_cell(self.explore.grid.cell_size_m);
                 let mut scored: Vec<ScoredCandidate> = poses
                     .iter()
-                    .zip(&scores)
-                    .map(|(p, s)| ScoredCandidate { world_from_camera: *p, utility: s.utility, reachable: None })
+                    .zip(scores.iter().zip(&new_cells))
+                    .map(|(p, (s, n))| ScoredCandidate {
+                        world_from_camera: *p,
+                        utility: s.utility + bits_per_cell * *n as f64,
+                        reachable: None,
+                    })
                     .collect();
-                let mut order: Vec<usize> = (0..scored.len()).filter(|i| scored[*i].utility.is_finite()).collect();
+                let mut order: Vec<usize> = (0..scored.len())
+                    .filter(|i| scored[*i].utility.is_finite() && (!table_only || new_cells[*i] >= disc.min_new_cells))
+                    .collect();
                 order.sort_by(|a, b| scored[*b].utility.total_cmp(&scored[*a].utility).then(a.cmp(b)));
                 for i in order {
                     let ok = reachable.reachable(&scored[i].world_from_camera);
@@ -345,7 +426,9 @@ impl ActiveSession {
                         return Ok(NextView::Move { world_from_camera: pose, utility, candidates: scored });
                     }
                 }
-                Ok(NextView::Stop { reason: SessionStop::NoReachableView })
+                Ok(NextView::Stop {
+                    reason: if table_only { SessionStop::AllExplored } else { SessionStop::NoReachableView },
+                })
             }
         }
     }

@@ -90,7 +90,15 @@
 //! (1 − R_o) weight is dropped (the expected reduction already favours uncertain cells);
 //! μ = `motion_cost_bits_per_m`, ρ = `motion_cost_m_per_rad` (rotation as equivalent metres);
 //! R, t is the candidate pose and R_now, t_now the current camera pose.
+//!
+//! # Table discovery (beyond the paper; [`DiscoveryConfig`], off by default in the core)
+//! The paper's f knows only mapped objects, so an object the Init views missed is never looked
+//! for. [`TableCoverage`] records which 2 cm cells of the table top have had a depth return;
+//! with weight w > 0 the session adds w·(bits per cm²)·(unseen cells a candidate would see) to f,
+//! adds candidates aimed at unseen cells, and does not stop on "every object done" while a view
+//! would still see `min_new_cells` unseen cells (`discovery` module docs).
 
+mod discovery;
 mod grid;
 mod utility;
 mod views;
@@ -100,6 +108,7 @@ use std::collections::BTreeMap;
 
 use nalgebra::Point3;
 
+pub use discovery::{discovery_targets, visible_unknown_cells, DiscoveryConfig, TableCoverage};
 pub use grid::{
     binary_entropy_bits, log_odds, plogp_bits, probability_from_log_odds, CellPose, CellRef, CellState, Face, FaceGrid,
     GridStats, SurfaceGrid, WorldCell,
@@ -110,7 +119,7 @@ pub use utility::{
 };
 pub use views::{
     camera_position_free, coverage_views, init_views, look_at, look_at_with_up, random_views, sample_candidates,
-    sample_candidates_around, AlwaysReachable, CandidateView, Reachability,
+    sample_candidates_around, sample_candidates_at, AlwaysReachable, CandidateView, Reachability,
 };
 pub use visibility::{
     integrate_object, point_visibility, CellVisibility, ObjectFrameUpdate, ObservedPoints, Occluders, Viewpoint,
@@ -334,6 +343,9 @@ pub struct ExploreConfig {
     pub expected_measurements: u32,
     /// expected-gain: metres of travel equivalent to one radian of camera rotation (ρ).
     pub motion_cost_m_per_rad: f64,
+    /// Table discovery term and stopping extension (beyond the paper; off = weight 0, the core
+    /// default; [`discovery`] module docs).
+    pub discovery: DiscoveryConfig,
 }
 
 impl Default for ExploreConfig {
@@ -352,6 +364,7 @@ impl Default for ExploreConfig {
             motion_cost_bits_per_m: 20.0,
             expected_measurements: 3,
             motion_cost_m_per_rad: 0.1,
+            discovery: DiscoveryConfig::default(),
         }
     }
 }
@@ -366,7 +379,8 @@ impl ExploreConfig {
         check_range("done_volume_probability", self.done_volume_probability, 0.0, 1.0)?;
         check_range("volume_sigma_floor", self.volume_sigma_floor, 1e-9, 1e3)?;
         check_range("motion_cost_bits_per_m", self.motion_cost_bits_per_m, 0.0, 1e9)?;
-        check_range("motion_cost_m_per_rad", self.motion_cost_m_per_rad, 0.0, 1e3)
+        check_range("motion_cost_m_per_rad", self.motion_cost_m_per_rad, 0.0, 1e3)?;
+        self.discovery.validate()
     }
 }
 

@@ -581,3 +581,108 @@ fn utility_matches_closed_form_for_one_unknown_cube() {
     assert_eq!(s3.utility, 0.0);
     assert!(s3.objects.is_empty());
 }
+
+fn table() -> TableRect {
+    TableRect { center_m: [0.5, 0.0], size_m: [0.8, 1.2], height_m: 0.0 }
+}
+
+fn on(disc: DiscoveryConfig) -> DiscoveryConfig {
+    DiscoveryConfig { weight: 1.0, ..disc }
+}
+
+#[test]
+fn a_top_down_view_sees_its_footprint_of_the_table() {
+    // Camera 0.5 m straight above the table centre; flat table: z-depth 0.5 everywhere.
+    let cam = camera();
+    let h = 0.5;
+    let pose = view(Point3::new(0.5, 0.0, h), [0.5, 0.0, 0.0]);
+    let depth = DepthImage::new(640, 480, vec![h as f32; 640 * 480]).unwrap_or_else(|e| panic!("{e}"));
+    let cfg = on(DiscoveryConfig::default());
+    let mut cov = TableCoverage::new(&table(), cfg.cell_m).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(cov.len(), 40 * 60);
+    let newly = cov.integrate_depth(&cam, &pose, &depth, &cfg).unwrap_or_else(|e| panic!("{e}"));
+    // Footprint (closed form): an axis-aligned 2·h·(W/2)/f × 2·h·(H/2)/f rectangle, i.e. a × b
+    // cells; it covers at least (a − 1)(b − 1) whole cells and touches at most (a + 2)(b + 2)
+    // (samples every 4 px ≈ 4.6 mm reach nearly every touched cell).
+    let a = 2.0 * h * cam.cx / cam.fx / cfg.cell_m;
+    let b = 2.0 * h * cam.cy / cam.fy / cfg.cell_m;
+    let seen = cov.seen_cells() as f64;
+    assert_eq!(newly, cov.seen_cells());
+    assert!(seen >= (a - 1.0) * (b - 1.0) && seen <= (a + 2.0) * (b + 2.0), "seen {seen}, a × b = {a} × {b}");
+    let empty = Occluders::from_map(&ObjectMap::new(), &GridConfig::default());
+    assert!((cov.known_fraction(&empty) - seen / 2400.0).abs() < 1e-12);
+    // The same frame again changes nothing; returns below the table top mark nothing.
+    assert_eq!(cov.integrate_depth(&cam, &pose, &depth, &cfg).unwrap_or_else(|e| panic!("{e}")), 0);
+    let below = DepthImage::new(640, 480, vec![0.6; 640 * 480]).unwrap_or_else(|e| panic!("{e}"));
+    let mut cov2 = TableCoverage::new(&table(), cfg.cell_m).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(cov2.integrate_depth(&cam, &pose, &below, &cfg).unwrap_or_else(|e| panic!("{e}")), 0);
+    // Wrong depth size: a typed error.
+    let small = DepthImage::new(64, 48, vec![0.5; 64 * 48]).unwrap_or_else(|e| panic!("{e}"));
+    assert!(matches!(cov2.integrate_depth(&cam, &pose, &small, &cfg), Err(ExploreError::Degenerate { .. })));
+}
+
+#[test]
+fn unseen_cells_are_counted_where_the_camera_looks_and_not_behind_objects() {
+    let cam = camera();
+    let cfg = on(DiscoveryConfig::default());
+    let grid = GridConfig::default();
+    let mut cov = TableCoverage::new(&table(), cfg.cell_m).unwrap_or_else(|e| panic!("{e}"));
+    // See the y < 0 half from above (depth 0.5 over the view's footprint).
+    let seen_pose = view(Point3::new(0.5, -0.3, 0.5), [0.5, -0.3, 0.0]);
+    let depth = DepthImage::new(640, 480, vec![0.5; 640 * 480]).unwrap_or_else(|e| panic!("{e}"));
+    cov.integrate_depth(&cam, &seen_pose, &depth, &cfg).unwrap_or_else(|e| panic!("{e}"));
+    let empty_map = ObjectMap::new();
+    let empty = Occluders::from_map(&empty_map, &grid);
+    let unknown = cov.unknown_cells(&empty);
+    let towards_seen = visible_unknown_cells(&unknown, &cam, &seen_pose, &empty, &grid);
+    let unseen_pose = view(Point3::new(0.5, 0.3, 0.5), [0.5, 0.3, 0.0]);
+    let towards_unseen = visible_unknown_cells(&unknown, &cam, &unseen_pose, &empty, &grid);
+    assert_eq!(towards_seen, 0);
+    assert!(towards_unseen > 500, "{towards_unseen}");
+    // A tall block in the unseen half: its footprint counts as known, and from a low oblique
+    // camera the cells behind it are hidden.
+    let map = map_of(vec![object(Label::Block, [0.5, 0.3, 0.15], 0.0, [0.06, 0.06, 0.15])]);
+    let occ = Occluders::from_map(&map, &grid);
+    let unknown_obj = cov.unknown_cells(&occ);
+    let footprint = unknown.len() - unknown_obj.len();
+    assert!((36..=64).contains(&footprint), "{footprint}"); // (12 + 2·1 cm margin)² / 4 cm² = 49
+    let low = view(Point3::new(0.5, -0.1, 0.25), [0.5, 0.45, 0.0]);
+    let without = visible_unknown_cells(&unknown_obj, &cam, &low, &empty, &grid);
+    let with = visible_unknown_cells(&unknown_obj, &cam, &low, &occ, &grid);
+    assert!(with + 20 < without, "with {with}, without {without}");
+    assert!((cov.known_fraction(&occ) - (1.0 - unknown_obj.len() as f64 / 2400.0)).abs() < 1e-12);
+}
+
+#[test]
+fn discovery_targets_spread_over_the_unseen_cells() {
+    let mut pts: Vec<Point3<f64>> = (0..10).map(|i| Point3::new(0.2 + 0.01 * f64::from(i), -0.4, 0.0)).collect();
+    pts.extend((0..10).map(|i| Point3::new(0.2 + 0.01 * f64::from(i), 0.4, 0.0)));
+    let t = discovery_targets(&pts, 2, 7);
+    assert_eq!(t.len(), 2);
+    assert!(t[0].y * t[1].y < 0.0, "one target per cluster: {t:?}");
+    assert_eq!(t, discovery_targets(&pts, 2, 7));
+    assert!(discovery_targets(&[], 3, 0).is_empty());
+    assert_eq!(discovery_targets(&pts[..1], 3, 0).len(), 1);
+}
+
+#[test]
+fn discovery_keeps_an_empty_map_looking_at_the_table() {
+    // Nothing mapped and nothing seen (Init saw no object): the paper's utility has no candidate,
+    // the discovery term aims at the unseen table.
+    use crate::active::{ActiveConfig, ActiveSession, NextView, SessionStop};
+    let cam = camera();
+    let here = view(Point3::new(0.3, 0.0, 0.5), [0.5, 0.0, 0.0]);
+    let map = ObjectMap::new();
+    let paper = ActiveConfig::default();
+    let mut s = ActiveSession::new(paper.clone(), table()).unwrap_or_else(|e| panic!("{e}"));
+    let d = s.next_view(&map, &cam, &here, &AlwaysReachable).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(d, NextView::Stop { reason: SessionStop::NoReachableView });
+    let disc = ActiveConfig { discovery_weight: 1.0, ..paper };
+    let mut s = ActiveSession::new(disc, table()).unwrap_or_else(|e| panic!("{e}"));
+    let d = s.next_view(&map, &cam, &here, &AlwaysReachable).unwrap_or_else(|e| panic!("{e}"));
+    let NextView::Move { world_from_camera, utility, .. } = d else { panic!("expected a move, got {d:?}") };
+    assert!(utility >= 4.0 * 25.0, "at least min_new_cells × 4 bits: {utility}");
+    // It looks down at the table top.
+    let axis = world_from_camera.rotation * Vector3::z();
+    assert!(axis.z < -0.5, "{axis:?}");
+}

@@ -125,7 +125,6 @@ pub fn sample_candidates_around(
     let occluders = Occluders::from_map(map, grid);
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let mut out = Vec::new();
-    let n = config.views_per_object;
     for o in &map.objects {
         if around.is_some_and(|ids| !ids.contains(&o.id)) {
             continue;
@@ -134,19 +133,59 @@ pub fn sample_candidates_around(
         if !c.coords.iter().all(|v| v.is_finite()) {
             continue;
         }
-        for k in 0..n {
-            let az = std::f64::consts::TAU * (k as f64 + rng.random::<f64>()) / n as f64;
-            let el = rng.random_range(config.elevation_deg[0]..=config.elevation_deg[1]).to_radians();
-            let d = rng.random_range(config.distance_m[0]..=config.distance_m[1]);
-            let eye = c + Vector3::new(el.cos() * az.cos(), el.cos() * az.sin(), el.sin()) * d;
-            if !camera_position_free(&eye, &occluders, config) {
-                continue;
-            }
-            let pose = look_at(&eye, &c)?;
-            if reachable.reachable(&pose) {
-                out.push(CandidateView { world_from_camera: pose, target_object: Some(o.id) });
-            }
+        views_around(&c, Some(o.id), config, &occluders, reachable, &mut rng, &mut out)?;
+    }
+    Ok(out)
+}
+
+/// `views_per_object` views looking at `target` (stratified azimuth, uniform elevation and
+/// distance, as [`sample_candidates_around`]), appended to `out` when collision-free and reachable.
+fn views_around(
+    target: &Point3<f64>,
+    target_object: Option<u32>,
+    config: &CandidateConfig,
+    occluders: &Occluders,
+    reachable: &dyn Reachability,
+    rng: &mut ChaCha8Rng,
+    out: &mut Vec<CandidateView>,
+) -> Result<(), ExploreError> {
+    let n = config.views_per_object;
+    for k in 0..n {
+        let az = std::f64::consts::TAU * (k as f64 + rng.random::<f64>()) / n as f64;
+        let el = rng.random_range(config.elevation_deg[0]..=config.elevation_deg[1]).to_radians();
+        let d = rng.random_range(config.distance_m[0]..=config.distance_m[1]);
+        let eye = target + Vector3::new(el.cos() * az.cos(), el.cos() * az.sin(), el.sin()) * d;
+        if !camera_position_free(&eye, occluders, config) {
+            continue;
         }
+        let pose = look_at(&eye, target)?;
+        if reachable.reachable(&pose) {
+            out.push(CandidateView { world_from_camera: pose, target_object });
+        }
+    }
+    Ok(())
+}
+
+/// Candidate views aimed at points rather than objects (e.g. unseen table cells from
+/// [`super::discovery_targets`]): `views_per_object` per target as [`sample_candidates_around`]
+/// samples them around an object centre, `target_object` = `None`. Deterministic given `seed`.
+pub fn sample_candidates_at(
+    targets: &[Point3<f64>],
+    map: &ObjectMap,
+    config: &CandidateConfig,
+    grid: &GridConfig,
+    reachable: &dyn Reachability,
+    seed: u64,
+) -> Result<Vec<CandidateView>, ExploreError> {
+    config.validate()?;
+    let occluders = Occluders::from_map(map, grid);
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let mut out = Vec::new();
+    for t in targets {
+        if !t.coords.iter().all(|v| v.is_finite()) {
+            return Err(ExploreError::NonFinite { field: "candidate target" });
+        }
+        views_around(t, None, config, &occluders, reachable, &mut rng, &mut out)?;
     }
     Ok(out)
 }

@@ -146,9 +146,14 @@ impl Occluders {
         false
     }
 
-    /// Whether a point is inside any object primitive inflated by `margin_m` (bounding-sphere
-    /// accurate for the inflation: the test is on the primitive's own inflated extents).
+    /// Whether a point is inside any object primitive inflated by `margin_m` (the test is on the
+    /// primitive's own inflated extents) or lower than `margin_m` above the table top.
     pub fn point_inside_any(&self, p: &Point3<f64>, margin_m: f64) -> bool {
+        self.point_inside_object(p, margin_m) || p.z < self.table_height_m + margin_m
+    }
+
+    /// Whether `p` lies inside any object primitive inflated by `margin_m` (the table not counted).
+    pub fn point_inside_object(&self, p: &Point3<f64>, margin_m: f64) -> bool {
         self.items.iter().any(|o| {
             let q = o.object_from_world * p;
             match &o.shape {
@@ -160,7 +165,7 @@ impl Occluders {
                     (q.x * q.x + q.y * q.y).sqrt() <= c.radius + margin_m && q.z.abs() <= c.half_height + margin_m
                 }
             }
-        }) || p.z < self.table_height_m + margin_m
+        })
     }
 }
 
