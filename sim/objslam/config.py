@@ -64,12 +64,20 @@ class ExploreRunConfig:
     """object-driven / expected-gain: stop once every object is explored (the paper's rule).
     ``false``: keep choosing views by the same utility, every object counted (s(x) = 1), until
     ``max_views`` — the equal-budget comparison with random and coverage."""
+    discovery_before_stop: bool = True
+    """object-driven / expected-gain, beyond the paper: when every mapped object is explored, do
+    not stop while a view aimed at the unseen table top would still see
+    ``discovery_min_new_cells`` cells not seen yet; go there. The paper's utility knows only the
+    objects already mapped, so an object the Init views missed is never looked for (core
+    ``explore::discovery`` module docs); the Init views see about 76 % of the table with the
+    default camera and 38 % with ``camera.fovy_deg = 35``. ``false`` = the paper's stopping rule
+    (the reports' commands say which they ran)."""
     discovery_weight: float = 0.0
-    """object-driven / expected-gain, beyond the paper: weight of the table discovery term (bits
-    per cm² of table top not yet seen, added to f) and its stopping extension (do not stop while a
-    view would still see ``discovery_min_new_cells`` unseen cells). 0 = the paper. The paper's
-    utility knows only the objects already mapped; an object the Init views missed is never
-    looked for (core ``explore::discovery`` module docs)."""
+    """object-driven / expected-gain, beyond the paper: weight of the table discovery gain (bits
+    per cm² of table top not seen yet) added to every candidate's utility, candidates aimed at the
+    unseen table joining those around objects. 0 = the paper's utility. On the benchmark (seed 0,
+    default camera) 1.0 spends the first views on the empty table margins the Init views miss
+    (3D IoU 0.891 → 0.860)."""
     discovery_cell_m: float = 0.02
     """Table coverage cell, metres."""
     discovery_min_new_cells: int = 25

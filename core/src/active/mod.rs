@@ -16,10 +16,11 @@
 //!   - `coverage`: the Boustrophedon scan views in order (unreachable ones skipped), then stop;
 //!   - `random`: one random reachable view per step (seeded by `seed` and the step);
 //!   - `object-driven` / `expected-gain`: the paper's stopping rule, candidate views sampled around
-//!     the objects still to explore, the utility's argmax among the reachable ones. With
-//!     `discovery_weight` > 0 (beyond the paper), also candidates aimed at unseen table cells, the
-//!     discovery term added to the utility, and no stop on "all explored" while a reachable view
-//!     would still see `discovery_min_new_cells` unseen cells ([`explore::TableCoverage`]).
+//!     the objects still to explore, the utility's argmax among the reachable ones. Beyond the
+//!     paper ([`explore::TableCoverage`]): with `discovery_before_stop`, no stop on "all explored"
+//!     while a reachable view aimed at unseen table cells would still see
+//!     `discovery_min_new_cells` of them; with `discovery_weight` > 0, those views join the
+//!     candidates throughout and the discovery gain is added to every candidate's utility.
 //!
 //! Every strategy stops at `explore.max_views` views after Init (paper: 10), so the comparison is
 //! at an equal or smaller view budget ([`ActiveConfig::stop_when_explored`] `= false` makes it
@@ -79,9 +80,12 @@ pub struct ActiveConfig {
     /// until `max_views` — an equal-budget comparison with random and coverage, which always spend
     /// the budget (stop reason `max_views`).
     pub stop_when_explored: bool,
-    /// object-driven / expected-gain: weight w of the table discovery term (beyond the paper;
-    /// 0 = the paper's utility and stopping rule; `explore::discovery` module docs).
+    /// object-driven / expected-gain: weight w of the table discovery gain added to every
+    /// candidate's utility (beyond the paper; 0 = the paper's utility; `explore::discovery`).
     pub discovery_weight: f64,
+    /// object-driven / expected-gain: look at the unseen table before stopping on "all explored"
+    /// (beyond the paper; false = the paper's stopping rule).
+    pub discovery_before_stop: bool,
     /// Table coverage cell, metres.
     pub discovery_cell_m: f64,
     /// After every object is done, keep looking while a candidate sees at least this many unseen
@@ -112,6 +116,7 @@ impl Default for ActiveConfig {
             motion_cost_bits_per_m: e.motion_cost_bits_per_m,
             stop_when_explored: true,
             discovery_weight: e.discovery.weight,
+            discovery_before_stop: e.discovery.before_stop,
             discovery_cell_m: e.discovery.cell_m,
             discovery_min_new_cells: e.discovery.min_new_cells,
         }
@@ -202,6 +207,7 @@ impl ActiveSession {
         explore.done_normalized_entropy = config.done_normalized_entropy;
         explore.motion_cost_bits_per_m = config.motion_cost_bits_per_m;
         explore.discovery.weight = config.discovery_weight;
+        explore.discovery.before_stop = config.discovery_before_stop;
         explore.discovery.cell_m = config.discovery_cell_m;
         explore.discovery.min_new_cells = config.discovery_min_new_cells;
         explore.validate()?;
@@ -355,14 +361,20 @@ impl ActiveSession {
                 let mut ctx = UtilityContext::new(map, &self.grids, &self.history, camera, &self.explore)?;
                 let disc = &self.explore.discovery;
                 let occluders = Occluders::from_map(map, &self.explore.grid);
-                let unknown = if disc.enabled() { self.table_coverage.unknown_cells(&occluders) } else { Vec::new() };
-                // With discovery on, "every object done" still looks at the unseen table first.
+                let mut unknown =
+                    if disc.enabled() { self.table_coverage.unknown_cells(&occluders) } else { Vec::new() };
+                // With `before_stop`, "every object done" still looks at the unseen table first.
                 let mut table_only = false;
                 match stop_reason(&ctx.features(), self.views_taken, &self.explore) {
                     Some(StopReason::AllExplored) if !self.config.stop_when_explored => ctx.explore_every_object(),
-                    Some(StopReason::AllExplored) if unknown.len() >= disc.min_new_cells => table_only = true,
+                    Some(StopReason::AllExplored) if disc.before_stop && unknown.len() >= disc.min_new_cells => {
+                        table_only = true;
+                    }
                     Some(r) => return Ok(NextView::Stop { reason: r.into() }),
                     None => {}
+                }
+                if !table_only && disc.weight <= 0.0 {
+                    unknown.clear(); // the paper's candidates and utility until every object is done
                 }
                 let features = ctx.features();
                 let around: Vec<u32> = features.iter().filter(|f| f.explore).map(|f| f.object_id).collect();
@@ -404,7 +416,8 @@ impl ActiveSession {
                         }
                     })
                     .collect();
-                let bits_per_cell = disc.weight * self.table_coverage.bits_per_cell(self.explore.grid.cell_size_m);
+                let weight = if table_only { 1.0 } else { disc.weight };
+                let bits_per_cell = weight * self.table_coverage.bits_per_cell(self.explore.grid.cell_size_m);
                 let mut scored: Vec<ScoredCandidate> = poses
                     .iter()
                     .zip(scores.iter().zip(&new_cells))

@@ -10,16 +10,22 @@
 //!   is *seen* once a depth return of some frame lands in its column: the table surface or anything
 //!   standing on it, up to `max_height_m` above the table. Cells inside a mapped object's footprint
 //!   count as known (an object is there).
-//! - The discovery term of a candidate view: D(x) = w · (cell_m / object cell)² · N(x) bits, where
+//! - The discovery gain of a candidate view: D(x) = (cell_m / object cell)² · N(x) bits, where
 //!   N(x) = the unseen, not-known cells whose centre projects into the candidate's image within
 //!   range and whose ray from the camera is not blocked by the table or a mapped object. The unit is
 //!   the object grids' (an unknown 1 cm surface cell holds 1 bit), so D is "bits per cm² of unseen
-//!   table" and adds to f of object-driven and expected-gain without another scale. w = 0 is the
-//!   paper.
-//! - Stopping: when s(x) = 0 for every mapped object, the session still looks at the table while a
-//!   reachable candidate aimed at unseen cells sees at least `min_new_cells` of them (by default
-//!   25 cells of 2 cm = 100 cm², the footprint of the smallest object class); otherwise it stops
-//!   with the paper's reason.
+//!   table".
+//! - `before_stop` (the stopping extension): when s(x) = 0 for every mapped object, the session
+//!   does not stop while a reachable candidate aimed at unseen cells sees at least
+//!   `min_new_cells` of them (by default 25 cells of 2 cm = 100 cm², the footprint of the smallest
+//!   object class); it moves to the one with the highest f + D (f is 0 there but for
+//!   expected-gain's motion cost). The paper's views are unchanged until then.
+//! - `weight` w (the mixed term): w·D(x) is added to f of every candidate of object-driven and
+//!   expected-gain, and candidates aimed at unseen cells join those around objects. Measured on the
+//!   exploration benchmark (seed 0, default camera), w = 1 spends the first views on the empty
+//!   table margins the Init views miss (3D IoU 0.891 → 0.860), so the run default is 0 and
+//!   `before_stop` on.
+//! - Both off (w = 0, `before_stop` false) is the paper.
 
 use nalgebra::Point3;
 use rand::{Rng, SeedableRng};
@@ -33,8 +39,11 @@ use crate::geometry::{PinholeCamera, Se3};
 /// Discovery settings (see the module docs).
 #[derive(Debug, Clone, PartialEq)]
 pub struct DiscoveryConfig {
-    /// w: weight of the discovery term; 0 = the paper (no discovery term, paper stopping rule).
+    /// w: weight of the discovery gain added to every candidate's utility; 0 = no mixed term.
     pub weight: f64,
+    /// Do not stop on "every object done" while a view would still see `min_new_cells` unseen
+    /// cells (false = the paper's stopping rule).
+    pub before_stop: bool,
     /// Table cell side, metres.
     pub cell_m: f64,
     /// Keep exploring after every object is done while a candidate sees at least this many unseen
@@ -51,7 +60,15 @@ pub struct DiscoveryConfig {
 
 impl Default for DiscoveryConfig {
     fn default() -> Self {
-        Self { weight: 0.0, cell_m: 0.02, min_new_cells: 25, pixel_stride: 4, max_height_m: 0.4, targets: 4 }
+        Self {
+            weight: 0.0,
+            before_stop: false,
+            cell_m: 0.02,
+            min_new_cells: 25,
+            pixel_stride: 4,
+            max_height_m: 0.4,
+            targets: 4,
+        }
     }
 }
 
@@ -69,9 +86,9 @@ impl DiscoveryConfig {
         Ok(())
     }
 
-    /// Whether the discovery term is on.
+    /// Whether anything of discovery is on (the mixed term or the stopping extension).
     pub fn enabled(&self) -> bool {
-        self.weight > 0.0
+        self.weight > 0.0 || self.before_stop
     }
 }
 

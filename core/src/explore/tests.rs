@@ -677,6 +677,10 @@ fn discovery_keeps_an_empty_map_looking_at_the_table() {
     let mut s = ActiveSession::new(paper.clone(), table()).unwrap_or_else(|e| panic!("{e}"));
     let d = s.next_view(&map, &cam, &here, &AlwaysReachable).unwrap_or_else(|e| panic!("{e}"));
     assert_eq!(d, NextView::Stop { reason: SessionStop::NoReachableView });
+    let before_stop_only = ActiveConfig { discovery_before_stop: true, ..paper.clone() };
+    let mut s = ActiveSession::new(before_stop_only, table()).unwrap_or_else(|e| panic!("{e}"));
+    let d = s.next_view(&map, &cam, &here, &AlwaysReachable).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(d, NextView::Stop { reason: SessionStop::NoReachableView }, "an empty map is not 'all explored'");
     let disc = ActiveConfig { discovery_weight: 1.0, ..paper };
     let mut s = ActiveSession::new(disc, table()).unwrap_or_else(|e| panic!("{e}"));
     let d = s.next_view(&map, &cam, &here, &AlwaysReachable).unwrap_or_else(|e| panic!("{e}"));
@@ -685,4 +689,59 @@ fn discovery_keeps_an_empty_map_looking_at_the_table() {
     // It looks down at the table top.
     let axis = world_from_camera.rotation * Vector3::z();
     assert!(axis.z < -0.5, "{axis:?}");
+}
+
+/// Depth (z) and the points on object `id` seen by `cam` at `pose`, ray cast against `map`.
+fn render(map: &ObjectMap, cam: &PinholeCamera, pose: &Se3, id: u32) -> (DepthImage, Vec<Point3<f64>>) {
+    let occ = Occluders::from_map(map, &GridConfig::default());
+    let eye = Point3::from(pose.translation.vector);
+    let mut depth = vec![0.0f32; (cam.width * cam.height) as usize];
+    let mut points = Vec::new();
+    for v in 0..cam.height {
+        for u in 0..cam.width {
+            let dir = pose.rotation * cam.unproject(f64::from(u) + 0.5, f64::from(v) + 0.5, 1.0).coords;
+            if let Some((hit, t)) = occ.cast_ray(&eye, &dir, 5.0) {
+                depth[(v * cam.width + u) as usize] = t as f32;
+                if hit == Some(id) {
+                    points.push(eye + dir * t);
+                }
+            }
+        }
+    }
+    (DepthImage::new(cam.width, cam.height, depth).unwrap_or_else(|e| panic!("{e}")), points)
+}
+
+#[test]
+fn before_stop_looks_at_the_unseen_table_when_every_object_is_done() {
+    use crate::active::{ActiveConfig, ActiveSession, NextView, SessionStop};
+    use crate::frame::Frame;
+    let map = map_of(vec![object(Label::Block, [0.5, 0.0, 0.05], 0.0, [0.05, 0.05, 0.05])]);
+    let cam = PinholeCamera::from_fovy(96, 72, 0.8).unwrap_or_else(|e| panic!("{e}"));
+    let c = [0.5, 0.0, 0.05];
+    let mut poses = vec![view(Point3::new(0.5, 0.0, 0.45), c)];
+    poses.extend([0.0, 90.0, 180.0, 270.0].map(|az| view(eye_around(c, az, 35.0, 0.4), c)));
+    let run = |config: ActiveConfig| {
+        let mut s = ActiveSession::new(config, table()).unwrap_or_else(|e| panic!("{e}"));
+        for (i, pose) in poses.iter().enumerate() {
+            let (depth, points) = render(&map, &cam, pose, 0);
+            let frame = Frame { index: i as u32, camera: cam, depth, world_from_camera: *pose, detections: Vec::new() };
+            let observed = [ObservedPoints { object_id: 0, points_in_world: points }];
+            s.integrate_frame(&map, &frame, &observed).unwrap_or_else(|e| panic!("{e}"));
+            s.view_done(&map, false);
+        }
+        let known = *s.table_known_curve().last().unwrap_or(&1.0);
+        let d = s.next_view(&map, &cam, &poses[0], &AlwaysReachable).unwrap_or_else(|e| panic!("{e}"));
+        (d, known, s.table_known_curve().len())
+    };
+    let (paper, known, n) = run(ActiveConfig::default());
+    assert_eq!(paper, NextView::Stop { reason: SessionStop::AllExplored }, "the block is done");
+    assert_eq!(n, poses.len());
+    assert!(known > 0.05 && known < 0.6, "the small camera saw part of the table: {known}");
+    let (disc, _, _) = run(ActiveConfig { discovery_before_stop: true, ..ActiveConfig::default() });
+    let NextView::Move { world_from_camera, utility, candidates } = disc else { panic!("expected a move: {disc:?}") };
+    assert!(utility >= 4.0 * 25.0, "{utility}");
+    assert!(candidates.iter().all(|c| c.utility.is_finite()));
+    // It looks at the table away from the block's neighbourhood it has seen.
+    let axis = world_from_camera.rotation * Vector3::z();
+    assert!(axis.z < -0.3, "{axis:?}");
 }
