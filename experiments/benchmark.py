@@ -63,7 +63,25 @@ def _row(m: dict[str, Any]) -> dict[str, Any]:
         "n_objects_gt": m["n_objects_gt"],
         "entropy_curve": m["entropy_curve"],
         "accuracy_curve": m.get("accuracy_curve"),
-        **aligned_metrics(m["run_dir"]),
+        **run_extras(m["run_dir"]),
+    }
+
+
+def _run_path(run_dir: str | Path) -> Path:
+    return REPO / run_dir if not Path(run_dir).is_absolute() else Path(run_dir)
+
+
+def run_extras(run_dir: str | Path) -> dict[str, float | None]:
+    """What the report adds from a run folder: :func:`aligned_metrics`, the ground-truth objects
+    the map never got (``missed_objects``) and the fraction of the table top known at the end
+    (``table_known``: seen or under a mapped object; None for runs made before episodes recorded
+    ``table_known_curve``)."""
+    m = json.loads((_run_path(run_dir) / "metrics.json").read_text())
+    curve = m.get("table_known_curve") or [None]
+    return {
+        **aligned_metrics(run_dir),
+        "missed_objects": m["n_objects_gt"] - m["n_matched"],
+        "table_known": curve[-1],
     }
 
 
@@ -74,7 +92,7 @@ def aligned_metrics(run_dir: str | Path) -> dict[str, float | None]:
     from objslam.evaluation import offset_removed
     from objslam.scene import gt_objects, load_scene
 
-    run = REPO / run_dir if not Path(run_dir).is_absolute() else Path(run_dir)
+    run = _run_path(run_dir)
     cfg = tomllib.loads((run / "config.toml").read_text())
     scene = Path(cfg["scene"])
     gt = gt_objects(load_scene(scene if scene.is_absolute() else REPO / scene))
@@ -121,6 +139,8 @@ def write_reports(rows: list[dict[str, Any]], out: Path, command: str) -> None:
         ("iou3d_aligned", ".3f", "3D IoU after removing the map's global offset (higher is better; module docs)"),
         ("cde_aligned_cm", ".2f", "CDE after removing the map's global offset, cm (lower is better)"),
         ("map_offset_mm", ".1f", "The map's global offset (median centre offset), mm"),
+        ("missed_objects", ".2f", "Objects never mapped (ground-truth objects without a matched estimate)"),
+        ("table_known", ".2f", "Table top known at the end (seen, or under a mapped object), fraction; - = run made before episodes recorded it"),
         ("views", ".1f", "Views used (Init + NBV)"),
         ("path_length_m", ".2f", "Camera path length, m"),
         ("wall_s", ".0f", "Wall time per episode, s"),
@@ -333,7 +353,7 @@ def main(argv: list[str] | None = None) -> int:
         old = json.loads((Path(a.out) / "exploration.json").read_text())
         extra = [_other_sweep(spec) for spec in a.also]
         rows = [
-            r if "error" in r else {**r, **aligned_metrics(r["run_dir"])}
+            r if "error" in r else {**r, **run_extras(r["run_dir"])}
             for r in old["rows"] + [r for e in extra for r in e["rows"]]
         ]
         rows.sort(key=lambda r: (r["scene"], STRATEGIES.index(r["strategy"]) if r["strategy"] in STRATEGIES else 99, r["seed"]))

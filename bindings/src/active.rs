@@ -361,6 +361,13 @@ impl ActiveMapperPy {
         (arr.to_pyarray(py), states)
     }
 
+    /// Table-top cells not known yet (neither seen nor under a mapped object): (N, 3) world
+    /// centres, for recording.
+    fn table_unknown_cells<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
+        let pts = self.session.table_unknown_cells(&self.mapper.map());
+        numpy::ndarray::Array2::from_shape_fn((pts.len(), 3), |(r, c)| pts[r][c]).to_pyarray(py)
+    }
+
     fn __len__(&self) -> usize {
         self.mapper.map().len()
     }

@@ -51,6 +51,8 @@ class EpisodeResult:
 #: Grid cell colours by state: unknown grey, free green, occupied red.
 MAP_POINT_COLOR = np.array([240, 200, 40], dtype=np.uint8)
 GRID_COLORS = np.array([[150, 150, 150], [60, 200, 60], [220, 50, 50]], dtype=np.uint8)
+TABLE_UNSEEN_COLOR = np.array([200, 60, 200], dtype=np.uint8)
+"""Table-top cells not seen yet (explore::discovery), recorded after each view."""
 
 
 def grey_of(rgb: np.ndarray) -> np.ndarray:
@@ -357,6 +359,7 @@ def run_episode(
             mapper.view_done(False)
             snapshot()
         rec.log_scalar("explore/mean_normalized_entropy", mapper.entropy_curve()[-1])
+        rec.log_scalar("explore/table_known_fraction", mapper.table_known_curve()[-1])
         stop_reason = "strategy_done"
         while True:
             # Candidate views are reachable only with a collision-free arm among the mapped objects.
@@ -377,10 +380,15 @@ def run_episode(
             mapper.view_done(True)
             snapshot()
             rec.log_scalar("explore/mean_normalized_entropy", mapper.entropy_curve()[-1])
+            rec.log_scalar("explore/table_known_fraction", mapper.table_known_curve()[-1])
             if cfg.record.grids:
                 pts, states = mapper.grid_cells()
                 rec.log_colored_points(
                     "world/map/grids", pts, GRID_COLORS[np.frombuffer(states, dtype=np.uint8)], 0.004
+                )
+                unseen = mapper.table_unknown_cells()
+                rec.log_colored_points(
+                    "world/map/table_unseen", unseen, np.tile(TABLE_UNSEEN_COLOR, (len(unseen), 1)), 0.008
                 )
         if bar is not None:
             bar.close()

@@ -272,6 +272,12 @@ impl ActiveSession {
         &self.table_coverage
     }
 
+    /// Table cells not known yet (neither seen nor under an object of `map`), world points just
+    /// above the table top (for recording).
+    pub fn table_unknown_cells(&self, map: &ObjectMap) -> Vec<nalgebra::Point3<f64>> {
+        self.table_coverage.unknown_cells(&Occluders::from_map(map, &self.explore.grid))
+    }
+
     /// The Init views (four table corners), shared by every strategy.
     pub fn initial_views(&self) -> Result<Vec<Se3>, ExploreError> {
         explore::init_views(&self.table, &self.candidates)
