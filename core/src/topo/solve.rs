@@ -248,11 +248,13 @@ pub struct CueWeight {
     pub position: f64,
     /// Weight of the pair's yaw difference (yaw cue of the rotation).
     pub yaw: f64,
+    /// Weights of the pair's three sorted half-extent ratios (size cue of the scale).
+    pub size: [f64; 3],
 }
 
 impl Default for CueWeight {
     fn default() -> Self {
-        Self { position: 1.0, yaw: 1.0 }
+        Self { position: 1.0, yaw: 1.0, size: [1.0; 3] }
     }
 }
 
@@ -272,7 +274,11 @@ pub fn fuse_cues_weighted(
     let weight = |i: usize| weights.and_then(|w| w.get(i).copied()).unwrap_or_default();
     if (0..n).any(|i| {
         let w = weight(i);
-        !(w.position.is_finite() && w.position >= 0.0 && w.yaw.is_finite() && w.yaw >= 0.0)
+        !(w.position.is_finite()
+            && w.position >= 0.0
+            && w.yaw.is_finite()
+            && w.yaw >= 0.0
+            && w.size.iter().all(|v| v.is_finite() && *v >= 0.0))
     }) {
         return None;
     }
@@ -320,19 +326,20 @@ pub fn fuse_cues_weighted(
     }
     let mut log_s = if den > DEGENERATE_EPS && num > 0.0 { Some((num / den).ln()) } else { None };
     if noise.size_rel.is_finite() && noise.size_rel > 0.0 {
-        let (mut sum, mut count) = (0.0, 0usize);
-        for c in pairs {
+        let (mut sum, mut count) = (0.0, 0.0);
+        for (i, c) in pairs.iter().enumerate() {
+            let w = weight(i).size;
             for k in 0..3 {
                 let r = (c.query_extents[k] / c.prior_extents[k]).ln();
                 if r.is_finite() {
-                    sum += r;
-                    count += 1;
+                    sum += w[k] * r;
+                    count += w[k];
                 }
             }
         }
-        if count > 0 {
-            let log_size = sum / count as f64;
-            let v_size = 2.0 * noise.size_rel * noise.size_rel / count as f64;
+        if count > DEGENERATE_EPS {
+            let log_size = sum / count;
+            let v_size = 2.0 * noise.size_rel * noise.size_rel / count;
             log_s = Some(match log_s {
                 Some(ls) if sigma2 > 0.0 => {
                     let v_pos = 2.0 * sigma2 / den;
@@ -386,8 +393,10 @@ impl RobustKernel {
 
 /// Iteratively re-weighted [`fuse_cues_weighted`] (beyond the paper): after each fit, a pair's
 /// position weight comes from its residual ‖T(p) − q‖ / s normalised by the relative position noise
-/// √2 σ, and its yaw weight from its folded yaw residual normalised by √2 σ_θ, through `kernel`
-/// with width `k` (in those σ units). Stops after `iterations` fits or when the transform no longer
+/// √2 σ, its yaw weight from its folded yaw residual normalised by √2 σ_θ, and each of its three
+/// size weights from the log half-extent ratio's residual ln(e_q / e_p) − ln s normalised by
+/// √2 σ_size (one badly estimated extent, e.g. the thickness of a thin book seen edge-on in one
+/// map only, no longer pulls the scale), through `kernel` with width `k` (in those σ units). Stops after `iterations` fits or when the transform no longer
 /// moves. Starts from the unweighted fusion; `None` when that is degenerate.
 pub fn robust_fuse(
     transform: &Similarity3<f64>,
@@ -404,6 +413,7 @@ pub fn robust_fuse(
     }
     let sigma_pos = std::f64::consts::SQRT_2 * noise.position;
     let sigma_yaw = std::f64::consts::SQRT_2 * noise.yaw_rad;
+    let sigma_size = std::f64::consts::SQRT_2 * noise.size_rel;
     let mut weights = vec![CueWeight::default(); pairs.len()];
     for _ in 0..iterations {
         let s = current.scaling();
@@ -418,6 +428,12 @@ pub fn robust_fuse(
                 }
                 _ => 1.0,
             };
+            if sigma_size.is_finite() && sigma_size > 0.0 {
+                for (axis, wa) in w.size.iter_mut().enumerate() {
+                    let r = (c.query_extents[axis] / c.prior_extents[axis]).ln() - s.ln();
+                    *wa = if r.is_finite() { kernel.weight(r.abs() / sigma_size, k) } else { 1.0 };
+                }
+            }
         }
         let Some(next) = fuse_cues_weighted(&current, pairs, Some(&weights), noise, yaw_cue) else { break };
         let moved = (next.to_homogeneous() - current.to_homogeneous()).abs().max();

@@ -402,3 +402,46 @@ fn a_partial_config_json_keeps_the_defaults_and_unknown_fields_are_refused() {
         Err(err) => assert!(err.to_string().contains("inlier_treshold"), "{err}"),
     }
 }
+
+#[test]
+fn robust_fuse_discounts_one_badly_estimated_extent() {
+    // Exact centres up to 2 mm noise, exact sizes except one object's smallest extent 40 % too
+    // large in the query: least squares pulls the scale by the pooled size cue, the robust
+    // kernels (which now re-weight size residuals too) keep it near the truth.
+    let nodes = layout(63, 8, &[Label::Cup, Label::Book]);
+    let truth = yaw_transform();
+    let mut query = transformed(&nodes, &truth);
+    let mut rng = ChaCha8Rng::seed_from_u64(5);
+    for q in query.iter_mut() {
+        q.center += Vector3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), 0.0) * 0.002;
+    }
+    let cues: Vec<CuePair> = nodes
+        .iter()
+        .zip(&query)
+        .enumerate()
+        .map(|(i, (a, b))| {
+            let mut qe = b.sorted_extents();
+            if i == 2 {
+                qe[0] *= 1.4;
+            }
+            CuePair {
+                prior_center: a.center,
+                query_center: b.center,
+                prior_extents: a.sorted_extents(),
+                query_extents: qe,
+                prior_yaw: a.yaw_rad,
+                query_yaw: b.yaw_rad,
+                yaw_period: None,
+            }
+        })
+        .collect();
+    let noise = NoiseModel::default();
+    let scale_err = |kernel| {
+        let t = robust_fuse(&truth, &cues, &noise, false, kernel, 2.0, 10).unwrap_or_else(|| panic!("none"));
+        (t.scaling() / truth.scaling() - 1.0).abs()
+    };
+    let (ls, huber, cauchy) =
+        (scale_err(RobustKernel::None), scale_err(RobustKernel::Huber), scale_err(RobustKernel::Cauchy));
+    assert!(ls > 0.005, "the outlier extent biases least squares: {ls}");
+    assert!(huber < 0.5 * ls && cauchy < 0.5 * ls, "ls {ls} huber {huber} cauchy {cauchy}");
+}
