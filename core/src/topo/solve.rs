@@ -328,12 +328,11 @@ pub fn fuse_cues_weighted(
     if noise.size_rel.is_finite() && noise.size_rel > 0.0 {
         let (mut sum, mut count) = (0.0, 0.0);
         for (i, c) in pairs.iter().enumerate() {
-            let w = weight(i).size;
-            for k in 0..3 {
-                let r = (c.query_extents[k] / c.prior_extents[k]).ln();
+            for ((wk, q), p) in weight(i).size.iter().zip(&c.query_extents).zip(&c.prior_extents) {
+                let r = (q / p).ln();
                 if r.is_finite() {
-                    sum += w[k] * r;
-                    count += w[k];
+                    sum += wk * r;
+                    count += wk;
                 }
             }
         }
