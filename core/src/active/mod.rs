@@ -267,11 +267,6 @@ impl ActiveSession {
         &self.table_curve
     }
 
-    /// The table coverage grid (for recording).
-    pub fn table_coverage(&self) -> &TableCoverage {
-        &self.table_coverage
-    }
-
     /// Table cells not known yet (neither seen nor under an object of `map`), world points just
     /// above the table top (for recording).
     pub fn table_unknown_cells(&self, map: &ObjectMap) -> Vec<nalgebra::Point3<f64>> {

@@ -121,49 +121,49 @@ pub fn sample_candidates_around(
     reachable: &dyn Reachability,
     seed: u64,
 ) -> Result<Vec<CandidateView>, ExploreError> {
+    let targets: Vec<(Point3<f64>, Option<u32>)> = map
+        .objects
+        .iter()
+        .filter(|o| around.is_none_or(|ids| ids.contains(&o.id)))
+        .map(|o| (Point3::from(o.world_from_object.translation.vector), Some(o.id)))
+        .filter(|(c, _)| c.coords.iter().all(|v| v.is_finite()))
+        .collect();
+    views_around(&targets, map, config, grid, reachable, seed)
+}
+
+/// For each target in order, `views_per_object` views looking at it (azimuth stratified over the
+/// circle, one uniform draw per stratum; elevation uniform in `elevation_deg`; distance uniform in
+/// `distance_m`), kept when collision-free among the map's objects and `reachable`. One random
+/// stream seeded by `seed`, drawn per target in order.
+fn views_around(
+    targets: &[(Point3<f64>, Option<u32>)],
+    map: &ObjectMap,
+    config: &CandidateConfig,
+    grid: &GridConfig,
+    reachable: &dyn Reachability,
+    seed: u64,
+) -> Result<Vec<CandidateView>, ExploreError> {
     config.validate()?;
     let occluders = Occluders::from_map(map, grid);
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let mut out = Vec::new();
-    for o in &map.objects {
-        if around.is_some_and(|ids| !ids.contains(&o.id)) {
-            continue;
+    let n = config.views_per_object;
+    for (target, target_object) in targets {
+        for k in 0..n {
+            let az = std::f64::consts::TAU * (k as f64 + rng.random::<f64>()) / n as f64;
+            let el = rng.random_range(config.elevation_deg[0]..=config.elevation_deg[1]).to_radians();
+            let d = rng.random_range(config.distance_m[0]..=config.distance_m[1]);
+            let eye = target + Vector3::new(el.cos() * az.cos(), el.cos() * az.sin(), el.sin()) * d;
+            if !camera_position_free(&eye, &occluders, config) {
+                continue;
+            }
+            let pose = look_at(&eye, target)?;
+            if reachable.reachable(&pose) {
+                out.push(CandidateView { world_from_camera: pose, target_object: *target_object });
+            }
         }
-        let c = Point3::from(o.world_from_object.translation.vector);
-        if !c.coords.iter().all(|v| v.is_finite()) {
-            continue;
-        }
-        views_around(&c, Some(o.id), config, &occluders, reachable, &mut rng, &mut out)?;
     }
     Ok(out)
-}
-
-/// `views_per_object` views looking at `target` (stratified azimuth, uniform elevation and
-/// distance, as [`sample_candidates_around`]), appended to `out` when collision-free and reachable.
-fn views_around(
-    target: &Point3<f64>,
-    target_object: Option<u32>,
-    config: &CandidateConfig,
-    occluders: &Occluders,
-    reachable: &dyn Reachability,
-    rng: &mut ChaCha8Rng,
-    out: &mut Vec<CandidateView>,
-) -> Result<(), ExploreError> {
-    let n = config.views_per_object;
-    for k in 0..n {
-        let az = std::f64::consts::TAU * (k as f64 + rng.random::<f64>()) / n as f64;
-        let el = rng.random_range(config.elevation_deg[0]..=config.elevation_deg[1]).to_radians();
-        let d = rng.random_range(config.distance_m[0]..=config.distance_m[1]);
-        let eye = target + Vector3::new(el.cos() * az.cos(), el.cos() * az.sin(), el.sin()) * d;
-        if !camera_position_free(&eye, occluders, config) {
-            continue;
-        }
-        let pose = look_at(&eye, target)?;
-        if reachable.reachable(&pose) {
-            out.push(CandidateView { world_from_camera: pose, target_object });
-        }
-    }
-    Ok(())
 }
 
 /// Candidate views aimed at points rather than objects (e.g. unseen table cells from
@@ -177,17 +177,11 @@ pub fn sample_candidates_at(
     reachable: &dyn Reachability,
     seed: u64,
 ) -> Result<Vec<CandidateView>, ExploreError> {
-    config.validate()?;
-    let occluders = Occluders::from_map(map, grid);
-    let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let mut out = Vec::new();
-    for t in targets {
-        if !t.coords.iter().all(|v| v.is_finite()) {
-            return Err(ExploreError::NonFinite { field: "candidate target" });
-        }
-        views_around(t, None, config, &occluders, reachable, &mut rng, &mut out)?;
+    if targets.iter().any(|t| !t.coords.iter().all(|v| v.is_finite())) {
+        return Err(ExploreError::NonFinite { field: "candidate target" });
     }
-    Ok(out)
+    let targets: Vec<(Point3<f64>, Option<u32>)> = targets.iter().map(|t| (*t, None)).collect();
+    views_around(&targets, map, config, grid, reachable, seed)
 }
 
 /// Init (paper: "the camera is sequentially placed over the four desk corners from a top view"):
