@@ -69,15 +69,16 @@ class ExploreRunConfig:
     not stop while a view aimed at the unseen table top would still see
     ``discovery_min_new_cells`` cells not seen yet; go there. The paper's utility knows only the
     objects already mapped, so an object the Init views missed is never looked for (core
-    ``explore::discovery`` module docs); the Init views see about 76 % of the table with the
-    default camera and 38 % with ``camera.fovy_deg = 35``. ``false`` = the paper's stopping rule
+    ``explore::discovery`` module docs); how much of the table the Init views leave unseen is in
+    each episode's ``table_known_curve`` and the reports' table-known tables (``init`` row of
+    ``reports/exploration_narrow_fov``). ``false`` = the paper's stopping rule
     (the reports' commands say which they ran)."""
     discovery_weight: float = 0.0
     """object-driven / expected-gain, beyond the paper: weight of the table discovery gain (bits
     per cm² of table top not seen yet) added to every candidate's utility, candidates aimed at the
-    unseen table joining those around objects. 0 = the paper's utility. On the benchmark (seed 0,
-    default camera) 1.0 spends the first views on the empty table margins the Init views miss
-    (3D IoU 0.891 → 0.860)."""
+    unseen table joining those around objects. 0 = the paper's utility. On a seed-0 pilot with the default
+    camera (not kept as a report) 1.0 spent the first views on the empty table margins the Init
+    views miss and ended with a lower 3D IoU than 0; hence off."""
     discovery_cell_m: float = 0.02
     """Table coverage cell, metres."""
     discovery_min_new_cells: int = 25
