@@ -63,7 +63,7 @@ def _row(m: dict[str, Any]) -> dict[str, Any]:
         "n_objects_gt": m["n_objects_gt"],
         "entropy_curve": m["entropy_curve"],
         "accuracy_curve": m.get("accuracy_curve"),
-        **run_extras(m["run_dir"]),
+        **run_extras(m["run_dir"], m),
     }
 
 
@@ -71,12 +71,12 @@ def _run_path(run_dir: str | Path) -> Path:
     return REPO / run_dir if not Path(run_dir).is_absolute() else Path(run_dir)
 
 
-def run_extras(run_dir: str | Path) -> dict[str, float | None]:
+def run_extras(run_dir: str | Path, metrics: dict[str, Any] | None = None) -> dict[str, float | None]:
     """What the report adds from a run folder: :func:`aligned_metrics`, the ground-truth objects
     the map never got (``missed_objects``) and the fraction of the table top known at the end
     (``table_known``: seen or under a mapped object; None for runs made before episodes recorded
-    ``table_known_curve``)."""
-    m = json.loads((_run_path(run_dir) / "metrics.json").read_text())
+    ``table_known_curve``). ``metrics``: the run's metrics.json when already loaded."""
+    m = metrics if metrics is not None else json.loads((_run_path(run_dir) / "metrics.json").read_text())
     curve = m.get("table_known_curve") or [None]
     return {
         **aligned_metrics(run_dir),
