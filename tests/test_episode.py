@@ -128,10 +128,11 @@ def missed(m: dict) -> int:
 def test_discovery_finds_the_object_the_paper_rule_leaves_unmapped(tmp_path, ci_overlay) -> None:
     """Against the scene file: with a 35° camera the Init views of scene03 miss an object; the
     paper's stopping rule ends once the mapped objects are explored and never maps it, looking at
-    the unseen table before stopping (explore.discovery_before_stop) finds it."""
+    the unseen table before stopping (explore.discovery_before_stop, with the budget reserve of
+    the run defaults) finds it."""
     common = {"scene": '"scenes/scene03.toml"', "camera.fovy_deg": 35.0, "seed": 0}
     paper = run_episode(
-        _cfg(tmp_path, ci_overlay, strategy="object-driven", **common, **{"explore.discovery_before_stop": "false"}),
+        _cfg(tmp_path, ci_overlay, strategy="object-driven", **common, **{"explore.discovery_before_stop": "false", "explore.discovery_reserve": "false"}),
         progress=False,
     ).metrics
     disc = run_episode(_cfg(tmp_path, ci_overlay, strategy="object-driven", **common), progress=False).metrics

@@ -84,6 +84,20 @@ class ExploreRunConfig:
     discovery_min_new_cells: int = 25
     """Cells a view must newly see to keep exploring after every object is done (25 × 2 cm × 2 cm
     = 100 cm², about the footprint of the smallest object class)."""
+    discovery_reserve: bool = True
+    """object-driven / expected-gain, beyond the paper: the budget reserve. At each decision,
+    estimate how many discovery views are still worth taking (greedy cover of the unseen table by
+    reachable candidates, each revealing ``discovery_min_new_cells`` new cells); when the views
+    left in ``max_views`` are no more than that, take a discovery view instead of the object NBV.
+    Objects first, the table's share of the budget last (core ``explore::discovery``)."""
+    discovery_min_frames: int = 3
+    """A table cell counts as seen once depth returns of this many frames landed in it (the map
+    confirms an object after ``pipeline.min_observations`` = 3 untruncated detections; a cell seen
+    in fewer frames may hold an object the map has not confirmed)."""
+    discovery_margin_frac: float = 0.1
+    """Returns within this fraction of the image width / height of the border do not mark table
+    cells, and predicted views count only the inner image (truncated detections do not seed
+    map objects)."""
 
 
 @dataclass(frozen=True)

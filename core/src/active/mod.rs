@@ -20,7 +20,9 @@
 //!     paper ([`explore::TableCoverage`]): with `discovery_before_stop`, no stop on "all explored"
 //!     while a reachable view aimed at unseen table cells would still see
 //!     `discovery_min_new_cells` of them; with `discovery_weight` > 0, those views join the
-//!     candidates throughout and the discovery gain is added to every candidate's utility.
+//!     candidates throughout and the discovery gain is added to every candidate's utility; with
+//!     `discovery_reserve`, a discovery view replaces the object NBV once the views left are no
+//!     more than the discovery views still worth taking.
 //!
 //! Every strategy stops at `explore.max_views` views after Init (paper: 10), so the comparison is
 //! at an equal or smaller view budget ([`ActiveConfig::stop_when_explored`] `= false` makes it
@@ -30,9 +32,10 @@
 use serde::{Deserialize, Serialize};
 
 use crate::explore::{
-    self, coverage_views, discovery_targets, random_views, sample_candidates_around, sample_candidates_at, stop_reason,
-    visible_unknown_cells, CandidateConfig, CandidateView, ExplorationGrids, ExploreConfig, ExploreError, HistoryBook,
-    ObservedPoints, Occluders, Reachability, StopReason, Strategy, TableCoverage, TableRect, UtilityContext,
+    self, coverage_views, discovery_targets, greedy_discovery_views, random_views, sample_candidates_around,
+    sample_candidates_at, stop_reason, visible_unknown_cells, visible_unknown_indices, CandidateConfig, CandidateView,
+    ExplorationGrids, ExploreConfig, ExploreError, HistoryBook, ObservedPoints, Occluders, Reachability, StopReason,
+    Strategy, TableCoverage, TableRect, UtilityContext,
 };
 use crate::frame::Frame;
 use crate::geometry::{PinholeCamera, Se3};
@@ -91,6 +94,15 @@ pub struct ActiveConfig {
     /// After every object is done, keep looking while a candidate sees at least this many unseen
     /// table cells.
     pub discovery_min_new_cells: usize,
+    /// object-driven / expected-gain: the budget reserve — take a discovery view when the views
+    /// left are no more than the discovery views still worth taking (beyond the paper;
+    /// `explore::discovery`).
+    pub discovery_reserve: bool,
+    /// A table cell counts as seen after returns in this many frames (the map's confirmation
+    /// count, `pipeline.min_observations`).
+    pub discovery_min_frames: u32,
+    /// Image border, fraction of width / height, whose returns do not mark table cells.
+    pub discovery_margin_frac: f64,
 }
 
 impl Default for ActiveConfig {
@@ -119,6 +131,9 @@ impl Default for ActiveConfig {
             discovery_before_stop: e.discovery.before_stop,
             discovery_cell_m: e.discovery.cell_m,
             discovery_min_new_cells: e.discovery.min_new_cells,
+            discovery_reserve: e.discovery.reserve,
+            discovery_min_frames: e.discovery.min_frames,
+            discovery_margin_frac: e.discovery.margin_frac,
         }
     }
 }
@@ -210,6 +225,9 @@ impl ActiveSession {
         explore.discovery.before_stop = config.discovery_before_stop;
         explore.discovery.cell_m = config.discovery_cell_m;
         explore.discovery.min_new_cells = config.discovery_min_new_cells;
+        explore.discovery.reserve = config.discovery_reserve;
+        explore.discovery.min_frames = config.discovery_min_frames;
+        explore.discovery.margin_frac = config.discovery_margin_frac;
         explore.validate()?;
         let candidates = CandidateConfig {
             views_per_object: config.views_per_object,
@@ -224,7 +242,7 @@ impl ActiveSession {
         };
         candidates.validate()?;
         table.validate()?;
-        let table_coverage = TableCoverage::new(&table, explore.discovery.cell_m)?;
+        let table_coverage = TableCoverage::new(&table, &explore.discovery)?;
         Ok(Self {
             config,
             strategy,
@@ -364,6 +382,9 @@ impl ActiveSession {
                 let occluders = Occluders::from_map(map, &self.explore.grid);
                 let mut unknown =
                     if disc.enabled() { self.table_coverage.unknown_cells(&occluders) } else { Vec::new() };
+                if unknown.len() < disc.min_new_cells && disc.weight <= 0.0 {
+                    unknown.clear();
+                }
                 // With `before_stop`, "every object done" still looks at the unseen table first.
                 let mut table_only = false;
                 match stop_reason(&ctx.features(), self.views_taken, &self.explore) {
@@ -374,6 +395,42 @@ impl ActiveSession {
                     Some(r) => return Ok(NextView::Stop { reason: r.into() }),
                     None => {}
                 }
+                // Candidates aimed at the unseen table (the same for every use below).
+                let always = |_: &Se3| true;
+                let table_views = if unknown.is_empty() || !(table_only || disc.reserve || disc.weight > 0.0) {
+                    Vec::new()
+                } else {
+                    let targets = discovery_targets(&unknown, disc.targets, step_seed);
+                    sample_candidates_at(
+                        &targets,
+                        map,
+                        &self.candidates,
+                        &self.explore.grid,
+                        &always,
+                        step_seed ^ TABLE_CANDIDATE_SEED,
+                    )?
+                };
+                // The budget reserve: the table's share of the views left, taken last.
+                if !table_only && disc.reserve && unknown.len() >= disc.min_new_cells {
+                    let left = self.explore.max_views - self.views_taken;
+                    let seen: Vec<Vec<usize>> = table_views
+                        .iter()
+                        .map(|v| {
+                            visible_unknown_indices(
+                                &unknown,
+                                camera,
+                                &v.world_from_camera,
+                                &occluders,
+                                &self.explore.grid,
+                                disc,
+                            )
+                        })
+                        .collect();
+                    let needed = greedy_discovery_views(&seen, unknown.len(), disc.min_new_cells, left, |i| {
+                        reachable.reachable(&table_views[i].world_from_camera)
+                    });
+                    table_only = needed.len() >= left;
+                }
                 if !table_only && disc.weight <= 0.0 {
                     unknown.clear(); // the paper's candidates and utility until every object is done
                 }
@@ -381,7 +438,6 @@ impl ActiveSession {
                 let around: Vec<u32> = features.iter().filter(|f| f.explore).map(|f| f.object_id).collect();
                 // The argmax rule over reachable views: sample without the reachability filter,
                 // score all, then ask reachability in utility order, so IK runs only for the best.
-                let always = |_: &Se3| true;
                 let mut views: Vec<CandidateView> = if table_only {
                     Vec::new()
                 } else {
@@ -395,15 +451,7 @@ impl ActiveSession {
                     )?
                 };
                 if !unknown.is_empty() {
-                    let targets = discovery_targets(&unknown, disc.targets, step_seed);
-                    views.extend(sample_candidates_at(
-                        &targets,
-                        map,
-                        &self.candidates,
-                        &self.explore.grid,
-                        &always,
-                        step_seed ^ TABLE_CANDIDATE_SEED,
-                    )?);
+                    views.extend(table_views);
                 }
                 let poses: Vec<Se3> = views.iter().map(|v| v.world_from_camera).collect();
                 let scores = ctx.score_all(&poses, self.strategy, Some(current))?;
@@ -413,7 +461,7 @@ impl ActiveSession {
                         if unknown.is_empty() {
                             0
                         } else {
-                            visible_unknown_cells(&unknown, camera, p, &occluders, &self.explore.grid)
+                            visible_unknown_cells(&unknown, camera, p, &occluders, &self.explore.grid, disc)
                         }
                     })
                     .collect();

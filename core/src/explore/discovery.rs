@@ -7,9 +7,15 @@
 //! is what the map does not yet know:
 //!
 //! - [`TableCoverage`]: a 2D grid over the table rectangle, cells `cell_m` (2 cm by default). A cell
-//!   is *seen* once a depth return of some frame lands in its column: the table surface or anything
-//!   standing on it, up to `max_height_m` above the table. Cells inside a mapped object's footprint
-//!   count as known (an object is there).
+//!   is *seen* once depth returns of `min_frames` frames (3, the map's confirmation count) landed
+//!   in its column, from pixels inside a border of `margin_frac` (10 %) of the image: the table
+//!   surface or anything standing on it, up to `max_height_m` above the table. Cells inside a
+//!   mapped object's footprint count as known (an object is there). Both rules keep a cell unknown
+//!   while an object standing there may be unconfirmed in the map: truncated detections (at the
+//!   border) do not seed objects, and an object needs `min_observations` detections (measured:
+//!   scene02, seed 3, 35° camera, with one return enough a cup seen untruncated in only the last
+//!   two frames of the episode was never confirmed, its cells counted seen, and the session
+//!   stopped; see `reports/exploration_narrow_fov`).
 //! - The discovery gain of a candidate view: D(x) = (cell_m / object cell)² · N(x) bits, where
 //!   N(x) = the unseen, not-known cells whose centre projects into the candidate's image within
 //!   range and whose ray from the camera is not blocked by the table or a mapped object. The unit is
@@ -26,7 +32,17 @@
 //!   table margins the Init views miss (lower 3D IoU than the paper's utility on a seed-0 pilot;
 //!   not kept as a report), so the run default is 0 and
 //!   `before_stop` on.
-//! - Both off (w = 0, `before_stop` false) is the paper.
+//! - `reserve` (the budget reserve): the paper's rule also stops at `max_views`, and a camera
+//!   that sees little of the table per view (a narrow field of view) can spend the whole budget
+//!   on the mapped objects with part of the table never seen. At each decision the session
+//!   estimates how many discovery views are still worth taking: a greedy set cover over this
+//!   step's candidates aimed at unseen cells, each pick revealing at least `min_new_cells` cells
+//!   no earlier pick reveals, reachable ([`greedy_discovery_views`]). When the views left are no
+//!   more than that, it takes a discovery view (the highest f + D among those seeing at least
+//!   `min_new_cells`, so a view that also sees an object to explore wins) instead of the object
+//!   NBV. Objects first, the table's share of the budget last: an episode that stops by the
+//!   paper's rule before the budget is tight never meets it.
+//! - All off (w = 0, `before_stop` and `reserve` false) is the paper.
 
 use nalgebra::Point3;
 use rand::{Rng, SeedableRng};
@@ -57,6 +73,18 @@ pub struct DiscoveryConfig {
     /// Look-at targets (unseen cells, spread by farthest-point sampling) of the candidates aimed
     /// at the table.
     pub targets: usize,
+    /// Budget reserve: take a discovery view now when the views left in the budget are no more
+    /// than the discovery views still worth taking ([`greedy_discovery_views`]); false = spend
+    /// the budget on the objects until the stopping rule.
+    pub reserve: bool,
+    /// A cell counts as seen once depth returns landed in it in this many frames (the map
+    /// confirms an object after `pipeline.min_observations` untruncated detections: a cell seen
+    /// in fewer frames may hold an object the map has not confirmed yet).
+    pub min_frames: u32,
+    /// Returns within this fraction of the image width (height) of the left/right (top/bottom)
+    /// border do not mark cells, and predicted views count only cells inside that inner image:
+    /// an object at the border is truncated, and truncated detections do not seed map objects.
+    pub margin_frac: f64,
 }
 
 impl Default for DiscoveryConfig {
@@ -69,6 +97,9 @@ impl Default for DiscoveryConfig {
             pixel_stride: 4,
             max_height_m: 0.4,
             targets: 4,
+            reserve: false,
+            min_frames: 3,
+            margin_frac: 0.1,
         }
     }
 }
@@ -79,6 +110,10 @@ impl DiscoveryConfig {
         check_range("discovery.weight", self.weight, 0.0, 1e6)?;
         check_range("discovery.cell_m", self.cell_m, 1e-3, 1.0)?;
         check_range("discovery.max_height_m", self.max_height_m, 0.0, 10.0)?;
+        check_range("discovery.margin_frac", self.margin_frac, 0.0, 0.45)?;
+        if self.min_frames == 0 {
+            return Err(ExploreError::InvalidConfig { field: "discovery.min_frames", reason: "must be ≥ 1".into() });
+        }
         if self.pixel_stride == 0 {
             return Err(ExploreError::InvalidConfig {
                 field: "discovery.pixel_stride", reason: "must be ≥ 1".into()
@@ -89,7 +124,7 @@ impl DiscoveryConfig {
 
     /// Whether anything of discovery is on (the mixed term or the stopping extension).
     pub fn enabled(&self) -> bool {
-        self.weight > 0.0 || self.before_stop
+        self.weight > 0.0 || self.before_stop || self.reserve
     }
 }
 
@@ -100,7 +135,9 @@ pub struct TableCoverage {
     cell_m: f64,
     cols: usize,
     rows: usize,
-    seen: Vec<bool>,
+    min_frames: u32,
+    /// Frames whose returns landed in each cell (saturating).
+    frames: Vec<u32>,
 }
 
 /// Below the table top by more than this, a return is not on the table (metres).
@@ -111,28 +148,35 @@ const CELL_LIFT_M: f64 = 0.002;
 const FOOTPRINT_MARGIN_M: f64 = 0.01;
 
 impl TableCoverage {
-    /// An all-unseen grid over `table` with cells of `cell_m`.
-    pub fn new(table: &TableRect, cell_m: f64) -> Result<Self, ExploreError> {
+    /// An all-unseen grid over `table` with cells of `config.cell_m`, a cell seen after
+    /// `config.min_frames` frames.
+    pub fn new(table: &TableRect, config: &DiscoveryConfig) -> Result<Self, ExploreError> {
         table.validate()?;
-        check_range("discovery.cell_m", cell_m, 1e-3, 1.0)?;
+        config.validate()?;
+        let cell_m = config.cell_m;
         let cols = ((table.size_m[0] / cell_m).ceil() as usize).max(1);
         let rows = ((table.size_m[1] / cell_m).ceil() as usize).max(1);
-        Ok(Self { table: *table, cell_m, cols, rows, seen: vec![false; cols * rows] })
+        Ok(Self { table: *table, cell_m, cols, rows, min_frames: config.min_frames, frames: vec![0; cols * rows] })
+    }
+
+    fn is_seen(&self, i: usize) -> bool {
+        self.frames[i] >= self.min_frames
     }
 
     /// Number of cells.
     pub fn len(&self) -> usize {
-        self.seen.len()
+        self.frames.len()
     }
 
     /// Whether the grid has no cells (never: a valid table has at least one).
     pub fn is_empty(&self) -> bool {
-        self.seen.is_empty()
+        self.frames.is_empty()
     }
 
-    /// Cells seen so far (depth returns only; see [`Self::known_fraction`]).
+    /// Cells seen so far, in `min_frames` frames (depth returns only; see
+    /// [`Self::known_fraction`]).
     pub fn seen_cells(&self) -> usize {
-        self.seen.iter().filter(|s| **s).count()
+        (0..self.frames.len()).filter(|i| self.is_seen(*i)).count()
     }
 
     fn cell_of(&self, x: f64, y: f64) -> Option<usize> {
@@ -157,8 +201,9 @@ impl TableCoverage {
         )
     }
 
-    /// Mark the cells under the depth returns of one frame (every `pixel_stride`-th pixel, pixel
-    /// centres); returns how many cells became seen. The depth must match the camera's size.
+    /// Count one frame for the cells under its depth returns (every `pixel_stride`-th pixel,
+    /// pixel centres, outside the `margin_frac` border); returns how many cells became seen (reached
+    /// `min_frames`). The depth must match the camera's size.
     pub fn integrate_depth(
         &mut self,
         camera: &PinholeCamera,
@@ -174,20 +219,27 @@ impl TableCoverage {
         }
         let stride = config.pixel_stride;
         let (lo, hi) = (self.table.height_m - BELOW_TABLE_TOLERANCE_M, self.table.height_m + config.max_height_m);
-        let mut newly = 0;
-        for v in (0..depth.height).step_by(stride) {
-            for u in (0..depth.width).step_by(stride) {
+        let (u_lo, u_hi) = inner_range(depth.width, config.margin_frac);
+        let (v_lo, v_hi) = inner_range(depth.height, config.margin_frac);
+        let mut hit = vec![false; self.frames.len()];
+        for v in (0..depth.height).step_by(stride).filter(|v| (v_lo..v_hi).contains(v)) {
+            for u in (0..depth.width).step_by(stride).filter(|u| (u_lo..u_hi).contains(u)) {
                 let Some(d) = depth.at(u, v) else { continue };
                 let p = world_from_camera * camera.unproject(f64::from(u) + 0.5, f64::from(v) + 0.5, f64::from(d));
                 if !(p.z >= lo && p.z <= hi) {
                     continue;
                 }
                 if let Some(i) = self.cell_of(p.x, p.y) {
-                    if !self.seen[i] {
-                        self.seen[i] = true;
-                        newly += 1;
-                    }
+                    hit[i] = true;
                 }
+            }
+        }
+        let mut newly = 0;
+        for (i, h) in hit.iter().enumerate() {
+            if *h {
+                let was = self.is_seen(i);
+                self.frames[i] = self.frames[i].saturating_add(1);
+                newly += usize::from(!was && self.is_seen(i));
             }
         }
         Ok(newly)
@@ -196,8 +248,8 @@ impl TableCoverage {
     /// Cells neither seen nor inside a mapped object's footprint (`occluders`: the map's
     /// primitives), as world points (centres lifted just above the table top).
     pub fn unknown_cells(&self, occluders: &Occluders) -> Vec<Point3<f64>> {
-        (0..self.seen.len())
-            .filter(|i| !self.seen[*i])
+        (0..self.frames.len())
+            .filter(|i| !self.is_seen(*i))
             .map(|i| self.cell_center(i))
             .filter(|p| !occluders.point_inside_object(p, FOOTPRINT_MARGIN_M))
             .collect()
@@ -205,7 +257,7 @@ impl TableCoverage {
 
     /// Fraction of the table known: seen, or inside a mapped object's footprint.
     pub fn known_fraction(&self, occluders: &Occluders) -> f64 {
-        1.0 - self.unknown_cells(occluders).len() as f64 / self.seen.len() as f64
+        1.0 - self.unknown_cells(occluders).len() as f64 / self.frames.len() as f64
     }
 
     /// Bits of one cell in the object grids' unit (1 bit per unknown cell of `object_cell_m`).
@@ -215,27 +267,94 @@ impl TableCoverage {
 }
 
 /// How many of `unknown` (from [`TableCoverage::unknown_cells`]) a camera at `world_from_camera`
-/// would see: in its image, within `grid`'s range, the ray from the eye unblocked by the table and
-/// the mapped objects.
+/// would see: in its image inside the `config.margin_frac` border, within `grid`'s range, the ray
+/// from the eye unblocked by the table and the mapped objects.
 pub fn visible_unknown_cells(
     unknown: &[Point3<f64>],
     camera: &PinholeCamera,
     world_from_camera: &Se3,
     occluders: &Occluders,
     grid: &GridConfig,
+    config: &DiscoveryConfig,
 ) -> usize {
+    visible_unknown_indices(unknown, camera, world_from_camera, occluders, grid, config).len()
+}
+
+/// Pixel range `[lo, hi)` of an image side of `n` pixels inside a border of `margin_frac` · n.
+fn inner_range(n: u32, margin_frac: f64) -> (u32, u32) {
+    let m = ((f64::from(n) * margin_frac).round() as u32).min(n / 2);
+    (m, n - m)
+}
+
+/// Indices into `unknown` of the cells a view would see (the test of [`visible_unknown_cells`]).
+pub fn visible_unknown_indices(
+    unknown: &[Point3<f64>],
+    camera: &PinholeCamera,
+    world_from_camera: &Se3,
+    occluders: &Occluders,
+    grid: &GridConfig,
+    config: &DiscoveryConfig,
+) -> Vec<usize> {
     let vp = Viewpoint::new(camera, world_from_camera);
-    unknown
-        .iter()
-        .filter(|p| {
-            let pc = vp.camera_from_world * **p;
-            let dist = (**p - vp.eye_in_world).norm();
+    let (u_lo, u_hi) = inner_range(camera.width, config.margin_frac);
+    let (v_lo, v_hi) = inner_range(camera.height, config.margin_frac);
+    let inner = |uv: [f64; 2]| {
+        uv[0] >= f64::from(u_lo) && uv[0] < f64::from(u_hi) && uv[1] >= f64::from(v_lo) && uv[1] < f64::from(v_hi)
+    };
+    (0..unknown.len())
+        .filter(|i| {
+            let p = &unknown[*i];
+            let pc = vp.camera_from_world * *p;
+            let dist = (*p - vp.eye_in_world).norm();
             pc.z >= grid.min_range_m
                 && dist <= grid.max_range_m
-                && camera.project(&pc).is_some_and(|uv| camera.contains(uv))
+                && camera.project(&pc).is_some_and(|uv| camera.contains(uv) && inner(uv))
                 && !occluders.segment_blocked(&vp.eye_in_world, p, None)
         })
-        .count()
+        .collect()
+}
+
+/// The discovery views still worth taking, by greedy set cover: repeatedly the view (index into
+/// `seen_by_view`, each the cell indices that view sees) that reveals the most cells no earlier
+/// pick reveals, as long as it reveals at least `min_new` of them and `accept` takes it (the
+/// reachability check: a rejected view is dropped and the next best tried); at most `limit`
+/// picks, in pick order. Its length is the session's estimate of the views that discovering the
+/// rest of the table needs (the budget reserve, module docs).
+pub fn greedy_discovery_views(
+    seen_by_view: &[Vec<usize>],
+    n_cells: usize,
+    min_new: usize,
+    limit: usize,
+    mut accept: impl FnMut(usize) -> bool,
+) -> Vec<usize> {
+    let mut covered = vec![false; n_cells];
+    let mut dropped = vec![false; seen_by_view.len()];
+    let mut picks = Vec::new();
+    while picks.len() < limit {
+        let gain = |v: &Vec<usize>| v.iter().filter(|c| !covered.get(**c).copied().unwrap_or(true)).count();
+        let best = (0..seen_by_view.len()).filter(|i| !dropped[*i]).map(|i| (i, gain(&seen_by_view[i]))).fold(
+            None,
+            |b: Option<(usize, usize)>, (i, g)| match b {
+                Some((_, bg)) if bg >= g => b,
+                _ => Some((i, g)),
+            },
+        );
+        let Some((i, g)) = best else { break };
+        if g < min_new.max(1) {
+            break;
+        }
+        dropped[i] = true;
+        if !accept(i) {
+            continue;
+        }
+        for c in &seen_by_view[i] {
+            if let Some(slot) = covered.get_mut(*c) {
+                *slot = true;
+            }
+        }
+        picks.push(i);
+    }
+    picks
 }
 
 /// Up to `n` look-at targets among `unknown`, spread out: the first drawn at random (seeded), each

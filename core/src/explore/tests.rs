@@ -597,8 +597,10 @@ fn a_top_down_view_sees_its_footprint_of_the_table() {
     let h = 0.5;
     let pose = view(Point3::new(0.5, 0.0, h), [0.5, 0.0, 0.0]);
     let depth = DepthImage::new(640, 480, vec![h as f32; 640 * 480]).unwrap_or_else(|e| panic!("{e}"));
-    let cfg = on(DiscoveryConfig::default());
-    let mut cov = TableCoverage::new(&table(), cfg.cell_m).unwrap_or_else(|e| panic!("{e}"));
+    // One frame marks a cell and the whole image counts (the closed form below); the default
+    // rules (3 frames, 10 % border) are checked at the end.
+    let cfg = on(DiscoveryConfig { min_frames: 1, margin_frac: 0.0, ..DiscoveryConfig::default() });
+    let mut cov = TableCoverage::new(&table(), &cfg).unwrap_or_else(|e| panic!("{e}"));
     assert_eq!(cov.len(), 40 * 60);
     let newly = cov.integrate_depth(&cam, &pose, &depth, &cfg).unwrap_or_else(|e| panic!("{e}"));
     // Footprint (closed form): an axis-aligned 2·h·(W/2)/f × 2·h·(H/2)/f rectangle, i.e. a × b
@@ -614,19 +616,35 @@ fn a_top_down_view_sees_its_footprint_of_the_table() {
     // The same frame again changes nothing; returns below the table top mark nothing.
     assert_eq!(cov.integrate_depth(&cam, &pose, &depth, &cfg).unwrap_or_else(|e| panic!("{e}")), 0);
     let below = DepthImage::new(640, 480, vec![0.6; 640 * 480]).unwrap_or_else(|e| panic!("{e}"));
-    let mut cov2 = TableCoverage::new(&table(), cfg.cell_m).unwrap_or_else(|e| panic!("{e}"));
+    let mut cov2 = TableCoverage::new(&table(), &cfg).unwrap_or_else(|e| panic!("{e}"));
     assert_eq!(cov2.integrate_depth(&cam, &pose, &below, &cfg).unwrap_or_else(|e| panic!("{e}")), 0);
     // Wrong depth size: a typed error.
     let small = DepthImage::new(64, 48, vec![0.5; 64 * 48]).unwrap_or_else(|e| panic!("{e}"));
     assert!(matches!(cov2.integrate_depth(&cam, &pose, &small, &cfg), Err(ExploreError::Degenerate { .. })));
+    // Defaults: nothing is seen after two frames, the inner 80 % × 80 % footprint after three.
+    let strict = on(DiscoveryConfig::default());
+    let mut cov3 = TableCoverage::new(&table(), &strict).unwrap_or_else(|e| panic!("{e}"));
+    for k in 0..3 {
+        let n = cov3.integrate_depth(&cam, &pose, &depth, &strict).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(n == 0, k < 2, "frame {k}: {n} newly seen");
+    }
+    let (a3, b3) = (a * (1.0 - 2.0 * strict.margin_frac), b * (1.0 - 2.0 * strict.margin_frac));
+    let seen3 = cov3.seen_cells() as f64;
+    assert!(seen3 >= (a3 - 1.0) * (b3 - 1.0) && seen3 <= (a3 + 2.0) * (b3 + 2.0), "seen {seen3}, {a3} × {b3}");
+    // A bad rule is a typed error naming the field.
+    let bad = DiscoveryConfig { min_frames: 0, ..DiscoveryConfig::default() };
+    assert!(matches!(
+        TableCoverage::new(&table(), &bad),
+        Err(ExploreError::InvalidConfig { field: "discovery.min_frames", .. })
+    ));
 }
 
 #[test]
 fn unseen_cells_are_counted_where_the_camera_looks_and_not_behind_objects() {
     let cam = camera();
-    let cfg = on(DiscoveryConfig::default());
+    let cfg = on(DiscoveryConfig { min_frames: 1, margin_frac: 0.0, ..DiscoveryConfig::default() });
     let grid = GridConfig::default();
-    let mut cov = TableCoverage::new(&table(), cfg.cell_m).unwrap_or_else(|e| panic!("{e}"));
+    let mut cov = TableCoverage::new(&table(), &cfg).unwrap_or_else(|e| panic!("{e}"));
     // See the y < 0 half from above (depth 0.5 over the view's footprint).
     let seen_pose = view(Point3::new(0.5, -0.3, 0.5), [0.5, -0.3, 0.0]);
     let depth = DepthImage::new(640, 480, vec![0.5; 640 * 480]).unwrap_or_else(|e| panic!("{e}"));
@@ -634,9 +652,9 @@ fn unseen_cells_are_counted_where_the_camera_looks_and_not_behind_objects() {
     let empty_map = ObjectMap::new();
     let empty = Occluders::from_map(&empty_map, &grid);
     let unknown = cov.unknown_cells(&empty);
-    let towards_seen = visible_unknown_cells(&unknown, &cam, &seen_pose, &empty, &grid);
+    let towards_seen = visible_unknown_cells(&unknown, &cam, &seen_pose, &empty, &grid, &cfg);
     let unseen_pose = view(Point3::new(0.5, 0.3, 0.5), [0.5, 0.3, 0.0]);
-    let towards_unseen = visible_unknown_cells(&unknown, &cam, &unseen_pose, &empty, &grid);
+    let towards_unseen = visible_unknown_cells(&unknown, &cam, &unseen_pose, &empty, &grid, &cfg);
     assert_eq!(towards_seen, 0);
     assert!(towards_unseen > 500, "{towards_unseen}");
     // A tall block in the unseen half: its footprint counts as known, and from a low oblique
@@ -647,8 +665,8 @@ fn unseen_cells_are_counted_where_the_camera_looks_and_not_behind_objects() {
     let footprint = unknown.len() - unknown_obj.len();
     assert!((36..=64).contains(&footprint), "{footprint}"); // (12 + 2·1 cm margin)² / 4 cm² = 49
     let low = view(Point3::new(0.5, -0.1, 0.25), [0.5, 0.45, 0.0]);
-    let without = visible_unknown_cells(&unknown_obj, &cam, &low, &empty, &grid);
-    let with = visible_unknown_cells(&unknown_obj, &cam, &low, &occ, &grid);
+    let without = visible_unknown_cells(&unknown_obj, &cam, &low, &empty, &grid, &cfg);
+    let with = visible_unknown_cells(&unknown_obj, &cam, &low, &occ, &grid, &cfg);
     assert!(with + 20 < without, "with {with}, without {without}");
     assert!((cov.known_fraction(&occ) - (1.0 - unknown_obj.len() as f64 / 2400.0)).abs() < 1e-12);
 }
@@ -744,4 +762,62 @@ fn before_stop_looks_at_the_unseen_table_when_every_object_is_done() {
     // It looks at the table away from the block's neighbourhood it has seen.
     let axis = world_from_camera.rotation * Vector3::z();
     assert!(axis.z < -0.3, "{axis:?}");
+}
+
+#[test]
+fn greedy_discovery_views_cover_the_most_new_cells_first() {
+    let set = |r: std::ops::Range<usize>| r.collect::<Vec<usize>>();
+    let views = vec![set(0..30), set(0..30), set(30..40), set(40..80), set(75..82)];
+    // 40 new, then 30, then 10; the copy of the second adds 0 and the last 2 (< 5).
+    assert_eq!(greedy_discovery_views(&views, 82, 5, 10, |_| true), vec![3, 0, 2]);
+    assert_eq!(greedy_discovery_views(&views, 82, 5, 2, |_| true), vec![3, 0], "limit");
+    assert_eq!(greedy_discovery_views(&views, 82, 20, 10, |_| true), vec![3, 0], "min_new");
+    // An unreachable view is dropped and the next best taken; ties go to the lower index.
+    assert_eq!(greedy_discovery_views(&views, 82, 5, 10, |i| i != 3), vec![0, 2, 4]);
+    assert_eq!(greedy_discovery_views(&views, 82, 5, 10, |i| i != 0), vec![3, 1, 2]);
+    assert!(greedy_discovery_views(&[], 82, 5, 10, |_| true).is_empty());
+    // Indices outside the cell count are ignored rather than panicking.
+    assert_eq!(greedy_discovery_views(&[vec![500, 501]], 82, 1, 10, |_| true), Vec::<usize>::new());
+}
+
+#[test]
+fn the_budget_reserve_takes_the_last_view_for_the_unseen_table() {
+    use crate::active::{ActiveConfig, ActiveSession, NextView};
+    use crate::frame::Frame;
+    // One block seen from above only (its sides unknown: not done), most of the table unseen.
+    let map = map_of(vec![object(Label::Block, [0.5, 0.0, 0.05], 0.0, [0.05, 0.05, 0.05])]);
+    let cam = PinholeCamera::from_fovy(96, 72, 0.8).unwrap_or_else(|e| panic!("{e}"));
+    let top = view(Point3::new(0.5, 0.0, 0.45), [0.5, 0.0, 0.05]);
+    let grid = GridConfig::default();
+    let decide = |config: ActiveConfig, views_taken: usize| {
+        let mut s = ActiveSession::new(config, table()).unwrap_or_else(|e| panic!("{e}"));
+        let (depth, points) = render(&map, &cam, &top, 0);
+        let frame = Frame { index: 0, camera: cam, depth, world_from_camera: top, detections: Vec::new() };
+        let observed = [ObservedPoints { object_id: 0, points_in_world: points }];
+        s.integrate_frame(&map, &frame, &observed).unwrap_or_else(|e| panic!("{e}"));
+        s.view_done(&map, false);
+        for _ in 0..views_taken {
+            s.view_done(&map, true);
+        }
+        let unknown = s.table_unknown_cells(&map);
+        let d = s.next_view(&map, &cam, &top, &AlwaysReachable).unwrap_or_else(|e| panic!("{e}"));
+        let NextView::Move { world_from_camera, .. } = d else { panic!("expected a move: {d:?}") };
+        let occ = Occluders::from_map(&map, &grid);
+        (
+            world_from_camera,
+            visible_unknown_cells(&unknown, &cam, &world_from_camera, &occ, &grid, &DiscoveryConfig::default()),
+        )
+    };
+    let reserve = ActiveConfig { discovery_reserve: true, ..ActiveConfig::default() };
+    // Plenty of budget left: the object NBV, exactly the paper's choice.
+    let (paper_pose, _) = decide(ActiveConfig::default(), 0);
+    let (early_pose, _) = decide(reserve.clone(), 0);
+    assert_eq!(paper_pose, early_pose, "objects first");
+    // One view left, and the unseen table needs at least one: a discovery view.
+    let (paper_last, _) = decide(ActiveConfig::default(), 9);
+    let (reserve_last, new_cells) = decide(reserve, 9);
+    assert_ne!(paper_last, reserve_last);
+    assert!(new_cells >= 25, "the reserve view sees {new_cells} unseen cells");
+    let axis = reserve_last.rotation * Vector3::z();
+    assert!(axis.z < -0.3, "it looks down at the table: {axis:?}");
 }
