@@ -207,7 +207,15 @@ class RunConfig:
     """View-selection strategy: object-driven (the paper's utility), expected-gain, random,
     coverage or init."""
     seed: int = 0
-    """Seeds sensor noise, the detector and random strategies."""
+    """Seeds sensor noise, the detector, random strategies and (mixed with the scene file's seed)
+    the kinematic prior noise."""
+    seed_algorithms: bool = False
+    """Also seed the mapper's own random streams from the run and scene seeds: the isolation
+    forest's subsamples, the cylinder fit's three-point circles and the tracker's PnP RANSAC
+    (``episode.algorithm_seeds``). False (default): those streams keep the core's fixed seeds, so
+    the run seed varies the simulated world (noise, detector, random views) and not the estimator,
+    and every report stays reproducible with its recorded command. True: repeating a run over
+    seeds also samples the estimator's own randomness (its spread over seeds then includes it)."""
     runs_dir: str = "runs"
     """Where run folders are created."""
     frame_rate_hz: float = 4.0

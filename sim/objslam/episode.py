@@ -148,6 +148,7 @@ class _Recorder:
 def new_mapper(cfg: RunConfig, scene: SceneSpec) -> Any:
     """A fresh :class:`_native.ActiveMapper` (association, parameterization, grids, tracker) for
     a run config and scene (also used for the local re-observation maps of :mod:`objslam.grasp`)."""
+    seeds = algorithm_seeds(cfg.seed, scene.seed) if cfg.seed_algorithms else None
     return _native.ActiveMapper(
         mapper_config_json=json.dumps(
             {
@@ -163,6 +164,7 @@ def new_mapper(cfg: RunConfig, scene: SceneSpec) -> Any:
                 "naive": to_dict(cfg.naive),
                 "param": {
                     "iforest": {
+                        **({"seed": seeds["iforest"]} if seeds else {}),
                         "passes": cfg.param.iforest_passes,
                         "readmit_rings": cfg.param.iforest_readmit_rings,
                         "readmit_gap_factor": cfg.param.iforest_readmit_gap,
@@ -174,6 +176,7 @@ def new_mapper(cfg: RunConfig, scene: SceneSpec) -> Any:
                         else {}
                     ),
                     "cylinder": {
+                        **({"seed": seeds["cylinder"]} if seeds else {}),
                         "enabled": cfg.param.cylinder_fit,
                         "consensus_iterations": cfg.param.cylinder_consensus_iterations,
                     },
@@ -192,6 +195,7 @@ def new_mapper(cfg: RunConfig, scene: SceneSpec) -> Any:
             {
                 "pose_source": cfg.pose_source,
                 "kinematic_noise": {**to_dict(cfg.pose_noise), "seed": kinematic_noise_seed(cfg.seed, scene.seed)},
+                **({"ransac": {"seed": seeds["ransac"]}} if seeds else {}),
             }
         ),
     )
@@ -203,6 +207,22 @@ def kinematic_noise_seed(run_seed: int, scene_seed: int) -> int:
     same bias in every scene: strategies whose views do not depend on the scene, coverage and
     init, then carried one shared draw of the map's placement error through all seven scenes.)"""
     return (run_seed * 1_000_003 + scene_seed) % (1 << 63)
+
+
+def algorithm_seeds(run_seed: int, scene_seed: int) -> dict[str, int]:
+    """Seeds of the mapper's own random streams (``RunConfig.seed_algorithms``): the isolation
+    forest, the cylinder fit's consensus circles and the tracker's PnP RANSAC, each a distinct
+    mix of the run and scene seeds (SplitMix64 of the kinematic noise seed and a stream tag), so
+    no two streams, runs or scenes share one."""
+
+    def splitmix(x: int) -> int:
+        x = (x + 0x9E3779B97F4A7C15) & 0xFFFFFFFFFFFFFFFF
+        x = ((x ^ (x >> 30)) * 0xBF58476D1CE4E5B9) & 0xFFFFFFFFFFFFFFFF
+        x = ((x ^ (x >> 27)) * 0x94D049BB133111EB) & 0xFFFFFFFFFFFFFFFF
+        return (x ^ (x >> 31)) % (1 << 63)
+
+    base = kinematic_noise_seed(run_seed, scene_seed)
+    return {name: splitmix(base ^ (tag << 56)) for tag, name in enumerate(("iforest", "cylinder", "ransac"), 1)}
 
 
 def run_episode(
