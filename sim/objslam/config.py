@@ -151,6 +151,11 @@ class ParamRunConfig:
     """Circles through three random side-wall points tried as a second start of the cylinder fit
     (the one with more points on the circle is kept); 0 = the algebraic start only (before
     2026-12-02: a neighbour's points merged into a bottle's cloud pulled that start off the wall)."""
+    cylinder_top_from_face: bool = False
+    """Beyond the paper: a cylinder's top from the median height of its top face's points instead
+    of its highest point, which depth noise lifts ~3 σ above the face (cylinders 1.5 mm too tall on
+    the exploration benchmark with exact poses; ``core/src/objects/cylinder.rs``). Off by default:
+    the reports were made without it."""
 
 
 @dataclass(frozen=True)

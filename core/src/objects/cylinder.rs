@@ -28,6 +28,18 @@
 //! The height is the vertical extent of the points, centred at its middle (the `iforest` stage
 //! centres the box at the mean of the points, which the top face of a can or bottle — dense in
 //! views from above — pulls upwards by centimetres).
+//!
+//! The top of that extent is the highest point, which depth noise biases upwards: the maximum
+//! of the top face's thousands of noisy returns lies about 3 σ above the face (measured on the
+//! exploration benchmark with exact camera poses, 0.5 mm + 1 mm-quantised depth noise: cylinders
+//! 1.5 mm too tall, every strategy; cuboids, whose extent comes from the forest and the
+//! refinement, 0.2 mm). With [`CylinderFitConfig::top_from_face`] the top is instead the median
+//! height of the top face's points: those in the top band and horizontally inside
+//! [`CylinderFitConfig::top_face_interior_frac`] × the fitted radius of the axis (a rim or the
+//! side wall lies on the circle, not inside it), when there are at least
+//! [`CylinderFitConfig::top_face_min_points`] of them; otherwise (top face not seen, or a hollow
+//! cup) the highest point as before. The noise is symmetric about the face, so the median is not
+//! biased by it.
 
 use nalgebra::{Matrix3, Point3, Vector3};
 
@@ -63,6 +75,14 @@ pub struct CylinderFitConfig {
     pub consensus_iterations: usize,
     /// Seed of the consensus start's point draws (default 0).
     pub seed: u64,
+    /// Top of the cylinder from the median height of its top face's points instead of the
+    /// highest point (module docs; default false, the measured behaviour of the reports).
+    pub top_from_face: bool,
+    /// Top-face points lie horizontally within this fraction of the fitted radius of the axis
+    /// (default 0.7).
+    pub top_face_interior_frac: f64,
+    /// Fewest top-face points for the median; fewer: the highest point (default 20).
+    pub top_face_min_points: usize,
 }
 
 impl Default for CylinderFitConfig {
@@ -79,6 +99,9 @@ impl Default for CylinderFitConfig {
             max_radius_ratio: 1.5,
             consensus_iterations: 200,
             seed: 0,
+            top_from_face: false,
+            top_face_interior_frac: 0.7,
+            top_face_min_points: 20,
         }
     }
 }
@@ -297,12 +320,31 @@ pub fn fit_cylinder(points: &[Point3<f64>], config: &CylinderFitConfig) -> Optio
         && fit.inlier_fraction >= config.min_inlier_fraction
         && (config.min_radius_m..=config.max_radius_m).contains(&fit.radius)
         && fit.radius <= config.max_radius_ratio * spread;
+    let top = if config.top_from_face { top_face_height(points, &fit, top, config).unwrap_or(top) } else { top };
     ok.then(|| ObjectGeometry {
         shape: Shape::Cylinder,
         center: Vector3::new(fit.center[0], fit.center[1], (top + bottom) / 2.0),
         yaw_rad: 0.0,
         half_extents: Vector3::new(fit.radius, fit.radius, (top - bottom) / 2.0),
     })
+}
+
+/// Median height of the top face's points (in the top band below `highest`, horizontally inside
+/// `top_face_interior_frac` × the fitted radius), or `None` with fewer than
+/// `top_face_min_points` of them.
+fn top_face_height(points: &[Point3<f64>], fit: &CircleFit, highest: f64, config: &CylinderFitConfig) -> Option<f64> {
+    let inner = config.top_face_interior_frac * fit.radius;
+    let mut z: Vec<f64> = points
+        .iter()
+        .filter(|p| p.z >= highest - config.top_band_m && (p.x - fit.center[0]).hypot(p.y - fit.center[1]) <= inner)
+        .map(|p| p.z)
+        .collect();
+    if z.len() < config.top_face_min_points.max(1) {
+        return None;
+    }
+    z.sort_by(f64::total_cmp);
+    let n = z.len();
+    Some(if n % 2 == 1 { z[n / 2] } else { (z[n / 2 - 1] + z[n / 2]) / 2.0 })
 }
 
 #[cfg(test)]
@@ -396,6 +438,44 @@ mod tests {
         // Same seed, same circle; no hypotheses, no consensus fit.
         assert_eq!(fit_circle_consensus(&side, 0.003, (0.01, 0.2), 200, 0), Some(consensus));
         assert!(fit_circle_consensus(&side, 0.003, (0.01, 0.2), 0, 0).is_none());
+    }
+
+    #[test]
+    fn top_face_median_removes_the_noise_maximum_bias() {
+        // A can (r 3.3 cm, 12 cm) seen over 200° of its wall and from above: 2000 top-face returns
+        // with 0.6 mm Gaussian height noise. The highest one lies ~3.5 σ above the face (the
+        // expected maximum of 2000 normals, 3.4-3.9 σ); the face median is within 0.1 mm.
+        let (c, r, h, sigma) = ([0.5, 0.1], 0.033, 0.12, 0.0006);
+        let mut rng = ChaCha8Rng::seed_from_u64(21);
+        let mut gauss = || {
+            let (u1, u2): (f64, f64) = (rng.random_range(1e-12..1.0), rng.random_range(0.0..1.0));
+            (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
+        };
+        let mut pts = partial_cylinder(c, r, h - 0.008, -1.75, 1.75, 22);
+        pts.retain(|p| p.z < h - 0.0091);
+        let mut rng2 = ChaCha8Rng::seed_from_u64(23);
+        for _ in 0..2000 {
+            let (a, rr) = (rng2.random_range(0.0..std::f64::consts::TAU), r * rng2.random_range(0.0f64..1.0).sqrt());
+            pts.push(Point3::new(c[0] + rr * a.cos(), c[1] + rr * a.sin(), h + sigma * gauss()));
+        }
+        let highest = pts.iter().map(|p| p.z).fold(f64::NEG_INFINITY, f64::max);
+        assert!(highest - h > 2.5 * sigma, "max only {} σ above", (highest - h) / sigma);
+        let bottom = pts.iter().map(|p| p.z).fold(f64::INFINITY, f64::min);
+        let old = fit_cylinder(&pts, &CylinderFitConfig::default()).unwrap_or_else(|| panic!("rejected"));
+        assert!(((old.center.z + old.half_extents.z) - highest).abs() < 1e-12, "{old:?}");
+        let cfg = CylinderFitConfig { top_from_face: true, ..Default::default() };
+        let new = fit_cylinder(&pts, &cfg).unwrap_or_else(|| panic!("rejected"));
+        let top = new.center.z + new.half_extents.z;
+        assert!((top - h).abs() < 1e-4, "top {top} vs {h}");
+        assert!((new.center.z - new.half_extents.z - bottom).abs() < 1e-12, "bottom kept: {new:?}");
+        // Axis and radius are the same fit.
+        assert_eq!((new.center.x, new.center.y, new.half_extents.x), (old.center.x, old.center.y, old.half_extents.x));
+        // Top face not seen (side wall only): too few interior points, the highest point stays.
+        let wall: Vec<Point3<f64>> =
+            partial_cylinder(c, r, h, -1.75, 1.75, 24).into_iter().filter(|p| p.z < h - 0.0011).collect();
+        let w_old = fit_cylinder(&wall, &CylinderFitConfig::default()).unwrap_or_else(|| panic!("rejected"));
+        let w_new = fit_cylinder(&wall, &cfg).unwrap_or_else(|| panic!("rejected"));
+        assert_eq!(w_old, w_new);
     }
 
     #[test]
