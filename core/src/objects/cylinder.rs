@@ -320,8 +320,11 @@ pub fn fit_cylinder(points: &[Point3<f64>], config: &CylinderFitConfig) -> Optio
         && fit.inlier_fraction >= config.min_inlier_fraction
         && (config.min_radius_m..=config.max_radius_m).contains(&fit.radius)
         && fit.radius <= config.max_radius_ratio * spread;
+    if !ok {
+        return None;
+    }
     let top = if config.top_from_face { top_face_height(points, &fit, top, config).unwrap_or(top) } else { top };
-    ok.then(|| ObjectGeometry {
+    Some(ObjectGeometry {
         shape: Shape::Cylinder,
         center: Vector3::new(fit.center[0], fit.center[1], (top + bottom) / 2.0),
         yaw_rad: 0.0,
