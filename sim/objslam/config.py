@@ -154,12 +154,13 @@ class ParamRunConfig:
     cylinder_top_from_face: bool = False
     """Beyond the paper: a cylinder's top from the median height of its top face's points instead
     of its highest point, which depth noise lifts ~3 σ above the face (``core/src/objects/cylinder.rs``).
-    Measured with exact poses, seeds 0-2 (``reports/exploration_fk_topface/`` against the same seeds
-    of ``reports/exploration_fk/``): cylinder height error +1.5 → +0.1 mm, mean 3D IoU
-    object-driven 0.965 → 0.971, random 0.964 → 0.971, coverage 0.972 → 0.978, CDE 0.07 → 0.04 cm.
-    With the default SLAM poses (``reports/exploration_topface/`` against seeds 0-2 of
-    ``reports/exploration.md``) the map's global offset dominates: 3D IoU object-driven
-    0.905 → 0.906, random 0.902 → 0.904; with the offset removed 0.951 → 0.956 and 0.955 → 0.959.
+    Measured with exact poses, seeds 0-2 (``reports/exploration_fk_topface/vs_baseline.md``, made by
+    ``experiments/compare_sweeps.py`` against the same episodes of ``reports/exploration_fk/``):
+    cylinder height error +1.5 → +0.1 mm (``size_errors.md``), 3D IoU +0.006 to +0.007 and CDE
+    −0.03 cm for object-driven, random and coverage alike. With the default SLAM poses
+    (``reports/exploration_topface/vs_baseline.md``, against ``reports/exploration.json``) the
+    map's global offset dominates: 3D IoU +0.002 (object-driven ± 0.006, random ± 0.001); with
+    the offset removed +0.005 ± 0.003 and +0.004 ± 0.002.
     Off by default only because the other reports were made without it (turning it on means
     re-running them)."""
 
