@@ -129,8 +129,16 @@ def test_discovery_finds_the_object_the_paper_rule_leaves_unmapped(tmp_path, ci_
     """Against the scene file: with a 35° camera the Init views of scene03 miss an object; the
     paper's stopping rule ends once the mapped objects are explored and never maps it, looking at
     the unseen table before stopping (explore.discovery_before_stop, with the budget reserve of
-    the run defaults) finds it."""
-    common = {"scene": '"scenes/scene03.toml"', "camera.fovy_deg": 35.0, "seed": 0}
+    the run defaults) finds it. The scenario (scene, seed, camera) was found with a cylinder's top
+    at its highest point; with the top-face median the paper's run no longer converges within
+    the budget (stop reason max_views, the object still missed), so the test keeps that estimator
+    to test the stopping rule, not the estimator."""
+    common = {
+        "scene": '"scenes/scene03.toml"',
+        "camera.fovy_deg": 35.0,
+        "seed": 0,
+        "param.cylinder_top_from_face": "false",
+    }
     paper = run_episode(
         _cfg(tmp_path, ci_overlay, strategy="object-driven", **common, **{"explore.discovery_before_stop": "false", "explore.discovery_reserve": "false"}),
         progress=False,

@@ -151,7 +151,7 @@ class ParamRunConfig:
     """Circles through three random side-wall points tried as a second start of the cylinder fit
     (the one with more points on the circle is kept); 0 = the algebraic start only (before
     2026-12-02: a neighbour's points merged into a bottle's cloud pulled that start off the wall)."""
-    cylinder_top_from_face: bool = False
+    cylinder_top_from_face: bool = True
     """Beyond the paper: a cylinder's top from the median height of its top face's points instead
     of its highest point, which depth noise lifts ~3 σ above the face (``core/src/objects/cylinder.rs``).
     Measured with exact poses, seeds 0-2 (``reports/exploration_fk_topface/vs_baseline.md``, made by
@@ -161,8 +161,8 @@ class ParamRunConfig:
     (``reports/exploration_topface/vs_baseline.md``, against ``reports/exploration.json``) the
     map's global offset dominates: 3D IoU +0.002 (object-driven ± 0.006, random ± 0.001); with
     the offset removed +0.005 ± 0.003 and +0.004 ± 0.002.
-    Off by default only because the other reports were made without it (turning it on means
-    re-running them)."""
+    On by default since 2026-12-03 (the reports made after that date use it; each report's
+    recorded command and run folders say so); False = the highest point, as before."""
 
 
 @dataclass(frozen=True)

@@ -179,8 +179,7 @@ def new_mapper(cfg: RunConfig, scene: SceneSpec) -> Any:
                         **({"seed": seeds["cylinder"]} if seeds else {}),
                         "enabled": cfg.param.cylinder_fit,
                         "consensus_iterations": cfg.param.cylinder_consensus_iterations,
-                        # Only when set, so a core built before the option still loads.
-                        **({"top_from_face": True} if cfg.param.cylinder_top_from_face else {}),
+                        "top_from_face": cfg.param.cylinder_top_from_face,
                     },
                     "refine": {
                         "refine_center": cfg.param.refine_center,

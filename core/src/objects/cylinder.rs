@@ -76,7 +76,8 @@ pub struct CylinderFitConfig {
     /// Seed of the consensus start's point draws (default 0).
     pub seed: u64,
     /// Top of the cylinder from the median height of its top face's points instead of the
-    /// highest point (module docs; default false, the measured behaviour of the reports).
+    /// highest point (module docs). Default false here (the library keeps the highest point);
+    /// the simulator's run config turns it on (`param.cylinder_top_from_face`, default true).
     pub top_from_face: bool,
     /// Top-face points lie horizontally within this fraction of the fitted radius of the axis
     /// (default 0.7).
