@@ -9,6 +9,8 @@ map object one after another (:mod:`objslam.grasp`). Each session writes
 ``grasp_<source>.json`` (rows + config) and ``grasp_<source>.rrd`` (planned TCP paths, grasp
 frames, finger gap, outcome events) into the run folder of its map. The sweep's list of session
 files goes to ``runs/grasp_sweep.json``; ``--report-only`` rebuilds the reports from it.
+``--maps-from-benchmark <out>/exploration.json`` maps nothing: it grasps on an exploration sweep's
+object-driven and init run folders, so the grasp and exploration reports describe the same maps.
 
 Reports (from the session files): ``<out>/grasping.json`` = {"command", "sessions", "rows":
 [{"scene", "seed", "object", "class", "map_source", "success", "cause", ...}]} and
@@ -110,6 +112,50 @@ def regrasp(a: argparse.Namespace, command: str) -> list[str]:
         sessions.append(str(path))
         _print_session(path, "reused map, ")
         _write_manifest(sessions, command, Path(a.manifest))
+    return sessions
+
+
+def grasp_benchmark_maps(a: argparse.Namespace, command: str) -> list[str]:
+    """Grasp sessions on the maps of an exploration benchmark sweep (``--maps-from-benchmark
+    <out>/exploration.json``): its ``object-driven`` run folders give the ``estimated`` and
+    ``ground_truth`` sessions, its ``init`` ones the ``init_only`` sessions, so the grasp report
+    and the exploration report describe the same maps. The world is built from the mapping run's
+    own ``config.toml`` (plus ``--set``), so it is the world that was mapped."""
+    from objslam.config import load_run_config
+    from objslam.scene import load_scene
+
+    rows = json.loads(Path(a.maps_from_benchmark).read_text())["rows"]
+    runs_by: dict[tuple[str, int, str], Path] = {}
+    for r in rows:
+        if r.get("run_dir"):
+            d = Path(r["run_dir"])
+            runs_by[(r["scene"], int(r["seed"]), r["strategy"])] = d if d.is_absolute() else REPO / d
+    sessions: list[str] = []
+    for scene_file in a.scenes:
+        scene = load_scene(REPO / scene_file)
+        for seed in a.seeds:
+            runs = {
+                "estimated": runs_by.get((scene.name, seed, "object-driven")),
+                "init_only": runs_by.get((scene.name, seed, "init")),
+            }
+            for source in a.sources:
+                run_dir = runs["estimated" if source == "ground_truth" else source]
+                if run_dir is None or not (run_dir / "map.json").exists():
+                    print(f"{scene.name} seed {seed} {source}: no map in {a.maps_from_benchmark}", file=sys.stderr)
+                    continue
+                cfg = load_run_config(overlays=[run_dir / "config.toml"], overrides=a.set, strategy="object-driven")
+                if cfg.seed != seed or Path(cfg.scene).stem != scene.name:
+                    print(f"{run_dir}: its config is {cfg.scene} seed {cfg.seed}, not {scene.name} seed {seed}", file=sys.stderr)
+                    continue
+                try:
+                    objs = _map_objects(source, scene, run_dir)
+                    path = _session(scene, cfg, objs, source, run_dir, _grasp_config(a, source), a.tag)
+                except Exception as e:  # noqa: BLE001 - one failed session never stops the sweep
+                    print(f"{scene.name} seed {seed} {source}: grasp session failed: {type(e).__name__}: {e}", file=sys.stderr)
+                    continue
+                sessions.append(str(path))
+                _print_session(path, "benchmark map, ")
+                _write_manifest(sessions, command, Path(a.manifest))
     return sessions
 
 
@@ -279,7 +325,7 @@ def _select(spec: str) -> tuple[list[str], dict[str, Any]]:
     return [p for p in m["sessions"] if json.loads(Path(p).read_text())["map_source"] in keep], m
 
 
-def main(argv: list[str] | None = None) -> int:
+def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--scenes", nargs="+", default=[f"scenes/scene0{i}.toml" for i in range(1, 8)])
     ap.add_argument("--seeds", nargs="+", type=int, default=[0, 1])
@@ -311,7 +357,18 @@ def main(argv: list[str] | None = None) -> int:
         "--reuse-maps", action="store_true",
         help="grasp again on the maps of the sweep in runs/grasp_sweep.json instead of mapping anew",
     )
-    a = ap.parse_args(argv)
+    ap.add_argument(
+        "--maps-from-benchmark", metavar="EXPLORATION_JSON",
+        help=(
+            "grasp on the maps of an exploration benchmark sweep (its object-driven and init run "
+            "folders) instead of mapping anew"
+        ),
+    )
+    return ap
+
+
+def main(argv: list[str] | None = None) -> int:
+    a = build_parser().parse_args(argv)
     command = ("python experiments/grasp.py " + " ".join(shlex.quote(x) for x in (argv if argv is not None else sys.argv[1:]))).strip()
     comparison: list[str] = []
     if a.report_only:
@@ -329,6 +386,8 @@ def main(argv: list[str] | None = None) -> int:
         command += "` on the sessions of `" + "`, `".join(made_by)
     elif a.reuse_maps:
         sessions = regrasp(a, command)
+    elif a.maps_from_benchmark:
+        sessions = grasp_benchmark_maps(a, command)
     else:
         sessions = run_sweep(a, command)
     report = write_reports(sessions, REPO / a.out, command, comparison, a.compare_note)

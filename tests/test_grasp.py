@@ -91,3 +91,33 @@ def test_an_object_blocked_by_a_neighbour_is_grasped_once_the_neighbour_is_set_a
     # One row per object, every graspable one lifted (the keyboard is too wide in truth).
     assert len(rows) == len(gt_map)
     assert all(r["success"] for r in rows if r["class"] != "keyboard")
+
+
+def test_benchmark_maps_are_used_only_for_their_own_scene_and_seed(tmp_path) -> None:
+    """--maps-from-benchmark grasps on an exploration sweep's run folders; a row whose folder's
+    config is another seed, or whose folder has no map, makes no session (nothing is grasped
+    in the wrong world) and says why."""
+    import sys
+
+    import tomli_w
+    from objslam.config import to_dict
+
+    sys.path.insert(0, str(SCENES[0].parents[1] / "experiments"))
+    import grasp as grasp_cli
+
+    run = tmp_path / "run_od"
+    run.mkdir()
+    cfg = load_run_config(overrides=["seed=1"], strategy="object-driven")
+    (run / "config.toml").write_text(tomli_w.dumps(to_dict(cfg)))
+    (run / "map.json").write_text("{}")
+    bench = tmp_path / "exploration.json"
+    bench.write_text(json.dumps({"rows": [
+        {"scene": "scene01", "seed": 0, "strategy": "object-driven", "run_dir": str(run)},
+        {"scene": "scene01", "seed": 0, "strategy": "init", "run_dir": str(tmp_path / "no_such_run")},
+    ]}))
+    manifest = tmp_path / "manifest.json"
+    args = ["--maps-from-benchmark", str(bench), "--scenes", "scenes/scene01.toml", "--seeds", "0",
+            "--manifest", str(manifest), "--out", str(tmp_path / "out")]
+    a = grasp_cli.build_parser().parse_args(args)
+    assert grasp_cli.grasp_benchmark_maps(a, "test") == []
+    assert not manifest.exists()
