@@ -145,8 +145,9 @@ class ParamRunConfig:
     extended down to it, its top kept (objects stand on the table; the local clouds cut the
     points within 5 mm of the table, so bottoms sit ~3 mm high: ``ParamConfig::support_z_m`` in
     ``core/src/objects/mod.rs``). 0 = off (the paper). Measured by the exploration benchmark
-    with and without it (``reports/exploration.md`` vs ``reports/exploration_no_snap/``, same 9
-    seeds): every strategy's 3D IoU rises and CDE falls."""
+    with and without it (``reports/exploration_highest_top/`` vs ``reports/exploration_no_snap/``,
+    same 9 seeds, both with the highest-point cylinder top): every strategy's 3D IoU rises and CDE
+    falls."""
     cylinder_consensus_iterations: int = 200
     """Circles through three random side-wall points tried as a second start of the cylinder fit
     (the one with more points on the circle is kept); 0 = the algebraic start only (before
@@ -158,9 +159,13 @@ class ParamRunConfig:
     ``experiments/compare_sweeps.py`` against the same episodes of ``reports/exploration_fk/``):
     cylinder height error +1.5 → +0.1 mm (``size_errors.md``), 3D IoU +0.006 to +0.007 and CDE
     −0.03 cm for object-driven, random and coverage alike. With the default SLAM poses
-    (``reports/exploration_topface/vs_baseline.md``, against ``reports/exploration.json``) the
+    (``reports/exploration_topface/vs_baseline.md``, seeds 0-2, against
+    ``reports/exploration_highest_top/``, the main benchmark before this default) the
     map's global offset dominates: 3D IoU +0.002 (object-driven ± 0.006, random ± 0.001); with
-    the offset removed +0.005 ± 0.003 and +0.004 ± 0.002.
+    the offset removed +0.005 ± 0.003 and +0.004 ± 0.002. The whole main benchmark re-run with
+    it (9 seeds, ``reports/exploration_highest_top/top_from_face_vs_this.md``): 3D IoU +0.001 to
+    +0.003 for every strategy, +0.002 to +0.005 (± 0.001) with the offset removed, cylinder
+    height error −0.2 to −0.4 mm (``reports/exploration_size_errors.md``).
     On by default since 2026-12-03 (the reports made after that date use it; each report's
     recorded command and run folders say so); False = the highest point, as before."""
 
