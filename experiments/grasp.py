@@ -337,7 +337,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--reobserve", nargs="*", default=[], choices=SOURCES,
         help=(
             "map sources whose grasps re-observe the target first (default: none; on the estimated "
-            "maps of seeds 0-1 re-observation gave 102/105 against 100 %% without, reports/grasping.md)"
+            "maps of the main benchmark, 9 seeds, re-observation gave 441/470 against 100 %% without, "
+            "mostly collisions: reports/grasping.md)"
         ),
     )
     ap.add_argument("--tag", default="", help="suffix of the session files (grasp_<source><tag>.json)")
