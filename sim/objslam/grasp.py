@@ -86,7 +86,12 @@ class GraspRunConfig:
     """Largest x-y distance between a map estimate and the true object it targets, metres."""
     reobserve: bool = False
     """Before each attempt, look at the target from close views and re-estimate it in a fresh local
-    map (the core's pipeline, same settings as the exploration); the refined estimate is grasped."""
+    map (the core's pipeline, same settings as the exploration); the refined estimate is grasped.
+    Measured (``reports/grasping.md``, 9 seeds): 441/470 against 100 % without. The local map runs
+    its own SLAM under the calibration-bias model, so its centre carries two views' bias (x-y error
+    4.8-6.0 mm median against 1.0-2.5 mm for the exploration map's estimate), the same in every
+    re-observation of a session; tracking the close views against the exploration's SLAM map would
+    remove it (not done)."""
     reobserve_views: str = "top"
     """``"top"``: two top-down views above the estimate (0.36 and 0.29 m); ``"top+oblique"``: a
     top-down view and two obliques from the robot's side."""
