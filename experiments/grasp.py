@@ -63,7 +63,7 @@ def _session(scene: Any, cfg: Any, map_objects: list[dict], source: str, run_dir
 def _grasp_config(a: argparse.Namespace, source: str) -> Any:
     from objslam.grasp import GraspRunConfig
 
-    return GraspRunConfig(reobserve=source in a.reobserve)
+    return GraspRunConfig(reobserve=source in a.reobserve, reobserve_register=a.reobserve_register)
 
 
 def _map_objects(source: str, scene: Any, run_dir: Path) -> list[dict]:
@@ -340,6 +340,10 @@ def build_parser() -> argparse.ArgumentParser:
             "maps of the main benchmark, 9 seeds, re-observation gave 441/470 against 100 %% without, "
             "mostly collisions: reports/grasping.md)"
         ),
+    )
+    ap.add_argument(
+        "--reobserve-register", action="store_true",
+        help="express the re-observation's local map in the exploration map's frame first (GraspRunConfig.reobserve_register)",
     )
     ap.add_argument("--tag", default="", help="suffix of the session files (grasp_<source><tag>.json)")
     ap.add_argument("--manifest", default=str(REPO / "runs" / "grasp_sweep.json"), help="the sweep's list of session files")

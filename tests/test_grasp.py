@@ -121,3 +121,30 @@ def test_benchmark_maps_are_used_only_for_their_own_scene_and_seed(tmp_path) -> 
     a = grasp_cli.build_parser().parse_args(args)
     assert grasp_cli.grasp_benchmark_maps(a, "test") == []
     assert not manifest.exists()
+
+
+def test_register_local_removes_the_local_maps_common_offset() -> None:
+    """The local map's objects share one calibration offset: registered against the map's
+    neighbours it is removed, and what the close views add to the target's centre is kept; with
+    no neighbour in view the target falls back to the map's centre."""
+    from objslam.grasp import register_local
+
+    def obj(i: int, x: float, y: float) -> dict:
+        return {"id": i, "label": "can", "geometry": {"shape": "cylinder", "center": [x, y, 0.05], "yaw_rad": 0.0, "half_extents": [0.03, 0.03, 0.05]}}
+
+    target = obj(0, 0.50, 0.00)
+    neighbours = [obj(1, 0.60, 0.05), obj(2, 0.45, -0.10)]
+    off = np.array([0.006, -0.005])
+    refine = np.array([0.002, 0.001])  # what the close views know better about the target
+    local = [
+        obj(10, *(np.array([0.50, 0.00]) + off + refine)),
+        obj(11, *(np.array([0.60, 0.05]) + off)),
+        obj(12, *(np.array([0.45, -0.10]) + off)),
+    ]
+    reg = register_local(local, target, neighbours, 0.06)
+    np.testing.assert_allclose(reg[0]["geometry"]["center"][:2], np.array([0.50, 0.00]) + refine, atol=1e-12)
+    np.testing.assert_allclose(reg[1]["geometry"]["center"][:2], [0.60, 0.05], atol=1e-12)
+    assert reg[0]["geometry"]["center"][2] == 0.05 and local[0]["geometry"]["center"][0] != reg[0]["geometry"]["center"][0]
+    alone = register_local(local[:1], target, [], 0.06)
+    np.testing.assert_allclose(alone[0]["geometry"]["center"][:2], [0.50, 0.00], atol=1e-12)
+    assert register_local([obj(20, 0.9, 0.9)], target, neighbours, 0.06)[0]["geometry"]["center"][:2] == [0.9, 0.9]
