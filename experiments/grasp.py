@@ -115,6 +115,19 @@ def regrasp(a: argparse.Namespace, command: str) -> list[str]:
     return sessions
 
 
+def _grasp_on(a: argparse.Namespace, scene: Any, cfg: Any, source: str, run_dir: Path, note: str) -> str | None:
+    """One grasp session of ``source`` on the map in ``run_dir``; its file, or None when it failed
+    (said on stderr: one failed session never stops the sweep)."""
+    try:
+        objs = _map_objects(source, scene, run_dir)
+        path = _session(scene, cfg, objs, source, run_dir, _grasp_config(a, source), a.tag)
+    except Exception as e:  # noqa: BLE001 - one failed session never stops the sweep
+        print(f"{scene.name} seed {cfg.seed} {source}: grasp session failed: {type(e).__name__}: {e}", file=sys.stderr)
+        return None
+    _print_session(path, note)
+    return str(path)
+
+
 def grasp_benchmark_maps(a: argparse.Namespace, command: str) -> list[str]:
     """Grasp sessions on the maps of an exploration benchmark sweep (``--maps-from-benchmark
     <out>/exploration.json``): its ``object-driven`` run folders give the ``estimated`` and
@@ -147,15 +160,10 @@ def grasp_benchmark_maps(a: argparse.Namespace, command: str) -> list[str]:
                 if cfg.seed != seed or Path(cfg.scene).stem != scene.name:
                     print(f"{run_dir}: its config is {cfg.scene} seed {cfg.seed}, not {scene.name} seed {seed}", file=sys.stderr)
                     continue
-                try:
-                    objs = _map_objects(source, scene, run_dir)
-                    path = _session(scene, cfg, objs, source, run_dir, _grasp_config(a, source), a.tag)
-                except Exception as e:  # noqa: BLE001 - one failed session never stops the sweep
-                    print(f"{scene.name} seed {seed} {source}: grasp session failed: {type(e).__name__}: {e}", file=sys.stderr)
-                    continue
-                sessions.append(str(path))
-                _print_session(path, "benchmark map, ")
-                _write_manifest(sessions, command, Path(a.manifest))
+                path = _grasp_on(a, scene, cfg, source, run_dir, "benchmark map, ")
+                if path is not None:
+                    sessions.append(path)
+                    _write_manifest(sessions, command, Path(a.manifest))
     return sessions
 
 
@@ -182,15 +190,9 @@ def run_sweep(a: argparse.Namespace, command: str) -> list[str]:
                 continue
             t_map = time.perf_counter() - t0
             for source in a.sources:
-                run_dir = runs["estimated" if source == "ground_truth" else source]
-                try:
-                    objs = _map_objects(source, scene, run_dir)
-                    path = _session(scene, cfg, objs, source, run_dir, _grasp_config(a, source), a.tag)
-                except Exception as e:  # noqa: BLE001 - one failed session never stops the sweep
-                    print(f"{scene.name} seed {seed} {source}: grasp session failed: {type(e).__name__}: {e}", file=sys.stderr)
-                    continue
-                sessions.append(str(path))
-                _print_session(path, f"mapping {t_map:.0f} s, ")
+                path = _grasp_on(a, scene, cfg, source, runs["estimated" if source == "ground_truth" else source], f"mapping {t_map:.0f} s, ")
+                if path is not None:
+                    sessions.append(path)
             _write_manifest(sessions, command, Path(a.manifest))
     return sessions
 
