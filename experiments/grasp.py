@@ -23,6 +23,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import math
 import shlex
 import sys
 import time
@@ -203,13 +204,41 @@ def _rate(rows: list[dict]) -> str:
     return f"{s}/{n} ({100.0 * s / n:.1f} %)" if n else "-"
 
 
+def _centre_errors_mm(d: dict[str, Any]) -> dict[Any, tuple[float, float]]:
+    """Re-observation sessions: per map object id, the x-y distance (mm) to its true object of the
+    centre that was grasped (``target_geometry``) and of the map's own estimate. Empty for
+    sessions without re-observation (the map's estimate is what they grasp)."""
+    if not any("target_geometry" in r for r in d["rows"]):
+        return {}
+    from objslam.scene import gt_objects, load_scene
+
+    truth = {g["id"]: g["geometry"]["center"] for g in gt_objects(load_scene(REPO / "scenes" / f"{d['scene']}.toml"))}
+    mapped = {o["id"]: o["geometry"]["center"] for o in _map_objects(d["map_source"], None, Path(d["map_run"]))} if d["map_source"] != "ground_truth" else truth
+    out = {}
+    for r in d["rows"]:
+        gt, mid = r.get("gt_id"), r.get("map_id")
+        if "target_geometry" in r and gt in truth and mid in mapped:
+            t = truth[gt]
+            out[mid] = (1000.0 * math.dist(r["target_geometry"]["center"][:2], t[:2]), 1000.0 * math.dist(mapped[mid][:2], t[:2]))
+    return out
+
+
+def _median_p90(v: list[float]) -> str:
+    """``median / 90th percentile`` (linear interpolation, numpy's default) of non-empty ``v``."""
+    import numpy as np
+
+    return f"{float(np.median(v)):.1f} / {float(np.percentile(v, 90)):.1f}"
+
+
 def _rows(sessions: list[str]) -> list[dict[str, Any]]:
     rows: list[dict[str, Any]] = []
     for p in sessions:
         d = json.loads(Path(p).read_text())
+        errs = _centre_errors_mm(d)
         for r in d["rows"]:
             if r.get("skipped"):
                 continue
+            grasped_err, map_err = errs.get(r.get("map_id"), (None, None))
             rows.append(
                 {
                     "scene": d["scene"],
@@ -226,6 +255,8 @@ def _rows(sessions: list[str]) -> list[dict[str, Any]]:
                     "expected_closed_width_m": r.get("expected_closed_width_m"),
                     "rise_m": r.get("rise_m"),
                     "deferred": r.get("deferred", 0),
+                    "grasped_xy_err_mm": grasped_err,
+                    "map_xy_err_mm": map_err,
                     "run_dir": d["map_run"],
                 }
             )
@@ -314,6 +345,22 @@ def write_reports(
             rs = [r for r in comp if r["map_source"] == src]
             cs = Counter(r["cause"] for r in rs if not r["success"])
             lines.append(f"| {src} | {len(rs)} | {_rate(rs)} | " + ", ".join(f"{c} {n}" for c, n in cs.most_common()) + " |")
+        lines.append("")
+    measured = [(name, rs) for name, rs in [*by.items(), ("comparison", comp)] if any(r["grasped_xy_err_mm"] is not None for r in rs)]
+    if measured:
+        lines += [
+            "## Grasped centre after re-observation",
+            "",
+            "x-y distance to the true object's centre, mm (median / 90th percentile over attempts): the",
+            "centre grasped after the close views, and the map's own estimate of the same objects.",
+            "",
+            "| rows | attempts | grasped centre | map's estimate |",
+            "|---|---:|---:|---:|",
+        ]
+        for name, rs in measured:
+            g = sorted(r["grasped_xy_err_mm"] for r in rs if r["grasped_xy_err_mm"] is not None)
+            m = sorted(r["map_xy_err_mm"] for r in rs if r["grasped_xy_err_mm"] is not None)
+            lines.append(f"| {name} | {len(g)} | {_median_p90(g)} | {_median_p90(m)} |")
         lines.append("")
     (out / "grasping.md").write_text("\n".join(lines))
     return report

@@ -88,9 +88,10 @@ class GraspRunConfig:
     """Before each attempt, look at the target from close views and re-estimate it in a fresh local
     map (the core's pipeline, same settings as the exploration); the refined estimate is grasped.
     Measured (``reports/grasping.md``, 9 seeds): 441/470 against 100 % without. The local map runs
-    its own SLAM under the calibration-bias model, so its centre carries two views' bias (x-y error
-    4.8-6.0 mm median against 1.0-2.5 mm for the exploration map's estimate), the same in every
-    re-observation of a session; ``reobserve_register`` removes most of it."""
+    its own SLAM under the calibration-bias model, so its centre carries two views' bias (grasped
+    x-y centre 5.2 mm from the truth, median, against 1.8 mm for the exploration map's estimate of
+    the same objects), the same in every re-observation of a session; ``reobserve_register``
+    removes most of it."""
     reobserve_views: str = "top"
     """``"top"``: two top-down views above the estimate (0.36 and 0.29 m); ``"top+oblique"``: a
     top-down view and two obliques from the robot's side."""
@@ -111,12 +112,10 @@ class GraspRunConfig:
     local objects and the map objects they match (nearest centre within ``reobserve_match_m``),
     the target excluded; with no neighbour in view it is the target's own difference (the map's
     centre is kept, the close views still give sizes and obstacles). False = as before.
-    Pilot on the main benchmark's maps, seeds 3, 5, 7 (`python experiments/grasp.py --reuse-maps
-    --maps-from <manifest of the 9-seed sweep> --sources estimated --reobserve estimated
-    --reobserve-register --seeds 3 5 7`, against the same sessions without it): grasped centre
-    error 5.2 → 2.3 mm (median), success 137/157 → 145/157. All 9 seeds
-    (``reports/grasping_reobserve_register/``): 450/470 against 441/470 unregistered; still below
-    no re-observation (100 %, 18 collisions left), so off by default."""
+    Measured on the main benchmark's maps, 9 seeds (``reports/grasping_reobserve_register/``,
+    against the same maps without it): grasped centre error 5.2 → 2.2 mm (median), success
+    441/470 → 450/470; still below no re-observation (100 %, 18 collisions left), so off by
+    default."""
     reobserve_height_m: float = 0.36
     """Height of the top-down re-observation view above the target's estimated centre, metres."""
     reobserve_offset_m: float = 0.20
