@@ -93,7 +93,7 @@ def test_an_object_blocked_by_a_neighbour_is_grasped_once_the_neighbour_is_set_a
     assert all(r["success"] for r in rows if r["class"] != "keyboard")
 
 
-def test_benchmark_maps_are_used_only_for_their_own_scene_and_seed(tmp_path) -> None:
+def test_benchmark_maps_are_used_only_for_their_own_scene_and_seed(tmp_path, capsys) -> None:
     """--maps-from-benchmark grasps on an exploration sweep's run folders; a row whose folder's
     config is another seed, or whose folder has no map, makes no session (nothing is grasped
     in the wrong world) and says why."""
@@ -121,6 +121,10 @@ def test_benchmark_maps_are_used_only_for_their_own_scene_and_seed(tmp_path) -> 
     a = grasp_cli.build_parser().parse_args(args)
     assert grasp_cli.grasp_benchmark_maps(a, "test") == []
     assert not manifest.exists()
+    err = capsys.readouterr().err
+    # estimated and ground_truth: the folder is seed 1's world; init_only: no map there.
+    assert err.count("seed 1, not scene01 seed 0") == 2, err
+    assert "scene01 seed 0 init_only: no map" in err, err
 
 
 def test_register_local_removes_the_local_maps_common_offset() -> None:
