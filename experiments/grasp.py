@@ -64,7 +64,11 @@ def _session(scene: Any, cfg: Any, map_objects: list[dict], source: str, run_dir
 def _grasp_config(a: argparse.Namespace, source: str) -> Any:
     from objslam.grasp import GraspRunConfig
 
-    return GraspRunConfig(reobserve=source in a.reobserve, reobserve_register=a.reobserve_register)
+    return GraspRunConfig(
+        reobserve=source in a.reobserve,
+        reobserve_register=a.reobserve_register,
+        reobserve_return_ready=not a.reobserve_from_view,
+    )
 
 
 def _map_objects(source: str, scene: Any, run_dir: Path) -> list[dict]:
@@ -393,6 +397,10 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument(
         "--reobserve-register", action="store_true",
         help="express the re-observation's local map in the exploration map's frame first (GraspRunConfig.reobserve_register)",
+    )
+    ap.add_argument(
+        "--reobserve-from-view", action="store_true",
+        help="plan the grasp from the last close view instead of the ready posture (GraspRunConfig.reobserve_return_ready = false; before 2026-12-03)",
     )
     ap.add_argument("--tag", default="", help="suffix of the session files (grasp_<source><tag>.json)")
     ap.add_argument("--manifest", default=str(REPO / "runs" / "grasp_sweep.json"), help="the sweep's list of session files")

@@ -43,6 +43,22 @@ def test_grasp_of_a_known_box_closes_at_its_width_and_lifts_it(scene01_session) 
     assert not out["disturbed"]
 
 
+def test_a_reobserved_grasp_is_planned_from_the_ready_posture(scene01_session) -> None:
+    # The close views leave the wrist wherever their camera roll put it; the grasp is planned from
+    # the ready posture (GraspRunConfig.reobserve_return_ready), as without re-observation.
+    scene, cfg = scene01_session
+    session = GraspSession(scene, cfg, GraspRunConfig(reobserve=True))
+    gt = gt_objects(scene, session.world.ground_truth())
+    can = next(g for g in gt if g["label"] == "can")
+    out = session.attempt(0, can, [g for g in gt if g["id"] != can["id"]], can["id"])
+    assert out["reobserved"] and out["reobserve_frames"] > 0
+    start = np.asarray(session.last_plan["to_pregrasp"]["positions"], dtype=float)[0]
+    assert np.max(np.abs(start - READY_QPOS[:7])) < 0.02
+    # The local map's own estimate of the can (its own SLAM gauge): within 1.5 cm of the truth.
+    assert np.hypot(*np.subtract(out["target_geometry"]["center"][:2], can["geometry"]["center"][:2])) < 0.015
+    assert out["success"] and out["cause"] == "none"
+
+
 def test_unreachable_and_degenerate_targets_are_outcomes(scene01_session) -> None:
     scene, cfg = scene01_session
     far = {"id": 99, "label": "block", "geometry": {"shape": "cuboid", "center": [1.6, 0.0, 0.03], "yaw_rad": 0.0,

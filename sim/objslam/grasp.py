@@ -116,6 +116,15 @@ class GraspRunConfig:
     against the same maps without it): grasped centre error 5.2 → 2.2 mm (median), success
     441/470 → 450/470; still below no re-observation (100 %, 18 collisions left), so off by
     default."""
+    reobserve_return_ready: bool = True
+    """After the close views, return to the ready configuration before the grasp is planned (planned
+    around the local objects and the refined target), so the grasp starts from the posture it has
+    without re-observation. The close views leave the wrist wherever their camera roll put it; the
+    planner prefers the hand yaw nearest the current one, and for a symmetric grasp that was often
+    the flipped yaw with joint 7 near its limit, whose IK took an unusual elbow and collided on the
+    approach (scene03 seed 1: the cup's approach tracking error 0.073 rad with an exact estimate).
+    Measured in ``reports/grasping.md`` (re-observation rows). False = plan from the last close
+    view, as before 2026-12-03."""
     reobserve_height_m: float = 0.36
     """Height of the top-down re-observation view above the target's estimated centre, metres."""
     reobserve_offset_m: float = 0.20
@@ -337,6 +346,8 @@ class GraspSession:
             ]
             neighbours = near if cfg.reobserve_obstacles == "local" else far + near
             out["target_geometry"] = target["geometry"]
+            if cfg.reobserve_return_ready:
+                self.go_ready([n["geometry"] for n in neighbours] + [target["geometry"]])
         plan = self.planner.plan_grasp(
             self.q_arm(), json.dumps(target["geometry"]), json.dumps([n["geometry"] for n in neighbours])
         )
