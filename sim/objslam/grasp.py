@@ -125,6 +125,12 @@ class GraspRunConfig:
     approach (scene03 seed 1: the cup's approach tracking error 0.073 rad with an exact estimate).
     Measured in ``reports/grasping.md`` (re-observation rows). False = plan from the last close
     view, as before 2026-12-03."""
+    reobserve_register_pair_m: float = 0.02
+    """With ``reobserve_register``: a local object and its nearest map neighbour farther apart than
+    this (x-y, metres) do not enter the offset. The offset is two views' calibration bias (a few mm,
+    p90 8.7 mm measured); a larger difference is an object the close views saw only in part at the
+    image border (scene02 seed 8: a book 22 cm from the target estimated 4.8 cm off, which shifted
+    the target 3.6 cm and the grasp collided)."""
     reobserve_height_m: float = 0.36
     """Height of the top-down re-observation view above the target's estimated centre, metres."""
     reobserve_offset_m: float = 0.20
@@ -314,7 +320,9 @@ class GraspSession:
         mapper.refresh_estimates()
         local = json.loads(mapper.objects_json())
         if cfg.reobserve_register and local:
-            local = register_local(local, target, list(neighbours), cfg.reobserve_match_m)
+            local = register_local(
+                local, target, list(neighbours), cfg.reobserve_match_m, cfg.reobserve_register_pair_m
+            )
         best = None
         for o in local:
             d = math.dist(o["geometry"]["center"][:2], target["geometry"]["center"][:2])
@@ -409,12 +417,16 @@ class GraspSession:
 
 
 def register_local(
-    local: list[dict[str, Any]], target: dict[str, Any], neighbours: list[dict[str, Any]], match_m: float
+    local: list[dict[str, Any]],
+    target: dict[str, Any],
+    neighbours: list[dict[str, Any]],
+    match_m: float,
+    pair_max_m: float = math.inf,
 ) -> list[dict[str, Any]]:
     """The local objects shifted in x-y by minus their calibration offset against the map (see
     ``GraspRunConfig.reobserve_register``): the median over local objects matched to a map
-    neighbour (nearest centre within ``match_m``), else the local object nearest the target
-    against the target. No match at all: unchanged."""
+    neighbour (nearest centre within ``pair_max_m``), else the local object nearest the target
+    (within ``match_m``) against the target. No match at all: unchanged."""
 
     def xy(o: dict[str, Any]) -> np.ndarray:
         return np.asarray(o["geometry"]["center"][:2], dtype=float)
@@ -429,7 +441,7 @@ def register_local(
         if o is t_local:
             continue
         m = nearest(o, neighbours)
-        if m is not None:
+        if m is not None and float(np.linalg.norm(xy(o) - xy(m))) <= pair_max_m:
             diffs.append(xy(o) - xy(m))
     if diffs:
         off = np.median(np.array(diffs), axis=0)
