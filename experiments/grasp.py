@@ -251,6 +251,9 @@ def _rows(sessions: list[str]) -> list[dict[str, Any]]:
                     "class": r["class"],
                     "map_source": d["map_source"],
                     "reobserve": bool(d["config"].get("reobserve", False)),
+                    # Sessions written before these options existed behaved as False.
+                    "reobserve_register": bool(d["config"].get("reobserve_register", False)),
+                    "reobserve_return_ready": bool(d["config"].get("reobserve_return_ready", False)),
                     "success": bool(r["success"]),
                     "cause": r["cause"],
                     "map_id": r.get("map_id"),
@@ -280,7 +283,10 @@ def write_reports(
         report.update(comparison_sessions=comparison, comparison_rows=comp, comparison_note=comparison_note)
     (out / "grasping.json").write_text(json.dumps(report, indent=2) + "\n")
     def variant(r: dict[str, Any]) -> str:
-        return r["map_source"] + (" + re-observation" if r["reobserve"] else "")
+        if not r["reobserve"]:
+            return r["map_source"]
+        how = [w for w, on in (("registered", r["reobserve_register"]), ("from the close view", not r["reobserve_return_ready"])) if on]
+        return r["map_source"] + " + re-observation" + (f" ({', '.join(how)})" if how else "")
 
     sources = sorted({variant(r) for r in rows}, key=lambda v: (SOURCES.index(v.split(" ")[0]), v))
     by = {s: [r for r in rows if variant(r) == s] for s in sources}
@@ -303,7 +309,9 @@ def write_reports(
         "`ground_truth` = true poses and sizes (upper bound), `init_only` = the four Init views' map;",
         "`+ re-observation` = before each attempt two close top-down views of the target are fused into a",
         "fresh local map by the core's pipeline; its centre / yaw with the map's top height are grasped and",
-        "its objects are the obstacles (a phantom the close views do not find is skipped). Planner: fingers",
+        "its objects are the obstacles (a phantom the close views do not find is skipped); the arm returns to",
+        "its ready posture before the grasp is planned (`from the close view`: it did not, the behaviour",
+        "before 2026-12-03; `registered`: the local map shifted onto the map by its neighbours). Planner: fingers",
         "open fully, grasp up to 4 cm below the estimated top (`sim/objslam/grasp.py`, `GraspRunConfig`).",
         "",
         "## Overall",
@@ -345,12 +353,13 @@ def write_reports(
             "| map source | attempts | success | causes |",
             "|---|---:|---:|---|",
         ]
-        for src in sorted({r["map_source"] for r in comp}, key=SOURCES.index):
-            rs = [r for r in comp if r["map_source"] == src]
+        for src in sorted({variant(r) for r in comp}, key=lambda v: (SOURCES.index(v.split(" ")[0]), v)):
+            rs = [r for r in comp if variant(r) == src]
             cs = Counter(r["cause"] for r in rs if not r["success"])
             lines.append(f"| {src} | {len(rs)} | {_rate(rs)} | " + ", ".join(f"{c} {n}" for c, n in cs.most_common()) + " |")
         lines.append("")
-    measured = [(name, rs) for name, rs in [*by.items(), ("comparison", comp)] if any(r["grasped_xy_err_mm"] is not None for r in rs)]
+    comp_by = {f"comparison: {v}": [r for r in comp if variant(r) == v] for v in sorted({variant(r) for r in comp})}
+    measured = [(name, rs) for name, rs in [*by.items(), *comp_by.items()] if any(r["grasped_xy_err_mm"] is not None for r in rs)]
     if measured:
         lines += [
             "## Grasped centre after re-observation",

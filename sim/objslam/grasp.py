@@ -27,11 +27,12 @@ Choices (config fields of :class:`GraspRunConfig`):
   object is then skipped as ``already_grasped``). Success rows have cause ``"none"``.
 - Graspable in ground truth: narrowest horizontal width ≤ the gripper's 8 cm opening minus 4 mm.
   Map objects the planner finds too wide are attempts only when their true object is graspable.
-- Re-observation (``reobserve``, off by default): before each attempt, three close views of the
-  target (top-down and two obliques, moved by the simulator's interim IK) are fused into a fresh
-  local map by the core's pipeline (same settings as the exploration); the local object nearest the
-  map estimate is grasped, and the local objects replace the map's within ``reobserve_replace_m``
-  as obstacles. The exploration map itself is not updated.
+- Re-observation (``reobserve``, off by default): before each attempt, close views of the target
+  (``reobserve_views``: two top-down by default, or top-down and two obliques) are fused into a
+  fresh local map by the core's pipeline (same settings as the exploration); the local object
+  nearest the map estimate is grasped (optionally registered to the map first), the local objects
+  are the obstacles, and the arm returns to its ready posture before the grasp is planned. The
+  exploration map itself is not updated.
 """
 
 from __future__ import annotations
