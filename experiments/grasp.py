@@ -288,7 +288,10 @@ def write_reports(
         how = [w for w, on in (("registered", r["reobserve_register"]), ("from the close view", not r["reobserve_return_ready"])) if on]
         return r["map_source"] + " + re-observation" + (f" ({', '.join(how)})" if how else "")
 
-    sources = sorted({variant(r) for r in rows}, key=lambda v: (SOURCES.index(v.split(" ")[0]), v))
+    def variant_key(v: str) -> tuple[int, str]:
+        return (SOURCES.index(v.split(" ")[0]), v)
+
+    sources = sorted({variant(r) for r in rows}, key=variant_key)
     by = {s: [r for r in rows if variant(r) == s] for s in sources}
     scenes = sorted({r["scene"] for r in rows})
     seeds = sorted({r["seed"] for r in rows})
@@ -353,7 +356,7 @@ def write_reports(
             "| map source | attempts | success | causes |",
             "|---|---:|---:|---|",
         ]
-        for src in sorted({variant(r) for r in comp}, key=lambda v: (SOURCES.index(v.split(" ")[0]), v)):
+        for src in sorted({variant(r) for r in comp}, key=variant_key):
             rs = [r for r in comp if variant(r) == src]
             cs = Counter(r["cause"] for r in rs if not r["success"])
             lines.append(f"| {src} | {len(rs)} | {_rate(rs)} | " + ", ".join(f"{c} {n}" for c, n in cs.most_common()) + " |")

@@ -427,23 +427,24 @@ def register_local(
 ) -> list[dict[str, Any]]:
     """The local objects shifted in x-y by minus their calibration offset against the map (see
     ``GraspRunConfig.reobserve_register``): the median over local objects matched to a map
-    neighbour (nearest centre within ``pair_max_m``), else the local object nearest the target
+    neighbour (nearest centre within ``match_m`` and ``pair_max_m``), else the local object nearest the target
     (within ``match_m``) against the target. No match at all: unchanged."""
 
     def xy(o: dict[str, Any]) -> np.ndarray:
         return np.asarray(o["geometry"]["center"][:2], dtype=float)
 
-    def nearest(o: dict[str, Any], pool: list[dict[str, Any]]) -> dict[str, Any] | None:
+    def nearest(o: dict[str, Any], pool: list[dict[str, Any]], radius: float) -> dict[str, Any] | None:
         best = min(pool, key=lambda m: float(np.linalg.norm(xy(m) - xy(o))), default=None)
-        return best if best is not None and float(np.linalg.norm(xy(best) - xy(o))) <= match_m else None
+        return best if best is not None and float(np.linalg.norm(xy(best) - xy(o))) <= radius else None
 
-    t_local = nearest(target, local)
+    t_local = nearest(target, local, match_m)
+    pair_radius = min(match_m, pair_max_m)
     diffs = []
     for o in local:
         if o is t_local:
             continue
-        m = nearest(o, neighbours)
-        if m is not None and float(np.linalg.norm(xy(o) - xy(m))) <= pair_max_m:
+        m = nearest(o, neighbours, pair_radius)
+        if m is not None:
             diffs.append(xy(o) - xy(m))
     if diffs:
         off = np.median(np.array(diffs), axis=0)
