@@ -103,6 +103,9 @@ pub struct ActiveConfig {
     pub discovery_min_frames: u32,
     /// Image border, fraction of width / height, whose returns do not mark table cells.
     pub discovery_margin_frac: f64,
+    /// Truncated detections (within this many pixels of the image edge) do not mark table cells;
+    /// 0 = off (`explore::discovery`).
+    pub discovery_exclude_truncated_px: f64,
 }
 
 impl Default for ActiveConfig {
@@ -134,6 +137,7 @@ impl Default for ActiveConfig {
             discovery_reserve: e.discovery.reserve,
             discovery_min_frames: e.discovery.min_frames,
             discovery_margin_frac: e.discovery.margin_frac,
+            discovery_exclude_truncated_px: e.discovery.exclude_truncated_px,
         }
     }
 }
@@ -228,6 +232,7 @@ impl ActiveSession {
         explore.discovery.reserve = config.discovery_reserve;
         explore.discovery.min_frames = config.discovery_min_frames;
         explore.discovery.margin_frac = config.discovery_margin_frac;
+        explore.discovery.exclude_truncated_px = config.discovery_exclude_truncated_px;
         explore.validate()?;
         let candidates = CandidateConfig {
             views_per_object: config.views_per_object,
@@ -303,10 +308,17 @@ impl ActiveSession {
         frame: &Frame,
         observed: &[ObservedPoints],
     ) -> Result<(), ExploreError> {
-        self.table_coverage.integrate_depth(
+        let truncated = explore::truncated_boxes(
+            frame.detections.iter().map(|d| d.bbox),
+            frame.camera.width,
+            frame.camera.height,
+            self.explore.discovery.exclude_truncated_px,
+        );
+        self.table_coverage.integrate_depth_excluding(
             &frame.camera,
             &frame.world_from_camera,
             &frame.depth,
+            &truncated,
             &self.explore.discovery,
         )?;
         self.grids

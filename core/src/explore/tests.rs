@@ -3,7 +3,7 @@
 use nalgebra::{Point3, Vector3};
 
 use super::*;
-use crate::geometry::{se3_from_yaw, ObjectGeometry, Shape};
+use crate::geometry::{se3_from_yaw, Box2, ObjectGeometry, Shape};
 use crate::map::{EstimateStage, Label, MapObject};
 
 fn object(label: Label, center: [f64; 3], yaw: f64, half: [f64; 3]) -> MapObject {
@@ -820,4 +820,37 @@ fn the_budget_reserve_takes_the_last_view_for_the_unseen_table() {
     assert!(new_cells >= 25, "the reserve view sees {new_cells} unseen cells");
     let axis = reserve_last.rotation * Vector3::z();
     assert!(axis.z < -0.3, "it looks down at the table: {axis:?}");
+}
+
+#[test]
+fn truncated_detections_do_not_mark_table_cells() {
+    // Camera 0.5 m straight above the table: a 160 × 160 px box at the left edge covers
+    // 160 · h / f metres square of table (closed form), which stays unseen; an interior box
+    // and the same box with the option off change nothing.
+    let cam = camera();
+    let h = 0.5;
+    let pose = view(Point3::new(0.5, 0.0, h), [0.5, 0.0, 0.0]);
+    let depth = DepthImage::new(640, 480, vec![h as f32; 640 * 480]).unwrap_or_else(|e| panic!("{e}"));
+    let edge = Box2::new(0.0, 160.0, 160.0, 320.0);
+    let inner = Box2::new(240.0, 160.0, 400.0, 320.0);
+    assert_eq!(truncated_boxes([edge, inner], 640, 480, 2.0), vec![edge]);
+    assert!(truncated_boxes([edge, inner], 640, 480, 0.0).is_empty());
+    let cfg = on(DiscoveryConfig { min_frames: 1, margin_frac: 0.0, ..DiscoveryConfig::default() });
+    let seen_with = |excluded: &[Box2]| {
+        let mut cov = TableCoverage::new(&table(), &cfg).unwrap_or_else(|e| panic!("{e}"));
+        cov.integrate_depth_excluding(&cam, &pose, &depth, excluded, &cfg).unwrap_or_else(|e| panic!("{e}"));
+        cov.seen_cells() as f64
+    };
+    let all = seen_with(&[]);
+    let side = 160.0 * h / cam.fx / cfg.cell_m; // the box's footprint, cells per side
+    let lost = all - seen_with(&truncated_boxes([edge], 640, 480, 2.0));
+    // Cells wholly inside the footprint are lost; cells it only touches may keep other returns.
+    assert!(lost >= (side - 2.0).powi(2) && lost <= (side + 1.0).powi(2), "lost {lost}, side {side}");
+    assert_eq!(seen_with(&truncated_boxes([inner], 640, 480, 2.0)), all);
+    // A bad margin is a typed error naming the field.
+    let bad = DiscoveryConfig { exclude_truncated_px: -1.0, ..DiscoveryConfig::default() };
+    assert!(matches!(
+        TableCoverage::new(&table(), &bad),
+        Err(ExploreError::InvalidConfig { field: "discovery.exclude_truncated_px", .. })
+    ));
 }
