@@ -104,6 +104,21 @@ class ExploreRunConfig:
     there may never be confirmed. 0 = off (the default; the reports were made without it).
     Measured on scene06, seed 6, 35° camera, exact poses: a block detected truncated in all but two
     frames was never mapped while its cells counted as seen (core ``explore::discovery``)."""
+    discovery_evidence_height_m: float = 0.0
+    """Depth returns more than this above the table top are evidence of an object, not a sight of
+    the table: they do not mark table cells seen, so the cells stay unknown until a map object
+    covers them; cells with such evidence far from every map object are *unexplained* (the depth
+    shows an object the map does not have: detected only truncated, or too few times) and draw
+    discovery views centred on them. 0 = off (the default; the reports were made without it).
+    Core ``explore::discovery``."""
+    discovery_evidence_weight: float = 10.0
+    """An unexplained table cell counts as this many unseen cells in the discovery count, gain
+    and budget reserve (a 5 cm block overlaps 9-16 cells of 2 cm; ``discovery_min_new_cells`` is 25)."""
+    discovery_evidence_explained_m: float = 0.025
+    """Evidence within this distance of a map object's primitive is explained by it, metres."""
+    discovery_evidence_max_views: int = 2
+    """After this many views taken for unexplained cells they count as plain unseen cells (an
+    object a centred view cannot get into the map does not take the budget)."""
 
 
 @dataclass(frozen=True)

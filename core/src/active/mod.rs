@@ -32,8 +32,8 @@
 use serde::{Deserialize, Serialize};
 
 use crate::explore::{
-    self, coverage_views, discovery_targets, greedy_discovery_views, random_views, sample_candidates_around,
-    sample_candidates_at, stop_reason, visible_unknown_cells, visible_unknown_indices, CandidateConfig, CandidateView,
+    self, coverage_views, discovery_targets, greedy_discovery_views_weighted, random_views, sample_candidates_around,
+    sample_candidates_at, stop_reason, visible_unknown_indices, CandidateConfig, CandidateView,
     ExplorationGrids, ExploreConfig, ExploreError, HistoryBook, ObservedPoints, Occluders, Reachability, StopReason,
     Strategy, TableCoverage, TableRect, UtilityContext,
 };
@@ -106,6 +106,15 @@ pub struct ActiveConfig {
     /// Truncated detections (within this many pixels of the image edge) do not mark table cells;
     /// 0 = off (`explore::discovery`).
     pub discovery_exclude_truncated_px: f64,
+    /// Returns more than this above the table are object evidence and do not mark table cells;
+    /// unexplained evidence draws discovery views (`explore::discovery`); 0 = off.
+    pub discovery_evidence_height_m: f64,
+    /// An unexplained cell counts as this many unseen cells.
+    pub discovery_evidence_weight: f64,
+    /// Evidence within this distance of a mapped object is explained by it, metres.
+    pub discovery_evidence_explained_m: f64,
+    /// Views taken for unexplained cells after which they count as plain unseen cells.
+    pub discovery_evidence_max_views: usize,
 }
 
 impl Default for ActiveConfig {
@@ -138,6 +147,10 @@ impl Default for ActiveConfig {
             discovery_min_frames: e.discovery.min_frames,
             discovery_margin_frac: e.discovery.margin_frac,
             discovery_exclude_truncated_px: e.discovery.exclude_truncated_px,
+            discovery_evidence_height_m: e.discovery.evidence_height_m,
+            discovery_evidence_weight: e.discovery.evidence_weight,
+            discovery_evidence_explained_m: e.discovery.evidence_explained_m,
+            discovery_evidence_max_views: e.discovery.evidence_max_views,
         }
     }
 }
@@ -213,6 +226,8 @@ pub struct ActiveSession {
     entropy_curve: Vec<f64>,
     table_coverage: TableCoverage,
     table_curve: Vec<f64>,
+    /// Views taken that saw unexplained object evidence (`explore::discovery`).
+    evidence_views: usize,
 }
 
 impl ActiveSession {
@@ -233,6 +248,10 @@ impl ActiveSession {
         explore.discovery.min_frames = config.discovery_min_frames;
         explore.discovery.margin_frac = config.discovery_margin_frac;
         explore.discovery.exclude_truncated_px = config.discovery_exclude_truncated_px;
+        explore.discovery.evidence_height_m = config.discovery_evidence_height_m;
+        explore.discovery.evidence_weight = config.discovery_evidence_weight;
+        explore.discovery.evidence_explained_m = config.discovery_evidence_explained_m;
+        explore.discovery.evidence_max_views = config.discovery_evidence_max_views;
         explore.validate()?;
         let candidates = CandidateConfig {
             views_per_object: config.views_per_object,
@@ -261,6 +280,7 @@ impl ActiveSession {
             entropy_curve: Vec::new(),
             table_coverage,
             table_curve: Vec::new(),
+            evidence_views: 0,
         })
     }
 
@@ -294,6 +314,11 @@ impl ActiveSession {
     /// above the table top (for recording).
     pub fn table_unknown_cells(&self, map: &ObjectMap) -> Vec<nalgebra::Point3<f64>> {
         self.table_coverage.unknown_cells(&Occluders::from_map(map, &self.explore.grid))
+    }
+
+    /// The table-top coverage grid (diagnostics: which cells are seen, unexplained).
+    pub fn table_coverage(&self) -> &TableCoverage {
+        &self.table_coverage
     }
 
     /// The Init views (four table corners), shared by every strategy.
@@ -392,27 +417,42 @@ impl ActiveSession {
                 let mut ctx = UtilityContext::new(map, &self.grids, &self.history, camera, &self.explore)?;
                 let disc = &self.explore.discovery;
                 let occluders = Occluders::from_map(map, &self.explore.grid);
-                let mut unknown =
-                    if disc.enabled() { self.table_coverage.unknown_cells(&occluders) } else { Vec::new() };
-                if unknown.len() < disc.min_new_cells && disc.weight <= 0.0 {
+                let (mut unknown, evidence) = if disc.enabled() {
+                    self.table_coverage.unknown_cells_with_evidence(&occluders)
+                } else {
+                    (Vec::new(), Vec::new())
+                };
+                // An unexplained cell stands for `evidence_weight` unseen cells until the session
+                // has spent `evidence_max_views` views on them.
+                let favour = disc.evidence_height_m > 0.0 && self.evidence_views < disc.evidence_max_views;
+                let mut weights: Vec<f64> =
+                    evidence.iter().map(|e| if *e && favour { disc.evidence_weight } else { 1.0 }).collect();
+                let min_new = disc.min_new_cells as f64;
+                if weights.iter().sum::<f64>() < min_new && disc.weight <= 0.0 {
                     unknown.clear();
+                    weights.clear();
                 }
+                let unknown_weight: f64 = weights.iter().sum();
                 // With `before_stop`, "every object done" still looks at the unseen table first.
                 let mut table_only = false;
                 match stop_reason(&ctx.features(), self.views_taken, &self.explore) {
                     Some(StopReason::AllExplored) if !self.config.stop_when_explored => ctx.explore_every_object(),
-                    Some(StopReason::AllExplored) if disc.before_stop && unknown.len() >= disc.min_new_cells => {
+                    Some(StopReason::AllExplored) if disc.before_stop && unknown_weight >= min_new => {
                         table_only = true;
                     }
                     Some(r) => return Ok(NextView::Stop { reason: r.into() }),
                     None => {}
                 }
-                // Candidates aimed at the unseen table (the same for every use below).
+                // Candidates aimed at the unseen table (the same for every use below); the
+                // unexplained cells' targets first.
                 let always = |_: &Se3| true;
                 let table_views = if unknown.is_empty() || !(table_only || disc.reserve || disc.weight > 0.0) {
                     Vec::new()
                 } else {
-                    let targets = discovery_targets(&unknown, disc.targets, step_seed);
+                    let favoured: Vec<_> =
+                        unknown.iter().zip(&weights).filter(|(_, w)| **w > 1.0).map(|(p, _)| *p).collect();
+                    let mut targets = discovery_targets(&favoured, disc.targets, step_seed);
+                    targets.extend(discovery_targets(&unknown, disc.targets, step_seed));
                     sample_candidates_at(
                         &targets,
                         map,
@@ -422,29 +462,22 @@ impl ActiveSession {
                         step_seed ^ TABLE_CANDIDATE_SEED,
                     )?
                 };
+                let grid = &self.explore.grid;
+                let sees = |cells: &[nalgebra::Point3<f64>], p: &Se3| {
+                    visible_unknown_indices(cells, camera, p, &occluders, grid, disc)
+                };
                 // The budget reserve: the table's share of the views left, taken last.
-                if !table_only && disc.reserve && unknown.len() >= disc.min_new_cells {
+                if !table_only && disc.reserve && unknown_weight >= min_new {
                     let left = self.explore.max_views - self.views_taken;
-                    let seen: Vec<Vec<usize>> = table_views
-                        .iter()
-                        .map(|v| {
-                            visible_unknown_indices(
-                                &unknown,
-                                camera,
-                                &v.world_from_camera,
-                                &occluders,
-                                &self.explore.grid,
-                                disc,
-                            )
-                        })
-                        .collect();
-                    let needed = greedy_discovery_views(&seen, unknown.len(), disc.min_new_cells, left, |i| {
+                    let seen: Vec<Vec<usize>> = table_views.iter().map(|v| sees(&unknown, &v.world_from_camera)).collect();
+                    let needed = greedy_discovery_views_weighted(&seen, &weights, min_new, left, |i| {
                         reachable.reachable(&table_views[i].world_from_camera)
                     });
                     table_only = needed.len() >= left;
                 }
                 if !table_only && disc.weight <= 0.0 {
                     unknown.clear(); // the paper's candidates and utility until every object is done
+                    weights.clear();
                 }
                 let features = ctx.features();
                 let around: Vec<u32> = features.iter().filter(|f| f.explore).map(|f| f.object_id).collect();
@@ -467,13 +500,16 @@ impl ActiveSession {
                 }
                 let poses: Vec<Se3> = views.iter().map(|v| v.world_from_camera).collect();
                 let scores = ctx.score_all(&poses, self.strategy, Some(current))?;
-                let new_cells: Vec<usize> = poses
+                // Per candidate: the weighted count of unseen cells it would see, and whether
+                // unexplained ones are among them.
+                let new_cells: Vec<(f64, bool)> = poses
                     .iter()
                     .map(|p| {
                         if unknown.is_empty() {
-                            0
+                            (0.0, false)
                         } else {
-                            visible_unknown_cells(&unknown, camera, p, &occluders, &self.explore.grid, disc)
+                            let idx = sees(&unknown, p);
+                            (idx.iter().map(|i| weights[*i]).sum(), idx.iter().any(|i| weights[*i] > 1.0))
                         }
                     })
                     .collect();
@@ -484,12 +520,12 @@ impl ActiveSession {
                     .zip(scores.iter().zip(&new_cells))
                     .map(|(p, (s, n))| ScoredCandidate {
                         world_from_camera: *p,
-                        utility: s.utility + bits_per_cell * *n as f64,
+                        utility: s.utility + bits_per_cell * n.0,
                         reachable: None,
                     })
                     .collect();
                 let mut order: Vec<usize> = (0..scored.len())
-                    .filter(|i| scored[*i].utility.is_finite() && (!table_only || new_cells[*i] >= disc.min_new_cells))
+                    .filter(|i| scored[*i].utility.is_finite() && (!table_only || new_cells[*i].0 >= min_new))
                     .collect();
                 order.sort_by(|a, b| scored[*b].utility.total_cmp(&scored[*a].utility).then(a.cmp(b)));
                 for i in order {
@@ -497,6 +533,7 @@ impl ActiveSession {
                     scored[i].reachable = Some(ok);
                     if ok {
                         let (pose, utility) = (scored[i].world_from_camera, scored[i].utility);
+                        self.evidence_views += usize::from(new_cells[i].1);
                         return Ok(NextView::Move { world_from_camera: pose, utility, candidates: scored });
                     }
                 }

@@ -109,7 +109,7 @@ use std::collections::BTreeMap;
 use nalgebra::Point3;
 
 pub use discovery::{
-    discovery_targets, greedy_discovery_views, truncated_boxes, visible_unknown_cells, visible_unknown_indices,
+    discovery_targets, greedy_discovery_views, greedy_discovery_views_weighted, truncated_boxes, visible_unknown_cells, visible_unknown_indices,
     DiscoveryConfig, TableCoverage,
 };
 pub use grid::{

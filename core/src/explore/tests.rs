@@ -854,3 +854,114 @@ fn truncated_detections_do_not_mark_table_cells() {
         Err(ExploreError::InvalidConfig { field: "discovery.exclude_truncated_px", .. })
     ));
 }
+
+#[test]
+fn object_evidence_keeps_its_cells_unknown_until_a_mapped_object_explains_them() {
+    // Camera 0.5 m above a flat table; an 80 × 80 px patch of the image sees a 5 cm high top
+    // (depth 0.45): its footprint is 80 · 0.45 / f metres square (closed form).
+    let cam = camera();
+    let h = 0.5;
+    let pose = view(Point3::new(0.5, 0.0, h), [0.5, 0.0, 0.0]);
+    let mut z = vec![h as f32; 640 * 480];
+    for v in 200..280 {
+        for u in 280..360 {
+            z[v * 640 + u] = 0.45;
+        }
+    }
+    let depth = DepthImage::new(640, 480, z).unwrap_or_else(|e| panic!("{e}"));
+    let base = on(DiscoveryConfig { min_frames: 1, margin_frac: 0.0, ..DiscoveryConfig::default() });
+    let evidence = DiscoveryConfig { evidence_height_m: 0.02, ..base.clone() };
+    let empty = Occluders::from_map(&ObjectMap::new(), &GridConfig::default());
+    let cells_with = |cfg: &DiscoveryConfig, occ: &Occluders| {
+        let mut cov = TableCoverage::new(&table(), cfg).unwrap_or_else(|e| panic!("{e}"));
+        cov.integrate_depth(&cam, &pose, &depth, cfg).unwrap_or_else(|e| panic!("{e}"));
+        let all_unknown = cov.unknown_cells(&empty).len();
+        let (unknown, unexplained) = cov.unknown_cells_with_evidence(occ);
+        (all_unknown, unknown.len(), unexplained.iter().filter(|u| **u).count())
+    };
+    let (off_unknown, _, off_unexplained) = cells_with(&base, &empty);
+    let (on_unknown, _, on_unexplained) = cells_with(&evidence, &empty);
+    let side = 80.0 * 0.45 / cam.fx / base.cell_m; // the top's footprint, cells per side
+    let lost = (on_unknown - off_unknown) as f64;
+    // Every cell the top touches is unexplained (its outline cells get table returns too).
+    assert!(lost >= side.ceil().powi(2) && lost <= (side.ceil() + 1.0).powi(2), "lost {lost}, side {side}");
+    assert_eq!(off_unexplained, 0, "off: no evidence is kept");
+    assert_eq!(on_unexplained as f64, lost, "with nothing mapped, every such cell is unexplained");
+    // A mapped object on the patch explains it (and its footprint makes the cells known) ...
+    let c = pose * cam.unproject(320.0, 240.0, 0.45);
+    let there = map_of(vec![object(Label::Block, [c.x, c.y, 0.025], 0.0, [0.04, 0.04, 0.025])]);
+    let occ_there = Occluders::from_map(&there, &GridConfig::default());
+    let (_, known_there, unexplained_there) = cells_with(&evidence, &occ_there);
+    assert_eq!(unexplained_there, 0);
+    assert!(known_there < off_unknown + 1, "the object's footprint is known: {known_there}");
+    // ... one 15 cm away does not.
+    let away = map_of(vec![object(Label::Block, [c.x + 0.15, c.y, 0.025], 0.0, [0.02, 0.02, 0.025])]);
+    let occ_away = Occluders::from_map(&away, &GridConfig::default());
+    assert_eq!(cells_with(&evidence, &occ_away).2, on_unexplained);
+    // A height above max_height_m is a typed error naming the field.
+    let bad = DiscoveryConfig { evidence_height_m: 0.5, ..DiscoveryConfig::default() };
+    assert!(matches!(
+        TableCoverage::new(&table(), &bad),
+        Err(ExploreError::InvalidConfig { field: "discovery.evidence_height_m", .. })
+    ));
+}
+
+#[test]
+fn unexplained_evidence_draws_a_view_centred_on_the_unmapped_object() {
+    use crate::active::{ActiveConfig, ActiveSession, NextView, SessionStop};
+    use crate::frame::Frame;
+    // The world holds blocks A and B; the map only A, explored from around. The whole table is
+    // seen from above, B's top included, so the paper's rule (and discovery without evidence)
+    // stops "all explored" with B missing; with object evidence B's cells are unexplained.
+    let a = [0.6, -0.25, 0.025];
+    let b = [0.3, 0.35, 0.025];
+    let world = map_of(vec![
+        object(Label::Block, a, 0.0, [0.025, 0.025, 0.025]),
+        object(Label::Block, b, 0.3, [0.025, 0.025, 0.025]),
+    ]);
+    let map = map_of(vec![object(Label::Block, a, 0.0, [0.025, 0.025, 0.025])]);
+    let cam = PinholeCamera::from_fovy(320, 240, 1.0).unwrap_or_else(|e| panic!("{e}"));
+    let mut poses: Vec<Se3> = [0.25, 0.5, 0.75]
+        .iter()
+        .flat_map(|x| [-0.45, -0.15, 0.15, 0.45].map(|y| view(Point3::new(*x, y, 0.5), [*x, y, 0.0])))
+        .collect();
+    poses.extend([0.0, 90.0, 180.0, 270.0].map(|az| view(eye_around(a, az, 35.0, 0.35), a)));
+    let frames: Vec<(Frame, Vec<Point3<f64>>)> = poses
+        .iter()
+        .enumerate()
+        .map(|(i, pose)| {
+            let (depth, points) = render(&world, &cam, pose, 0);
+            (Frame { index: i as u32, camera: cam, depth, world_from_camera: *pose, detections: Vec::new() }, points)
+        })
+        .collect();
+    let occ = Occluders::from_map(&map, &GridConfig::default());
+    let run = |config: ActiveConfig| {
+        let mut s = ActiveSession::new(config, table()).unwrap_or_else(|e| panic!("{e}"));
+        for (frame, points) in &frames {
+            let observed = [ObservedPoints { object_id: 0, points_in_world: points.clone() }];
+            for _ in 0..3 {
+                s.integrate_frame(&map, frame, &observed).unwrap_or_else(|e| panic!("{e}"));
+            }
+            s.view_done(&map, false);
+        }
+        let (_, unexplained) = s.table_coverage().unknown_cells_with_evidence(&occ);
+        let n = unexplained.iter().filter(|u| **u).count();
+        (s.next_view(&map, &cam, &poses[0], &AlwaysReachable).unwrap_or_else(|e| panic!("{e}")), n)
+    };
+    let before_stop = ActiveConfig { discovery_before_stop: true, discovery_reserve: true, ..ActiveConfig::default() };
+    let all_explored = NextView::Stop { reason: SessionStop::AllExplored };
+    assert_eq!(run(before_stop.clone()), (all_explored.clone(), 0), "without evidence B's cells count as seen");
+    let evidence = ActiveConfig { discovery_evidence_height_m: 0.02, ..before_stop };
+    let (d, n) = run(evidence.clone());
+    // B (5 cm square, turned 0.3 rad) overlaps 9-16 cells of 2 cm.
+    assert!((9..=16).contains(&n), "{n} unexplained cells");
+    let NextView::Move { world_from_camera, .. } = d else { panic!("expected a move: {d:?}") };
+    // B is in the inner image of the chosen view, A's cells explained by the map.
+    let uv = cam
+        .project(&(world_from_camera.inverse() * Point3::from(Vector3::from(b))))
+        .unwrap_or_else(|| panic!("B behind the camera"));
+    assert!(uv[0] > 32.0 && uv[0] < 288.0 && uv[1] > 24.0 && uv[1] < 216.0, "B at {uv:?}");
+    // With no views left for evidence it counts as plain unseen cells: fewer than
+    // min_new_cells, so the session stops.
+    assert_eq!(run(ActiveConfig { discovery_evidence_max_views: 0, ..evidence }).0, all_explored);
+}
