@@ -33,9 +33,9 @@ use serde::{Deserialize, Serialize};
 
 use crate::explore::{
     self, coverage_views, discovery_targets, greedy_discovery_views_weighted, random_views, sample_candidates_around,
-    sample_candidates_at, stop_reason, visible_unknown_indices, CandidateConfig, CandidateView,
-    ExplorationGrids, ExploreConfig, ExploreError, HistoryBook, ObservedPoints, Occluders, Reachability, StopReason,
-    Strategy, TableCoverage, TableRect, UtilityContext,
+    sample_candidates_at, stop_reason, visible_unknown_indices, CandidateConfig, CandidateView, ExplorationGrids,
+    ExploreConfig, ExploreError, HistoryBook, ObservedPoints, Occluders, Reachability, StopReason, Strategy,
+    TableCoverage, TableRect, UtilityContext,
 };
 use crate::frame::Frame;
 use crate::geometry::{PinholeCamera, Se3};
@@ -469,7 +469,8 @@ impl ActiveSession {
                 // The budget reserve: the table's share of the views left, taken last.
                 if !table_only && disc.reserve && unknown_weight >= min_new {
                     let left = self.explore.max_views - self.views_taken;
-                    let seen: Vec<Vec<usize>> = table_views.iter().map(|v| sees(&unknown, &v.world_from_camera)).collect();
+                    let seen: Vec<Vec<usize>> =
+                        table_views.iter().map(|v| sees(&unknown, &v.world_from_camera)).collect();
                     let needed = greedy_discovery_views_weighted(&seen, &weights, min_new, left, |i| {
                         reachable.reachable(&table_views[i].world_from_camera)
                     });

@@ -308,7 +308,7 @@ impl TableCoverage {
         let (lo, hi) = (self.table.height_m - BELOW_TABLE_TOLERANCE_M, self.table.height_m + config.max_height_m);
         let (u_lo, u_hi) = inner_range(depth.width, config.margin_frac);
         let (v_lo, v_hi) = inner_range(depth.height, config.margin_frac);
-        let evidence_above = (self.evidence_height_m > 0.0).then(|| self.table.height_m + self.evidence_height_m);
+        let evidence_above = (self.evidence_height_m > 0.0).then_some(self.table.height_m + self.evidence_height_m);
         let mut hit = vec![false; self.frames.len()];
         let mut evidence_hit = vec![false; self.frames.len()];
         for v in (0..depth.height).step_by(stride).filter(|v| (v_lo..v_hi).contains(v)) {

@@ -109,8 +109,8 @@ use std::collections::BTreeMap;
 use nalgebra::Point3;
 
 pub use discovery::{
-    discovery_targets, greedy_discovery_views, greedy_discovery_views_weighted, truncated_boxes, visible_unknown_cells, visible_unknown_indices,
-    DiscoveryConfig, TableCoverage,
+    discovery_targets, greedy_discovery_views, greedy_discovery_views_weighted, truncated_boxes, visible_unknown_cells,
+    visible_unknown_indices, DiscoveryConfig, TableCoverage,
 };
 pub use grid::{
     binary_entropy_bits, log_odds, plogp_bits, probability_from_log_odds, CellPose, CellRef, CellState, Face, FaceGrid,
