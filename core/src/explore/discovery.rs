@@ -50,8 +50,9 @@
 //!   truncated in all but two frames, 98 % of the table known, "all explored" with the block
 //!   missing; with the option at 2 px it is mapped).
 //! - Object evidence (`evidence_height_m` > 0; off by default): returns more than this above the
-//!   table top are evidence that something stands in the cell, not a sight of the table: they do
-//!   not mark the cell seen, so the cell stays unknown until a mapped object's footprint covers it.
+//!   table top are evidence that something stands in the cell, not a sight of the table (counted
+//!   from the whole image, border included: the border is where an object the map has not
+//!   confirmed shows, truncated): they do not mark the cell seen, so the cell stays unknown until a mapped object's footprint covers it.
 //!   A cell whose evidence came in `min_frames` frames and that lies farther than
 //!   `evidence_explained_m` from every mapped object is *unexplained*, and unknown even if table
 //!   returns reached part of it (an object's outline cells): the depth shows an object the map
@@ -311,21 +312,26 @@ impl TableCoverage {
         let evidence_above = (self.evidence_height_m > 0.0).then_some(self.table.height_m + self.evidence_height_m);
         let mut hit = vec![false; self.frames.len()];
         let mut evidence_hit = vec![false; self.frames.len()];
-        for v in (0..depth.height).step_by(stride).filter(|v| (v_lo..v_hi).contains(v)) {
-            for u in (0..depth.width).step_by(stride).filter(|u| (u_lo..u_hi).contains(u)) {
+        // Evidence counts from the whole image (the border is where an object the map has not
+        // confirmed shows, truncated); table sightings only from inside the border, outside the
+        // excluded boxes.
+        let whole = evidence_above.is_some();
+        for v in (0..depth.height).step_by(stride).filter(|v| whole || (v_lo..v_hi).contains(v)) {
+            for u in (0..depth.width).step_by(stride).filter(|u| whole || (u_lo..u_hi).contains(u)) {
                 let (pu, pv) = (f64::from(u) + 0.5, f64::from(v) + 0.5);
-                if excluded.iter().any(|b| pu >= b.min[0] && pu <= b.max[0] && pv >= b.min[1] && pv <= b.max[1]) {
-                    continue;
-                }
+                let sighting = (v_lo..v_hi).contains(&v)
+                    && (u_lo..u_hi).contains(&u)
+                    && !excluded.iter().any(|b| pu >= b.min[0] && pu <= b.max[0] && pv >= b.min[1] && pv <= b.max[1]);
                 let Some(d) = depth.at(u, v) else { continue };
-                let p = world_from_camera * camera.unproject(f64::from(u) + 0.5, f64::from(v) + 0.5, f64::from(d));
+                let p = world_from_camera * camera.unproject(pu, pv, f64::from(d));
                 if !(p.z >= lo && p.z <= hi) {
                     continue;
                 }
                 if let Some(i) = self.cell_of(p.x, p.y) {
                     match evidence_above {
                         Some(z) if p.z > z => evidence_hit[i] = true,
-                        _ => hit[i] = true,
+                        _ if sighting => hit[i] = true,
+                        _ => {}
                     }
                 }
             }

@@ -898,6 +898,21 @@ fn object_evidence_keeps_its_cells_unknown_until_a_mapped_object_explains_them()
     let away = map_of(vec![object(Label::Block, [c.x + 0.15, c.y, 0.025], 0.0, [0.02, 0.02, 0.025])]);
     let occ_away = Occluders::from_map(&away, &GridConfig::default());
     assert_eq!(cells_with(&evidence, &occ_away).2, on_unexplained);
+    // Evidence counts from the image border too (where table sightings do not): a top seen in
+    // the left 48 px of a 10 % (64 px) border.
+    let mut z = vec![h as f32; 640 * 480];
+    for v in 200..280 {
+        for u in 0..48 {
+            z[v * 640 + u] = 0.45;
+        }
+    }
+    let border = DepthImage::new(640, 480, z).unwrap_or_else(|e| panic!("{e}"));
+    let strict = DiscoveryConfig { margin_frac: 0.1, ..evidence.clone() };
+    let mut cov = TableCoverage::new(&table(), &strict).unwrap_or_else(|e| panic!("{e}"));
+    cov.integrate_depth(&cam, &pose, &border, &strict).unwrap_or_else(|e| panic!("{e}"));
+    let n = cov.unknown_cells_with_evidence(&empty).1.iter().filter(|u| **u).count() as f64;
+    let (a, b) = (48.0 * 0.45 / cam.fx / base.cell_m, 80.0 * 0.45 / cam.fy / base.cell_m);
+    assert!(n >= a.floor() * b.floor() && n <= (a.ceil() + 1.0) * (b.ceil() + 1.0), "{n} cells, {a} × {b}");
     // A height above max_height_m is a typed error naming the field.
     let bad = DiscoveryConfig { evidence_height_m: 0.5, ..DiscoveryConfig::default() };
     assert!(matches!(
