@@ -106,7 +106,7 @@ class ExploreRunConfig:
     frames was never mapped while its cells counted as seen (core ``explore::discovery``)."""
     discovery_evidence_height_m: float = 0.0
     """Depth returns more than this above the table top are evidence of an object, not a sight of
-    the table: they do not mark table cells seen, so the cells stay unknown until a map object
+    the table (counted from the whole image, border included): they do not mark table cells seen, so the cells stay unknown until a map object
     covers them; cells with such evidence far from every map object are *unexplained* (the depth
     shows an object the map does not have: detected only truncated, or too few times) and draw
     discovery views centred on them. 0 = off (the default; the reports were made without it).
