@@ -428,11 +428,12 @@ impl ActiveSession {
                 let mut weights: Vec<f64> =
                     evidence.iter().map(|e| if *e && favour { disc.evidence_weight } else { 1.0 }).collect();
                 let min_new = disc.min_new_cells as f64;
-                if weights.iter().sum::<f64>() < min_new && disc.weight <= 0.0 {
+                let mut unknown_weight: f64 = weights.iter().sum();
+                if unknown_weight < min_new && disc.weight <= 0.0 {
                     unknown.clear();
                     weights.clear();
+                    unknown_weight = 0.0;
                 }
-                let unknown_weight: f64 = weights.iter().sum();
                 // With `before_stop`, "every object done" still looks at the unseen table first.
                 let mut table_only = false;
                 match stop_reason(&ctx.features(), self.views_taken, &self.explore) {

@@ -855,6 +855,18 @@ fn truncated_detections_do_not_mark_table_cells() {
     ));
 }
 
+/// A 640 × 480 depth image of a flat table at `h` with an object top at depth `top` in image
+/// columns `cols`, rows 200..280.
+fn flat_with_top(h: f64, cols: std::ops::Range<usize>, top: f32) -> DepthImage {
+    let mut z = vec![h as f32; 640 * 480];
+    for v in 200..280 {
+        for u in cols.clone() {
+            z[v * 640 + u] = top;
+        }
+    }
+    DepthImage::new(640, 480, z).unwrap_or_else(|e| panic!("{e}"))
+}
+
 #[test]
 fn object_evidence_keeps_its_cells_unknown_until_a_mapped_object_explains_them() {
     // Camera 0.5 m above a flat table; an 80 × 80 px patch of the image sees a 5 cm high top
@@ -862,13 +874,7 @@ fn object_evidence_keeps_its_cells_unknown_until_a_mapped_object_explains_them()
     let cam = camera();
     let h = 0.5;
     let pose = view(Point3::new(0.5, 0.0, h), [0.5, 0.0, 0.0]);
-    let mut z = vec![h as f32; 640 * 480];
-    for v in 200..280 {
-        for u in 280..360 {
-            z[v * 640 + u] = 0.45;
-        }
-    }
-    let depth = DepthImage::new(640, 480, z).unwrap_or_else(|e| panic!("{e}"));
+    let depth = flat_with_top(h, 280..360, 0.45);
     let base = on(DiscoveryConfig { min_frames: 1, margin_frac: 0.0, ..DiscoveryConfig::default() });
     let evidence = DiscoveryConfig { evidence_height_m: 0.02, ..base.clone() };
     let empty = Occluders::from_map(&ObjectMap::new(), &GridConfig::default());
@@ -900,13 +906,7 @@ fn object_evidence_keeps_its_cells_unknown_until_a_mapped_object_explains_them()
     assert_eq!(cells_with(&evidence, &occ_away).2, on_unexplained);
     // Evidence counts from the image border too (where table sightings do not): a top seen in
     // the left 48 px of a 10 % (64 px) border.
-    let mut z = vec![h as f32; 640 * 480];
-    for v in 200..280 {
-        for u in 0..48 {
-            z[v * 640 + u] = 0.45;
-        }
-    }
-    let border = DepthImage::new(640, 480, z).unwrap_or_else(|e| panic!("{e}"));
+    let border = flat_with_top(h, 0..48, 0.45);
     let strict = DiscoveryConfig { margin_frac: 0.1, ..evidence.clone() };
     let mut cov = TableCoverage::new(&table(), &strict).unwrap_or_else(|e| panic!("{e}"));
     cov.integrate_depth(&cam, &pose, &border, &strict).unwrap_or_else(|e| panic!("{e}"));
