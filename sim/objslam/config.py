@@ -104,13 +104,13 @@ class ExploreRunConfig:
     there may never be confirmed. 0 = off (the default; the reports were made without it).
     Measured on scene06, seed 6, 35° camera, exact poses: a block detected truncated in all but two
     frames was never mapped while its cells counted as seen (core ``explore::discovery``)."""
-    discovery_evidence_height_m: float = 0.0
+    discovery_evidence_height_m: float = 0.02
     """Depth returns more than this above the table top are evidence of an object, not a sight of
-    the table (counted from the whole image, border included): they do not mark table cells seen, so the cells stay unknown until a map object
-    covers them; cells with such evidence far from every map object are *unexplained* (the depth
-    shows an object the map does not have: detected only truncated, or too few times) and draw
-    discovery views centred on them. 0 = off (the default; the reports were made without it).
-    Core ``explore::discovery``."""
+    the table (counted from the whole image, border included): they do not mark table cells seen,
+    so the cells stay unknown until a map object covers them; cells with such evidence far from
+    every map object are *unexplained* (the depth shows an object the map does not have: detected
+    only truncated, or too few times) and draw discovery views centred on them. 0 = off (as
+    before stop 24; the reports' commands say which they ran). Core ``explore::discovery``."""
     discovery_evidence_weight: float = 10.0
     """An unexplained table cell counts as this many unseen cells in the discovery count, gain
     and budget reserve (a 5 cm block overlaps 9-16 cells of 2 cm; ``discovery_min_new_cells`` is 25)."""
