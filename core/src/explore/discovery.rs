@@ -49,10 +49,12 @@
 //!   while the map never confirms it (measured: scene06, seed 6, 35° camera, exact poses: a block
 //!   truncated in all but two frames, 98 % of the table known, "all explored" with the block
 //!   missing; with the option at 2 px it is mapped).
-//! - Object evidence (`evidence_height_m` > 0; off by default): returns more than this above the
+//! - Object evidence (`evidence_height_m` > 0; off in core's default, 0.02 in the run config
+//!   `explore.discovery_evidence_height_m`): returns more than this above the
 //!   table top are evidence that something stands in the cell, not a sight of the table (counted
 //!   from the whole image, border included: the border is where an object the map has not
-//!   confirmed shows, truncated): they do not mark the cell seen, so the cell stays unknown until a mapped object's footprint covers it.
+//!   confirmed shows, truncated): they do not mark the cell seen, so the cell stays unknown until
+//!   a mapped object's footprint covers it.
 //!   A cell whose evidence came in `min_frames` frames and that lies farther than
 //!   `evidence_explained_m` from every mapped object is *unexplained*, and unknown even if table
 //!   returns reached part of it (an object's outline cells): the depth shows an object the map
