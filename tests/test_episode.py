@@ -166,13 +166,31 @@ def test_object_evidence_maps_the_object_seen_only_at_the_border(tmp_path, ci_ov
         _cfg(tmp_path, ci_overlay, strategy="object-driven", **common, **{"explore.discovery_evidence_height_m": 0.0}),
         progress=False,
     ).metrics
-    evidence = run_episode(
-        _cfg(tmp_path, ci_overlay, strategy="object-driven", **common, **{"explore.discovery_evidence_height_m": 0.02}),
+    recorded = run_episode(
+        _cfg(
+            tmp_path,
+            ci_overlay,
+            strategy="object-driven",
+            **{**common, "record.enabled": "true", "record.rgb": "false", "record.depth": "false", "explore.discovery_evidence_height_m": 0.02},
+        ),
         progress=False,
-    ).metrics
+    )
+    evidence = recorded.metrics
     assert missed(without) >= 1, without["objects"]
     assert missed(evidence) == 0, evidence["objects"]
     assert evidence["mean"]["iou3d"] > without["mean"]["iou3d"] + 0.05
+    # The per-view unexplained-cell count: the can's cells while the map lacks it, none once it
+    # is mapped; always none with the option off.
+    curve = evidence["table_unexplained_curve"]
+    assert len(curve) == len(evidence["table_known_curve"]) and max(curve) >= 5 and curve[-1] == 0, curve
+    assert not any(without["table_unexplained_curve"]), without["table_unexplained_curve"]
+    # ... and recorded for the viewer: the unexplained cells as points, their count as a scalar.
+    rerun = shutil.which("rerun") or str(Path(__file__).resolve().parents[1] / ".venv" / "bin" / "rerun")
+    out = subprocess.run(
+        [rerun, "rrd", "print", str(recorded.run_dir / "run.rrd")], capture_output=True, text=True, timeout=300, check=False
+    )
+    assert out.returncode == 0, out.stderr
+    assert "world/map/table_unexplained" in out.stdout and "explore/table_unexplained_cells" in out.stdout
 
 
 def test_slam_pose_source_beats_noisy_kinematics(tmp_path, ci_overlay) -> None:

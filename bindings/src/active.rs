@@ -361,11 +361,17 @@ impl ActiveMapperPy {
         (arr.to_pyarray(py), states)
     }
 
-    /// Table-top cells not known yet (neither seen nor under a mapped object): (N, 3) world
-    /// centres, for recording.
-    fn table_unknown_cells<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
-        let pts = self.session.table_unknown_cells(&self.mapper.map());
-        numpy::ndarray::Array2::from_shape_fn((pts.len(), 3), |(r, c)| pts[r][c]).to_pyarray(py)
+    /// Table-top cells not known yet (neither seen nor under a mapped object), for recording:
+    /// (N, 3) world centres and, per cell, whether it is unexplained (object evidence no map
+    /// object explains).
+    fn table_unknown_cells<'py>(&self, py: Python<'py>) -> (Bound<'py, PyArray2<f64>>, Vec<bool>) {
+        let (pts, unexplained) = self.session.table_unknown_cells_with_evidence(&self.mapper.map());
+        (numpy::ndarray::Array2::from_shape_fn((pts.len(), 3), |(r, c)| pts[r][c]).to_pyarray(py), unexplained)
+    }
+
+    /// Unexplained table cells after each view (object evidence no map object explains).
+    fn table_unexplained_curve(&self) -> Vec<usize> {
+        self.session.table_unexplained_curve().to_vec()
     }
 
     fn __len__(&self) -> usize {

@@ -53,6 +53,26 @@ MAP_POINT_COLOR = np.array([240, 200, 40], dtype=np.uint8)
 GRID_COLORS = np.array([[150, 150, 150], [60, 200, 60], [220, 50, 50]], dtype=np.uint8)
 TABLE_UNSEEN_COLOR = np.array([200, 60, 200], dtype=np.uint8)
 """Table-top cells not seen yet (explore::discovery), recorded after each view."""
+TABLE_UNEXPLAINED_COLOR = np.array([255, 140, 0], dtype=np.uint8)
+"""Unexplained table-top cells: object evidence (depth returns above the table) that no map object
+explains, i.e. an object the depth shows and the map lacks (explore::discovery)."""
+
+
+def _log_table(rec: Any, mapper: Any, cells: bool) -> None:
+    """Record the table-top coverage after a view: the known fraction and the unexplained cell
+    count as scalars and, with ``cells``, the unknown cells (``world/map/table_unseen``) and the
+    unexplained ones (``world/map/table_unexplained``) as points."""
+    rec.log_scalar("explore/table_known_fraction", mapper.table_known_curve()[-1])
+    rec.log_scalar("explore/table_unexplained_cells", float(mapper.table_unexplained_curve()[-1]))
+    if not cells:
+        return
+    pts, unexplained = mapper.table_unknown_cells()
+    mask = np.asarray(unexplained, dtype=bool).reshape(-1)
+    for entity, sel, colour in (
+        ("world/map/table_unseen", ~mask, TABLE_UNSEEN_COLOR),
+        ("world/map/table_unexplained", mask, TABLE_UNEXPLAINED_COLOR),
+    ):
+        rec.log_colored_points(entity, pts[sel], np.tile(colour, (int(sel.sum()), 1)), 0.008)
 
 
 def grey_of(rgb: np.ndarray) -> np.ndarray:
@@ -380,7 +400,7 @@ def run_episode(
             mapper.view_done(False)
             snapshot()
         rec.log_scalar("explore/mean_normalized_entropy", mapper.entropy_curve()[-1])
-        rec.log_scalar("explore/table_known_fraction", mapper.table_known_curve()[-1])
+        _log_table(rec, mapper, cfg.record.grids)
         stop_reason = "strategy_done"
         while True:
             # Candidate views are reachable only with a collision-free arm among the mapped objects.
@@ -401,15 +421,11 @@ def run_episode(
             mapper.view_done(True)
             snapshot()
             rec.log_scalar("explore/mean_normalized_entropy", mapper.entropy_curve()[-1])
-            rec.log_scalar("explore/table_known_fraction", mapper.table_known_curve()[-1])
+            _log_table(rec, mapper, cfg.record.grids)
             if cfg.record.grids:
                 pts, states = mapper.grid_cells()
                 rec.log_colored_points(
                     "world/map/grids", pts, GRID_COLORS[np.frombuffer(states, dtype=np.uint8)], 0.004
-                )
-                unseen = mapper.table_unknown_cells()
-                rec.log_colored_points(
-                    "world/map/table_unseen", unseen, np.tile(TABLE_UNSEEN_COLOR, (len(unseen), 1)), 0.008
                 )
         if bar is not None:
             bar.close()
@@ -459,6 +475,7 @@ def run_episode(
             "stop_reason": stop_reason,
             "entropy_curve": mapper.entropy_curve(),
             "table_known_curve": mapper.table_known_curve(),
+            "table_unexplained_curve": mapper.table_unexplained_curve(),
             "accuracy_curve": accuracy_curve,
             "timings_ms_median": {s: (statistics.median(v) if v else None) for s, v in times.items()},
             "events": events,

@@ -226,6 +226,8 @@ pub struct ActiveSession {
     entropy_curve: Vec<f64>,
     table_coverage: TableCoverage,
     table_curve: Vec<f64>,
+    /// Unexplained table cells (object evidence no map object explains) after each view.
+    unexplained_curve: Vec<usize>,
     /// Views taken that saw unexplained object evidence (`explore::discovery`).
     evidence_views: usize,
 }
@@ -280,6 +282,7 @@ impl ActiveSession {
             entropy_curve: Vec::new(),
             table_coverage,
             table_curve: Vec::new(),
+            unexplained_curve: Vec::new(),
             evidence_views: 0,
         })
     }
@@ -310,10 +313,22 @@ impl ActiveSession {
         &self.table_curve
     }
 
+    /// Unexplained table cells (object evidence that no map object explains: an object the depth
+    /// shows and the map lacks; `explore::discovery`) after each view, Init views included;
+    /// zeros with object evidence off.
+    pub fn table_unexplained_curve(&self) -> &[usize] {
+        &self.unexplained_curve
+    }
+
     /// Table cells not known yet (neither seen nor under an object of `map`), world points just
     /// above the table top (for recording).
     pub fn table_unknown_cells(&self, map: &ObjectMap) -> Vec<nalgebra::Point3<f64>> {
         self.table_coverage.unknown_cells(&Occluders::from_map(map, &self.explore.grid))
+    }
+
+    /// [`Self::table_unknown_cells`] with, per cell, whether it is unexplained (for recording).
+    pub fn table_unknown_cells_with_evidence(&self, map: &ObjectMap) -> (Vec<nalgebra::Point3<f64>>, Vec<bool>) {
+        self.table_coverage.unknown_cells_with_evidence(&Occluders::from_map(map, &self.explore.grid))
     }
 
     /// The table-top coverage grid (diagnostics: which cells are seen, unexplained).
@@ -362,7 +377,11 @@ impl ActiveSession {
     /// the Init views (they do not use the budget).
     pub fn view_done(&mut self, map: &ObjectMap, counts_as_view: bool) {
         self.history.record(map);
-        self.table_curve.push(self.table_coverage.known_fraction(&Occluders::from_map(map, &self.explore.grid)));
+        let (unknown, unexplained) =
+            self.table_coverage.unknown_cells_with_evidence(&Occluders::from_map(map, &self.explore.grid));
+        let cells = self.table_coverage.len().max(1) as f64;
+        self.table_curve.push(1.0 - unknown.len() as f64 / cells);
+        self.unexplained_curve.push(unexplained.iter().filter(|&&u| u).count());
         if counts_as_view {
             self.views_taken += 1;
         }

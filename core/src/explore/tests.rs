@@ -961,6 +961,9 @@ fn unexplained_evidence_draws_a_view_centred_on_the_unmapped_object() {
         }
         let (_, unexplained) = s.table_coverage().unknown_cells_with_evidence(&occ);
         let n = unexplained.iter().filter(|u| **u).count();
+        // The session's per-view curve holds the same count after the last view.
+        assert_eq!(s.table_unexplained_curve().len(), frames.len());
+        assert_eq!(s.table_unexplained_curve().last(), Some(&n));
         (s.next_view(&map, &cam, &poses[0], &AlwaysReachable).unwrap_or_else(|e| panic!("{e}")), n)
     };
     let before_stop = ActiveConfig { discovery_before_stop: true, discovery_reserve: true, ..ActiveConfig::default() };
