@@ -73,15 +73,19 @@ def _run_path(run_dir: str | Path) -> Path:
 
 def run_extras(run_dir: str | Path, metrics: dict[str, Any] | None = None) -> dict[str, float | None]:
     """What the report adds from a run folder: :func:`aligned_metrics`, the ground-truth objects
-    the map never got (``missed_objects``) and the fraction of the table top known at the end
+    the map never got (``missed_objects``), the fraction of the table top known at the end
     (``table_known``: seen or under a mapped object; None for runs made before episodes recorded
-    ``table_known_curve``). ``metrics``: the run's metrics.json when already loaded."""
+    ``table_known_curve``) and the table cells whose object evidence no map object explained at
+    the end (``table_unexplained``; None for runs made before ``table_unexplained_curve``).
+    ``metrics``: the run's metrics.json when already loaded."""
     m = metrics if metrics is not None else json.loads((_run_path(run_dir) / "metrics.json").read_text())
     curve = m.get("table_known_curve") or [None]
+    unexplained = m.get("table_unexplained_curve") or [None]
     return {
         **aligned_metrics(run_dir),
         "missed_objects": m["n_objects_gt"] - m["n_matched"],
         "table_known": curve[-1],
+        "table_unexplained": unexplained[-1],
     }
 
 
@@ -141,6 +145,7 @@ def write_reports(rows: list[dict[str, Any]], out: Path, command: str) -> None:
         ("map_offset_mm", ".1f", "The map's global offset (median centre offset), mm"),
         ("missed_objects", ".2f", "Objects never mapped (ground-truth objects without a matched estimate)"),
         ("table_known", ".2f", "Table top known at the end (seen, or under a mapped object), fraction; - = run made before episodes recorded it"),
+        ("table_unexplained", ".1f", "Table cells (2 cm by default) with object evidence no map object explains at the end (0 with evidence off); - = run made before episodes recorded it"),
         ("views", ".1f", "Views used (Init + NBV)"),
         ("path_length_m", ".2f", "Camera path length, m"),
         ("wall_s", ".0f", "Wall time per episode, s"),
