@@ -378,3 +378,68 @@ fn a_pose_far_from_the_prior_is_rejected() {
     }
     assert_eq!(tracker.lost_by_reason().get("prior_disagreement"), Some(&1));
 }
+
+#[test]
+fn a_pose_that_disagrees_with_the_priors_motion_is_dead_reckoned() {
+    // Exact priors (no noise): the prior gate is 3 x 2 mm, the motion gate 2 mm (no bias, so no
+    // conjugation term). Frame 5's prior is shifted by 4 mm while its images show the true pose:
+    // within the prior gate, but 4 mm from the last tracked frame moved by the prior's motion. With
+    // the motion gate the frame is lost (motion_disagreement) and output dead-reckoned (where the
+    // prior's motion puts it); without it, tracked. Frames 6 and 7 are a new view whose prior
+    // carries the same shift as a constant bias: not gated (the first frame of a view has no
+    // prediction, the next one moves consistently).
+    let seq = sequence();
+    let cam = camera();
+    let run_with = |floor_m: f64| {
+        let cfg = TrackerConfig {
+            kinematic_noise: KinematicNoiseConfig::none(),
+            motion_gate_floor_m: floor_m,
+            ..TrackerConfig::default()
+        };
+        let mut tracker = Tracker::new(cfg).unwrap_or_else(|e| panic!("{e}"));
+        let outs: Vec<_> = (0..8)
+            .map(|i| {
+                let (g, d) = &seq.frames[i];
+                let shift = if i >= 5 { 0.004 } else { 0.0 };
+                let input = TrackInput {
+                    grey: g,
+                    depth: d,
+                    camera: &cam,
+                    world_from_camera_fk: seq.gt[i] * Se3::translation(shift, 0.0, 0.0),
+                    view_index: u64::from(i >= 6),
+                    world_from_camera_gt: Some(seq.gt[i]),
+                };
+                tracker.track(&input).unwrap_or_else(|e| panic!("{e}"))
+            })
+            .collect();
+        (outs, tracker)
+    };
+    let (gated, tracker) = run_with(0.002);
+    for (i, out) in gated.iter().enumerate() {
+        if i == 5 {
+            assert!(
+                matches!(
+                    out.state,
+                    TrackingState::Lost { reason: LostReason::MotionDisagreement { trans_mm: 3..=5, .. } }
+                ),
+                "{:?}",
+                out.state
+            );
+            let off = (out.world_from_camera.translation.vector - seq.gt[5].translation.vector).norm();
+            assert!((off - 0.004).abs() < 0.001, "dead-reckoned pose {off} m from the truth, expected 4 mm");
+        } else {
+            assert!(out.is_ok(), "frame {i}: {:?}", out.state);
+        }
+    }
+    assert_eq!(tracker.lost_by_reason().get("motion_disagreement"), Some(&1));
+    let (ungated, _) = run_with(0.0);
+    assert!(ungated.iter().all(|o| o.is_ok()), "without the gate every frame tracks");
+    let off = (ungated[5].world_from_camera.translation.vector - seq.gt[5].translation.vector).norm();
+    assert!(off < 0.002, "tracked pose {off} m from the truth");
+
+    let bad = TrackerConfig { motion_gate_floor_m: -0.001, ..TrackerConfig::default() };
+    match Tracker::new(bad) {
+        Err(SlamError::Config { field, .. }) => assert_eq!(field, "motion_gate_floor_m"),
+        other => panic!("expected a config error, got {:?}", other.err()),
+    }
+}

@@ -302,6 +302,14 @@ class RunConfig:
     gauges stay one rigid map (``ObjectPipeline::transform_world``). False keeps each point where
     its frame's pose put it. Exploration benchmark, seed 0, mean over the 7 scenes: object-driven
     3D IoU 0.707 → 0.790 and CDE 1.01 → 0.60 cm with it; Init 0.743 → 0.822."""
+    slam_motion_gate_m: float = 0.0
+    """With the ``slam`` pose source: a tracked pose farther than this (plus the per-view bias's
+    conjugation bound) from the last tracked frame of the same view moved by the prior's motion
+    is lost and dead-reckoned instead (the core's ``TrackerConfig::motion_gate_floor_m``): a frame
+    that sees little of the scene cannot track to a consensus centimetres off and corrupt the map.
+    0 disables (the default so far)."""
+    slam_motion_gate_deg: float = 0.0
+    """The same gate's rotation floor, degrees (``motion_gate_floor_deg``); 0 disables."""
     camera: CameraConfig = field(default_factory=CameraConfig)
     detector: DetectorConfig = field(default_factory=DetectorConfig)
     naive: NaiveMapperConfig = field(default_factory=NaiveMapperConfig)

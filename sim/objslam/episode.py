@@ -215,6 +215,8 @@ def new_mapper(cfg: RunConfig, scene: SceneSpec) -> Any:
         else json.dumps(
             {
                 "pose_source": cfg.pose_source,
+                "motion_gate_floor_m": cfg.slam_motion_gate_m,
+                "motion_gate_floor_deg": cfg.slam_motion_gate_deg,
                 "kinematic_noise": {**to_dict(cfg.pose_noise), "seed": kinematic_noise_seed(cfg.seed, scene.seed)},
                 **({"ransac": {"seed": seeds["ransac"]}} if seeds else {}),
             }

@@ -98,6 +98,21 @@ pub struct TrackerConfig {
     /// rotation: likewise, at least 0.2°): the prior is never that far off, so such a pose is a
     /// false consensus; the frame is lost instead of corrupting the map. 0 disables.
     pub prior_gate_sigmas: f64,
+    /// Within a view the kinematic prior's bias is constant, so the prior's motion since the
+    /// last tracked frame of the same view predicts the SLAM pose far better than the prior
+    /// itself: it differs from the true motion only by the jitter and by the bias conjugating the
+    /// motion (at most θ·|bias translation| + |bias rotation|·d for a motion of angle θ and length
+    /// d). Reject a tracked pose farther from that prediction than
+    /// `motion_gate_floor_m` + θ·|bias translation| + |bias rotation|·d (rotation:
+    /// `motion_gate_floor_deg` + θ·|bias rotation|): the frame is lost (reason
+    /// `motion_disagreement`) and dead-reckoned from the last tracked frame instead. This catches
+    /// what the prior gate is too wide for: a frame that shows little of the scene (the camera
+    /// facing the robot's own link, a sliver of table left) and tracks to a consensus 2 cm off,
+    /// then corrupts the map as a keyframe. 0 disables; the first frame of a view is never gated
+    /// (the bias changes between views).
+    pub motion_gate_floor_m: f64,
+    /// See [`Self::motion_gate_floor_m`]; degrees.
+    pub motion_gate_floor_deg: f64,
     /// After this many consecutive lost frames *that show the scene* (at least
     /// [`Self::min_init_points`] keypoints with depth, yet no pose consensus: the map is likely
     /// wrong) the map is dropped and re-initialised from the prior. Frames that show too little of
@@ -134,6 +149,8 @@ impl Default for TrackerConfig {
             anchor_to_prior_mean: true,
             anchor_huber: 3.5,
             prior_gate_sigmas: 3.0,
+            motion_gate_floor_m: 0.0,
+            motion_gate_floor_deg: 0.0,
             reset_after_lost: 10,
         }
     }
@@ -188,6 +205,15 @@ pub enum LostReason {
         /// Translation difference to the prior, millimetres (rounded).
         trans_mm: u32,
         /// Rotation difference to the prior, centidegrees (rounded).
+        rot_cdeg: u32,
+    },
+    /// A pose was found but disagrees with the prior's motion since the last tracked frame of
+    /// the same view by more than [`TrackerConfig::motion_gate_floor_m`] plus the bias's
+    /// conjugation bound (a weakly constrained consensus).
+    MotionDisagreement {
+        /// Translation difference to the predicted pose, millimetres (rounded).
+        trans_mm: u32,
+        /// Rotation difference to the predicted pose, centidegrees (rounded).
         rot_cdeg: u32,
     },
 }
@@ -462,7 +488,8 @@ pub struct Tracker {
     n_lost: usize,
     /// Lost frames that showed too little of the scene (see [`TrackerConfig::reset_after_lost`]).
     n_lost_hidden: usize,
-    /// Lost frames by reason (`too_few_features`, `no_depth`, `too_few_inliers`, `prior_disagreement`).
+    /// Lost frames by reason (`too_few_features`, `no_depth`, `too_few_inliers`, `prior_disagreement`,
+    /// `motion_disagreement`).
     lost_by_reason: BTreeMap<&'static str, usize>,
     records: Vec<FrameRecord>,
 }
@@ -476,11 +503,14 @@ impl Tracker {
             ("fine_radius_px", config.fine_radius_px),
             ("anchor_huber", config.anchor_huber),
         ];
-        if !(config.prior_gate_sigmas.is_finite() && config.prior_gate_sigmas >= 0.0) {
-            return Err(SlamError::Config {
-                field: "prior_gate_sigmas",
-                reason: format!("{} must be finite and ≥ 0", config.prior_gate_sigmas),
-            });
+        for (field, v) in [
+            ("prior_gate_sigmas", config.prior_gate_sigmas),
+            ("motion_gate_floor_m", config.motion_gate_floor_m),
+            ("motion_gate_floor_deg", config.motion_gate_floor_deg),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(SlamError::Config { field, reason: format!("{v} must be finite and ≥ 0") });
+            }
         }
         for (field, v) in positive {
             if !(v.is_finite() && v > 0.0) {
@@ -647,7 +677,7 @@ impl Tracker {
         } else if let Some(pose) = known {
             Ok(self.step_known_pose(&frame, camera, pose))
         } else {
-            self.step_slam(&frame, camera, &prior)
+            self.step_slam(&frame, camera, &prior, input.view_index)
         };
         match result {
             Ok((map_from_camera, matches, n_inliers)) => {
@@ -693,6 +723,7 @@ impl Tracker {
                     LostReason::NoDepth { .. } => "no_depth",
                     LostReason::TooFewInliers { .. } => "too_few_inliers",
                     LostReason::PriorDisagreement { .. } => "prior_disagreement",
+                    LostReason::MotionDisagreement { .. } => "motion_disagreement",
                 };
                 *self.lost_by_reason.entry(key).or_insert(0) += 1;
                 out.state = TrackingState::Lost { reason };
@@ -756,6 +787,7 @@ impl Tracker {
         frame: &FrameData,
         camera: &PinholeCamera,
         prior: &Se3,
+        view_index: u64,
     ) -> Result<(Se3, Vec<PointMatch>, usize), LostReason> {
         let anchored = self.world_from_map().inverse() * prior;
         if self.points.is_empty() {
@@ -766,15 +798,26 @@ impl Tracker {
             return Ok((anchored, Vec::new(), 0));
         }
         let mut seeds = Vec::with_capacity(2);
-        if let Some((last_map_from_camera, last_prior, _)) = self.last {
-            seeds.push(last_map_from_camera * (last_prior.inverse() * prior));
+        // The prior's motion since the last tracked frame of this view (same bias): the gate's
+        // prediction, and the first seed.
+        let mut predicted = None;
+        if let Some((last_map_from_camera, last_prior, last_view)) = self.last {
+            let motion = last_prior.inverse() * prior;
+            let seed = last_map_from_camera * motion;
+            if last_view == view_index {
+                predicted = Some((seed, motion));
+            }
+            seeds.push(seed);
         }
         seeds.push(anchored);
         let mut best_inliers = 0;
         let mut disagreement = None;
         for seed in seeds {
             match self.estimate_from_seed(frame, camera, &seed) {
-                Ok(r) => match self.prior_disagreement(&r.0, &anchored) {
+                Ok(r) => match self
+                    .prior_disagreement(&r.0, &anchored)
+                    .or_else(|| predicted.and_then(|(p, m)| self.motion_disagreement(&r.0, &p, &m)))
+                {
                     None => return Ok(r),
                     Some(d) => disagreement = Some(d),
                 },
@@ -800,6 +843,27 @@ impl Tracker {
         let dt = (map_from_camera.translation.vector - prior_in_map.translation.vector).norm();
         let dr = (map_from_camera.rotation.inverse() * prior_in_map.rotation).angle().to_degrees();
         (dt > gate_t || dr > gate_r).then(|| LostReason::PriorDisagreement {
+            trans_mm: (dt * 1e3).round().min(f64::from(u32::MAX)) as u32,
+            rot_cdeg: (dr * 100.0).round().min(f64::from(u32::MAX)) as u32,
+        })
+    }
+
+    /// `Some(reason)` if `map_from_camera` is farther from `predicted` (the last tracked pose of
+    /// this view moved by the prior's `motion` since then) than the motion gate
+    /// ([`TrackerConfig::motion_gate_floor_m`]).
+    fn motion_disagreement(&self, map_from_camera: &Se3, predicted: &Se3, motion: &Se3) -> Option<LostReason> {
+        let (floor_t, floor_r) = (self.config.motion_gate_floor_m, self.config.motion_gate_floor_deg);
+        if floor_t <= 0.0 && floor_r <= 0.0 {
+            return None;
+        }
+        let n = &self.config.kinematic_noise;
+        let (theta, d) = (motion.rotation.angle(), motion.translation.vector.norm());
+        let bias_rot = n.bias_rot_deg.to_radians();
+        let gate_t = floor_t + theta * n.bias_trans_m + bias_rot * d;
+        let gate_r = floor_r + (theta * bias_rot).to_degrees();
+        let dt = (map_from_camera.translation.vector - predicted.translation.vector).norm();
+        let dr = (map_from_camera.rotation.inverse() * predicted.rotation).angle().to_degrees();
+        ((floor_t > 0.0 && dt > gate_t) || (floor_r > 0.0 && dr > gate_r)).then(|| LostReason::MotionDisagreement {
             trans_mm: (dt * 1e3).round().min(f64::from(u32::MAX)) as u32,
             rot_cdeg: (dr * 100.0).round().min(f64::from(u32::MAX)) as u32,
         })
