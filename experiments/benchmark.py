@@ -76,7 +76,9 @@ def run_extras(run_dir: str | Path, metrics: dict[str, Any] | None = None) -> di
     the map never got (``missed_objects``), the fraction of the table top known at the end
     (``table_known``: seen or under a mapped object; None for runs made before episodes recorded
     ``table_known_curve``) and the table cells whose object evidence no map object explained at
-    the end (``table_unexplained``; None for runs made before ``table_unexplained_curve``).
+    the end (``table_unexplained``; None for runs made before ``table_unexplained_curve``), the
+    camera pose error the map was built with (``ate_mm``: online ATE; None for runs without
+    ``ate_rmse_m``) and the tracker's lost frames (``lost_frames``).
     ``metrics``: the run's metrics.json when already loaded."""
     m = metrics if metrics is not None else json.loads((_run_path(run_dir) / "metrics.json").read_text())
     curve = m.get("table_known_curve") or [None]
@@ -86,6 +88,8 @@ def run_extras(run_dir: str | Path, metrics: dict[str, Any] | None = None) -> di
         "missed_objects": m["n_objects_gt"] - m["n_matched"],
         "table_known": curve[-1],
         "table_unexplained": unexplained[-1],
+        "ate_mm": None if m.get("ate_rmse_m") is None else 1000.0 * m["ate_rmse_m"],
+        "lost_frames": m.get("lost_frames"),
     }
 
 
@@ -146,6 +150,8 @@ def write_reports(rows: list[dict[str, Any]], out: Path, command: str) -> None:
         ("missed_objects", ".2f", "Objects never mapped (ground-truth objects without a matched estimate)"),
         ("table_known", ".2f", "Table top known at the end (seen, or under a mapped object), fraction; - = run made before episodes recorded it"),
         ("table_unexplained", ".1f", "Table cells (2 cm by default) with object evidence no map object explains at the end (0 with evidence off); - = run made before episodes recorded it"),
+        ("ate_mm", ".2f", "Camera pose ATE the map was built with (online, no alignment), mm"),
+        ("lost_frames", ".1f", "Frames the tracker lost (dead-reckoned or the prior)"),
         ("views", ".1f", "Views used (Init + NBV)"),
         ("path_length_m", ".2f", "Camera path length, m"),
         ("wall_s", ".0f", "Wall time per episode, s"),

@@ -14,7 +14,7 @@ import json
 import statistics
 from pathlib import Path
 
-METRICS = (("iou3d", ".3f"), ("cde_cm", ".2f"), ("iou3d_aligned", ".3f"), ("views", ".1f"))
+METRICS = (("iou3d", ".3f"), ("cde_cm", ".2f"), ("iou3d_aligned", ".3f"), ("views", ".1f"), ("ate_mm", ".2f"))
 
 
 def compare(changed: Path, baseline: Path) -> str:
