@@ -60,7 +60,8 @@
 //!    A pose farther from the prior than [`TrackerConfig::prior_gate_sigmas`] × the prior's stated
 //!    noise is a false consensus (seen on the benchmark scenes when the camera faced the robot's
 //!    own links and matched a sliver of table): lost, so it cannot corrupt the map.
-//!    Optionally ([`TrackerConfig::motion_gate_floor_m`], off by default) a tighter gate within
+//!    Optionally ([`TrackerConfig::motion_gate_floor_m`], off in the core, 1 cm / 2° in the
+//!    run config) a tighter gate within
 //!    a view: the pose must also agree with the last tracked frame moved by the prior's motion
 //!    (exact but for the jitter and the bias's conjugation of the motion, which the gate bounds),
 //!    else the frame is lost and dead-reckoned. Found on a benchmark episode whose last view faced
