@@ -15,6 +15,9 @@ import statistics
 from pathlib import Path
 
 METRICS = (("iou3d", ".3f"), ("cde_cm", ".2f"), ("iou3d_aligned", ".3f"), ("views", ".1f"), ("ate_mm", ".2f"))
+# An episode counts as changed when its 3D IoU differs by more than this (re-runs of the same
+# episode agree to ~1e-6; see the determinism tests).
+IOU_CHANGED = 1e-3
 
 
 def compare(changed: Path, baseline: Path) -> str:
@@ -61,6 +64,22 @@ def compare(changed: Path, baseline: Path) -> str:
                 f"{format(statistics.mean(diffs), '+' + spec)} ± {format(se, spec)}",
             ]
         lines.append(f"| {s} | {len(keys)} | " + " | ".join(cells) + " |")
+    moved = [k for k in common if abs(new[k]["iou3d"] - old[k]["iou3d"]) > IOU_CHANGED]
+    lines += [
+        "",
+        f"Episodes whose 3D IoU moved by more than {IOU_CHANGED}: {len(moved)} of {len(common)}.",
+    ]
+    if moved:
+        lines += [
+            "",
+            "| strategy | scene | seed | iou3d baseline | iou3d changed | lost frames baseline | lost frames changed |",
+            "|---|---|---:|---:|---:|---:|---:|",
+        ]
+        for k in moved:
+            lines.append(
+                f"| {k[0]} | {k[1]} | {k[2]} | {old[k]['iou3d']:.3f} | {new[k]['iou3d']:.3f} | "
+                f"{old[k].get('lost_frames', '-')} | {new[k].get('lost_frames', '-')} |"
+            )
     return "\n".join(lines) + "\n"
 
 
