@@ -5,8 +5,10 @@
 Runs one episode (default pose source ``slam``) and writes, for every frame the core receives,
 ``grey_<i>.u8`` (H*W bytes), ``depth_<i>.f32`` (H*W little-endian float32 metres) and one line of
 ``frames.jsonl`` with the frame index, view index, intrinsics, the forward-kinematics and the
-ground-truth ``world_from_camera`` (row-major 4x4). ``cargo run --release -p objslam-core
---example slam_replay -- <out>`` replays them through the tracker with any tracker config.
+ground-truth ``world_from_camera`` (row-major 4x4), and the episode's tracker config as
+``tracker.json``. ``cargo run --release -p objslam-core --example slam_replay -- <out>`` replays
+them through the tracker with that config (exactly reproducing the episode's poses), or with keys
+of it overridden.
 """
 
 from __future__ import annotations
@@ -67,7 +69,11 @@ def main(argv: list[str] | None = None) -> int:
     orig = native.ActiveMapper
 
     class _Patched:
-        ActiveMapper = staticmethod(lambda **kw: _Capturing(orig(**kw), a.out))
+        @staticmethod
+        def ActiveMapper(**kw):  # noqa: N802 (stands in for the native class)
+            if kw.get("tracker_config_json"):
+                (a.out / "tracker.json").write_text(kw["tracker_config_json"] + "\n")
+            return _Capturing(orig(**kw), a.out)
 
         def __getattr__(self, name):
             return getattr(native, name)

@@ -2,6 +2,10 @@
 //!
 //! `cargo run --release -p objslam-core --example slam_replay -- <capture dir> [tracker config JSON] [-v]`
 //!
+//! The tracker config is the capture's `tracker.json` (the episode's own, so the replay reproduces
+//! its poses) with the keys of the optional JSON argument merged over it (objects merged key by
+//! key), e.g. `'{"motion_gate_floor_m": 0, "motion_gate_floor_deg": 0}'`.
+//!
 //! Prints the online ATE (each frame's pose as output when it was tracked), the final-trajectory
 //! ATE ([`Tracker::trajectory`]), the ATE after the best rigid alignment (consistency only), RPE,
 //! lost frames, and with `-v` one line per frame (features, features with depth, inliers, state,
@@ -46,12 +50,32 @@ fn aligned_ate(est: &[Se3], gt: &[Se3]) -> f64 {
     (s / n).sqrt()
 }
 
+/// Merge `over` into `base`: objects key by key (recursively), anything else replaced.
+fn merge(base: &mut serde_json::Value, over: &serde_json::Value) {
+    match (base, over) {
+        (serde_json::Value::Object(b), serde_json::Value::Object(o)) => {
+            for (k, v) in o {
+                merge(b.entry(k.clone()).or_insert(serde_json::Value::Null), v);
+            }
+        }
+        (b, o) => *b = o.clone(),
+    }
+}
+
 fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().collect();
     let dir = Path::new(args.get(1).ok_or_else(|| anyhow!("usage: slam_replay <capture dir> [config JSON] [-v]"))?);
     let verbose = args.iter().any(|a| a == "-v");
-    let cfg_json = args.get(2).filter(|a| *a != "-v").cloned().unwrap_or_else(|| "{}".into());
-    let config: TrackerConfig = serde_json::from_str(&cfg_json).context("tracker config")?;
+    let overrides: serde_json::Value = match args.get(2).filter(|a| *a != "-v") {
+        Some(s) => serde_json::from_str(s).context("tracker config argument")?,
+        None => serde_json::json!({}),
+    };
+    let mut cfg_json: serde_json::Value = match std::fs::read_to_string(dir.join("tracker.json")) {
+        Ok(s) => serde_json::from_str(&s).context("tracker.json")?,
+        Err(_) => serde_json::json!({}),
+    };
+    merge(&mut cfg_json, &overrides);
+    let config: TrackerConfig = serde_json::from_value(cfg_json).context("tracker config")?;
     let mut tracker = Tracker::new(config)?;
     let lines = std::fs::read_to_string(dir.join("frames.jsonl")).context("frames.jsonl")?;
     let (mut online, mut gts) = (Vec::new(), Vec::new());

@@ -443,3 +443,59 @@ fn a_pose_that_disagrees_with_the_priors_motion_is_dead_reckoned() {
         other => panic!("expected a config error, got {:?}", other.err()),
     }
 }
+
+#[test]
+fn the_motion_gate_outvotes_a_single_off_reference() {
+    // Exact images, exact priors except frames 4 and 5 (shifted +3 mm and -3 mm along the camera
+    // x axis) and 6 (+10 mm); prior gate off, motion gate 4 mm (no noise, so no conjugation term).
+    // The visual pose is the truth, so a reference frame with a shifted prior predicts the next
+    // frame off by the difference of the shifts. Frame 4 is 3 mm from frame 3's prediction:
+    // accepted. Frame 5 is 6 mm from frame 4's prediction but 3 mm from frame 3's: rejected with
+    // one reference, accepted with two. Frame 6 is 13 mm and 7 mm from its two references:
+    // rejected either way.
+    let seq = sequence();
+    let cam = camera();
+    let run_with = |references: usize| {
+        let cfg = TrackerConfig {
+            kinematic_noise: KinematicNoiseConfig::none(),
+            prior_gate_sigmas: 0.0,
+            motion_gate_floor_m: 0.004,
+            motion_gate_references: references,
+            ..TrackerConfig::default()
+        };
+        let mut tracker = Tracker::new(cfg).unwrap_or_else(|e| panic!("{e}"));
+        (0..7)
+            .map(|i| {
+                let (g, d) = &seq.frames[i];
+                let shift = match i {
+                    4 => 0.003,
+                    5 => -0.003,
+                    6 => 0.010,
+                    _ => 0.0,
+                };
+                let input = TrackInput {
+                    grey: g,
+                    depth: d,
+                    camera: &cam,
+                    world_from_camera_fk: seq.gt[i] * Se3::translation(shift, 0.0, 0.0),
+                    view_index: 0,
+                    world_from_camera_gt: Some(seq.gt[i]),
+                };
+                tracker.track(&input).unwrap_or_else(|e| panic!("{e}")).state
+            })
+            .collect::<Vec<_>>()
+    };
+    let gated = |s: &TrackingState| matches!(s, TrackingState::Lost { reason: LostReason::MotionDisagreement { .. } });
+    let one = run_with(1);
+    assert!(one[..5].iter().all(|s| *s == TrackingState::Ok), "{one:?}");
+    assert!(gated(&one[5]), "one reference: frame 5 {:?}", one[5]);
+    let two = run_with(2);
+    assert!(two[..6].iter().all(|s| *s == TrackingState::Ok), "{two:?}");
+    assert!(gated(&two[6]), "two references: frame 6 {:?}", two[6]);
+
+    let bad = TrackerConfig { motion_gate_references: 0, ..TrackerConfig::default() };
+    match Tracker::new(bad) {
+        Err(SlamError::Config { field, .. }) => assert_eq!(field, "motion_gate_references"),
+        other => panic!("expected a config error, got {:?}", other.err()),
+    }
+}

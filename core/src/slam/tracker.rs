@@ -1,7 +1,7 @@
 //! The RGB-D tracker: one [`Tracker::track`] call per frame does feature extraction, pose
 //! estimation (or takes the configured pose source), keyframe insertion, local BA and culling.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, VecDeque};
 
 use nalgebra::{Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
@@ -109,10 +109,19 @@ pub struct TrackerConfig {
     /// what the prior gate is too wide for: a frame that shows little of the scene (the camera
     /// facing the robot's own link, a sliver of table left) and tracks to a consensus 2 cm off,
     /// then corrupts the map as a keyframe. 0 disables; the first frame of a view is never gated
-    /// (the bias changes between views).
+    /// (the bias changes between views). The prediction is made from each of the last
+    /// [`Self::motion_gate_references`] tracked frames of the view and the pose passes when it
+    /// agrees with any of them.
     pub motion_gate_floor_m: f64,
     /// See [`Self::motion_gate_floor_m`]; degrees.
     pub motion_gate_floor_deg: f64,
+    /// How many of the last tracked frames of the view the motion gate predicts from (at least
+    /// 1); a pose passes when it agrees with any prediction. With 1, a reference frame that was
+    /// itself accepted slightly off (within the gate, e.g. 13 mm off the truth after a 7 mm
+    /// frame) gets the next, correct frame rejected and the view dead-reckoned from the bad pose;
+    /// with 2 a single off reference is outvoted by the one before it, while a frame off from
+    /// both is still rejected.
+    pub motion_gate_references: usize,
     /// After this many consecutive lost frames *that show the scene* (at least
     /// [`Self::min_init_points`] keypoints with depth, yet no pose consensus: the map is likely
     /// wrong) the map is dropped and re-initialised from the prior. Frames that show too little of
@@ -151,6 +160,7 @@ impl Default for TrackerConfig {
             prior_gate_sigmas: 3.0,
             motion_gate_floor_m: 0.0,
             motion_gate_floor_deg: 0.0,
+            motion_gate_references: 2,
             reset_after_lost: 10,
         }
     }
@@ -482,6 +492,9 @@ pub struct Tracker {
     anchor: Anchor,
     /// Last tracked frame: map ← camera, its prior, its view index.
     last: Option<(Se3, Se3, u64)>,
+    /// The last tracked frames of the current view (map ← camera, prior), newest last, at most
+    /// [`TrackerConfig::motion_gate_references`]: the motion gate's references.
+    view_tracked: VecDeque<(Se3, Se3)>,
     frames_since_keyframe: usize,
     last_keyframe_tracked: usize,
     lost_streak: usize,
@@ -536,6 +549,9 @@ impl Tracker {
         if config.local_keyframes == 0 {
             return Err(SlamError::Config { field: "local_keyframes", reason: "must be ≥ 1".into() });
         }
+        if config.motion_gate_references == 0 {
+            return Err(SlamError::Config { field: "motion_gate_references", reason: "must be ≥ 1".into() });
+        }
         let orb = OrbExtractor::new(config.orb)?;
         Ok(Self {
             config,
@@ -547,6 +563,7 @@ impl Tracker {
             epoch: 0,
             anchor: Anchor::new(&config.kinematic_noise, config.anchor_huber),
             last: None,
+            view_tracked: VecDeque::new(),
             frames_since_keyframe: 0,
             last_keyframe_tracked: 0,
             lost_streak: 0,
@@ -703,6 +720,13 @@ impl Tracker {
                         })
                     })
                     .collect();
+                if self.last.is_some_and(|(_, _, v)| v != input.view_index) {
+                    self.view_tracked.clear();
+                }
+                self.view_tracked.push_back((map_from_camera, prior));
+                while self.view_tracked.len() > self.config.motion_gate_references.max(1) {
+                    self.view_tracked.pop_front();
+                }
                 self.last = Some((map_from_camera, prior, input.view_index));
                 self.records.push(FrameRecord {
                     epoch: self.epoch,
@@ -759,6 +783,7 @@ impl Tracker {
         self.keyframes.clear();
         self.anchor = Anchor::new(&self.config.kinematic_noise, self.config.anchor_huber);
         self.last = None;
+        self.view_tracked.clear();
         self.epoch += 1;
         self.lost_streak = 0;
     }
@@ -798,26 +823,29 @@ impl Tracker {
             return Ok((anchored, Vec::new(), 0));
         }
         let mut seeds = Vec::with_capacity(2);
-        // The prior's motion since the last tracked frame of this view (same bias): the gate's
-        // prediction, and the first seed.
-        let mut predicted = None;
+        // The prior's motion since the last tracked frames of this view (same bias): the gate's
+        // predictions (newest first); since the last one, the first seed.
+        let mut predicted = Vec::new();
         if let Some((last_map_from_camera, last_prior, last_view)) = self.last {
-            let motion = last_prior.inverse() * prior;
-            let seed = last_map_from_camera * motion;
+            seeds.push(last_map_from_camera * (last_prior.inverse() * prior));
             if last_view == view_index {
-                predicted = Some((seed, motion));
+                predicted = self
+                    .view_tracked
+                    .iter()
+                    .rev()
+                    .map(|(m, p)| {
+                        let motion = p.inverse() * prior;
+                        (m * motion, motion)
+                    })
+                    .collect();
             }
-            seeds.push(seed);
         }
         seeds.push(anchored);
         let mut best_inliers = 0;
         let mut disagreement = None;
         for seed in seeds {
             match self.estimate_from_seed(frame, camera, &seed) {
-                Ok(r) => match self
-                    .prior_disagreement(&r.0, &anchored)
-                    .or_else(|| predicted.and_then(|(p, m)| self.motion_disagreement(&r.0, &p, &m)))
-                {
+                Ok(r) => match self.prior_disagreement(&r.0, &anchored).or_else(|| self.motion_gate(&r.0, &predicted)) {
                     None => return Ok(r),
                     Some(d) => disagreement = Some(d),
                 },
@@ -846,6 +874,14 @@ impl Tracker {
             trans_mm: (dt * 1e3).round().min(f64::from(u32::MAX)) as u32,
             rot_cdeg: (dr * 100.0).round().min(f64::from(u32::MAX)) as u32,
         })
+    }
+
+    /// `Some(reason)` (against the newest reference) if `map_from_camera` disagrees with every
+    /// prediction of the motion gate; `None` when it agrees with one or there are none.
+    fn motion_gate(&self, map_from_camera: &Se3, predicted: &[(Se3, Se3)]) -> Option<LostReason> {
+        let mut reasons = predicted.iter().map(|(p, m)| self.motion_disagreement(map_from_camera, p, m));
+        let first = reasons.next()??;
+        reasons.all(|r| r.is_some()).then_some(first)
     }
 
     /// `Some(reason)` if `map_from_camera` is farther from `predicted` (the last tracked pose of
