@@ -70,7 +70,7 @@ def main(argv: list[str] | None = None) -> int:
 
     class _Patched:
         @staticmethod
-        def ActiveMapper(**kw):  # noqa: N802 (stands in for the native class)
+        def ActiveMapper(**kw):  # stands in for the native class
             if kw.get("tracker_config_json"):
                 (a.out / "tracker.json").write_text(kw["tracker_config_json"] + "\n")
             return _Capturing(orig(**kw), a.out)

@@ -845,10 +845,12 @@ impl Tracker {
         let mut disagreement = None;
         for seed in seeds {
             match self.estimate_from_seed(frame, camera, &seed) {
-                Ok(r) => match self.prior_disagreement(&r.0, &anchored).or_else(|| self.motion_gate(&r.0, &predicted)) {
-                    None => return Ok(r),
-                    Some(d) => disagreement = Some(d),
-                },
+                Ok(r) => {
+                    match self.prior_disagreement(&r.0, &anchored).or_else(|| self.motion_gate(&r.0, &predicted)) {
+                        None => return Ok(r),
+                        Some(d) => disagreement = Some(d),
+                    }
+                }
                 Err(n) => best_inliers = best_inliers.max(n),
             }
         }
