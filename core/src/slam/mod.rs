@@ -61,13 +61,16 @@
 //!    noise is a false consensus (seen on the benchmark scenes when the camera faced the robot's
 //!    own links and matched a sliver of table): lost, so it cannot corrupt the map.
 //!    Optionally ([`TrackerConfig::motion_gate_floor_m`], off in the core, 1 cm / 2° in the
-//!    run config) a tighter gate within
-//!    a view: the pose must also agree with the last tracked frame moved by the prior's motion
-//!    (exact but for the jitter and the bias's conjugation of the motion, which the gate bounds),
-//!    else the frame is lost and dead-reckoned. Found on a benchmark episode whose last view faced
-//!    the robot's own link with a sliver of table in the image corner: 89 inliers tracked to a
-//!    pose 21 mm off (the prior gate allows ~4 cm), it became a keyframe and the next frames
-//!    tracked 15-20 mm off; the final map lost 0.09 3D IoU with its offset removed.
+//!    run config) a tighter gate within a view: the pose must also agree with one of the last
+//!    [`TrackerConfig::motion_gate_references`] (2) tracked frames of the view moved by the
+//!    prior's motion since (exact but for the jitter and the bias's conjugation of the motion,
+//!    which the gate bounds), else the frame is lost and dead-reckoned. Found on a benchmark
+//!    episode whose last view faced the robot's own link with a sliver of table in the image
+//!    corner: 89 inliers tracked to a pose 21 mm off (the prior gate allows ~4 cm), it became a
+//!    keyframe and the next frames tracked 15-20 mm off; the final map lost 0.09 3D IoU with its
+//!    offset removed. Two references, not one: a reference frame accepted off (13.5 mm, within
+//!    the gate of a 7.4 mm one) otherwise gets the next, correct frame rejected and the view
+//!    dead-reckoned from the bad pose.
 //! 5. Keyframe when the inliers drop below 75 % of the last keyframe's tracked points or every
 //!    [`TrackerConfig::keyframe_max_interval`] frames; it creates up to 500 new points from
 //!    unmatched keypoints with depth (closest first), then runs local bundle adjustment over the
