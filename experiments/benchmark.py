@@ -338,7 +338,9 @@ def _other_sweep(spec: str) -> dict[str, Any]:
     if only:
         keep = only.split(",")
         sweep["rows"] = [r for r in sweep["rows"] if r["strategy"] in keep]
-        sweep["command"] = f"{sweep['command']} (its {', '.join(keep)} rows)"
+        suffix = f" (its {', '.join(keep)} rows)"
+        if not sweep["command"].endswith(suffix):  # a sweep that was itself joined this way
+            sweep["command"] += suffix
     return sweep
 
 
