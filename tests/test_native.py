@@ -53,8 +53,9 @@ def test_zero_and_nan_depth_are_no_return() -> None:
 
 
 def test_depth_box_gives_object_at_expected_place(tmp_path: Path) -> None:
-    # A fronto-parallel plate at 0.5 m seen by an identity camera: the box (20..40, 14..34) covers
-    # x ∈ [(20-32)/100·0.5, (40-32)/100·0.5) = [-0.06, 0.04) m.
+    # A fronto-parallel plate at 0.5 m seen by an identity camera: the box (20..40, 14..34) holds
+    # columns 20..39, whose centres (image x 20.5..39.5) back-project to x ∈ [(20.5-32)/100·0.5,
+    # (39.5-32)/100·0.5] = [-0.0575, 0.0375] m.
     m = objslam.NaiveMapper(json.dumps({"pixel_stride": 1, "trim_fraction": 0.0}))
     ids = _update(m, detections=[(20, 14, 40, 34, "book", 0.9)])
     assert ids == [0]
@@ -62,7 +63,8 @@ def test_depth_box_gives_object_at_expected_place(tmp_path: Path) -> None:
     g = obj["geometry"]
     assert obj["label"] == "book" and g["shape"] == "cuboid"
     assert math.isclose(g["center"][2], 0.5, abs_tol=1e-6)
-    assert math.isclose(g["center"][0], (-0.06 + 0.035) / 2, abs_tol=1e-6)  # last column u = 39
+    assert math.isclose(g["center"][0], (-0.0575 + 0.0375) / 2, abs_tol=1e-6)
+    assert math.isclose(g["half_extents"][0], (0.0375 + 0.0575) / 2, abs_tol=1e-6)
     path = tmp_path / "map.json"
     objslam.save_map(m.map_json(), str(path))
     assert json.loads(objslam.load_map(str(path))) == json.loads(m.map_json())

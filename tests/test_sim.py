@@ -3,7 +3,10 @@ with the simulator's ground truth; unreachable poses raise."""
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
+import objslam
 import pytest
 from objslam.camera import CameraConfig, DepthNoiseConfig
 from objslam.scene import load_scene
@@ -57,6 +60,42 @@ def test_fk_pose_matches_renderer_and_depth_matches_geometry(scene1_world) -> No
     p = c[:3, :3] @ (kinv @ np.array([u, v, 1.0]) * d) + c[:3, 3]
     assert abs(p[2] - top[2]) < 3e-3, (p, top)
     assert np.linalg.norm(p[:2] - top[:2]) < 0.02
+
+
+def test_core_back_projection_matches_the_renderers_position_buffer(scene1_world) -> None:
+    """The core's camera model and the renderer agree on where a pixel is: pixel (i, j) is the ray
+    through image point (i + 0.5, j + 0.5). The naive mapper's extent of an object box (every pixel,
+    no trimming, exact depth and pose) equals the extent of the same pixels' points in SAPIEN's
+    position buffer; integer pixel coordinates would shift it by half a pixel (~0.5 mm here)."""
+    w = scene1_world
+    o = max(w.spec.objects, key=lambda o: o.half_extents[0] * o.half_extents[1])
+    top = np.array([o.position[0], o.position[1], 2 * o.half_extents[2]])
+    eye = top + np.array([-0.12, -0.06, 0.35])
+    f = list(w.move_camera_to(look_at(eye, top), frame_rate_hz=4.0))[-1]
+    pos = w.camera.get_picture("Position")  # OpenGL camera axes: x right, y up, z back
+    ids = [a for a, (oid, _) in w.actor_to_object.items() if oid == o.id]
+    mask = np.isin(f.segmentation, ids)
+    rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
+    u0, u1, v0, v1 = int(cols[0]), int(cols[-1]) + 1, int(rows[0]), int(rows[-1]) + 1
+    m = objslam.NaiveMapper(json.dumps({"pixel_stride": 1, "trim_fraction": 0.0, "voxel_m": 1e-6}))
+    ids_out = m.update(
+        index=0,
+        intrinsics=f.intrinsics,
+        depth=f.depth_m,
+        world_from_camera=f.world_from_camera_gt,
+        detections=[(float(u0), float(v0), float(u1), float(v1), "book", 0.9)],
+    )
+    assert ids_out == [0]
+    g = json.loads(m.objects_json())[0]["geometry"]
+    lo_core = np.array(g["center"]) - np.array(g["half_extents"])
+    hi_core = np.array(g["center"]) + np.array(g["half_extents"])
+    box = pos[v0:v1, u0:u1]
+    valid = (f.depth_m[v0:v1, u0:u1] > 0).ravel()
+    p_cv = box[..., :3].reshape(-1, 3)[valid] * np.array([1.0, -1.0, -1.0])
+    c = f.world_from_camera_gt
+    p_world = p_cv @ c[:3, :3].T + c[:3, 3]
+    np.testing.assert_allclose(lo_core, p_world.min(axis=0), atol=5e-5)
+    np.testing.assert_allclose(hi_core, p_world.max(axis=0), atol=5e-5)
 
 
 def test_unreachable_pose_raises(scene1_world) -> None:

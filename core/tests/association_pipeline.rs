@@ -58,7 +58,7 @@ fn render(camera: &PinholeCamera, pose: &Se3, boxes: &[GtBox], rng: &mut ChaCha8
     let origin = pose.translation.vector;
     for v in 0..camera.height {
         for u in 0..camera.width {
-            let dir_c = camera.unproject(f64::from(u) + 0.5, f64::from(v) + 0.5, 1.0).coords;
+            let dir_c = camera.unproject_pixel(u, v, 1.0).coords;
             let dir = pose.rotation * dir_c;
             let mut best = if dir.z < 0.0 { -origin.z / dir.z } else { f64::INFINITY };
             for b in boxes {

@@ -54,7 +54,7 @@ fn render(map: &ObjectMap, occ: &Occluders, cam: &PinholeCamera, pose: &Se3) -> 
     let eye = Point3::from(pose.translation.vector);
     for v in 0..cam.height {
         for u in 0..cam.width {
-            let dir_c = cam.unproject(f64::from(u) + 0.5, f64::from(v) + 0.5, 1.0).coords;
+            let dir_c = cam.unproject_pixel(u, v, 1.0).coords;
             let dir_w = pose.rotation * dir_c;
             if let Some((id, t)) = occ.cast_ray(&eye, &dir_w, 3.0) {
                 depth[(v * cam.width + u) as usize] = t as f32;

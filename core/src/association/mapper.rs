@@ -169,7 +169,7 @@ pub fn table_plane(frame: &Frame, config: &LocalCloudConfig) -> [f64; 3] {
             if d > config.max_depth_m {
                 continue;
             }
-            let p: Point3<f64> = frame.world_from_camera * frame.camera.unproject(f64::from(u), f64::from(v), d);
+            let p: Point3<f64> = frame.world_from_camera * frame.camera.unproject_pixel(u, v, d);
             if p.z.abs() <= band {
                 pts.push(p);
             }
@@ -240,7 +240,7 @@ impl BoxSurface {
                 if d > config.max_depth_m {
                     continue;
                 }
-                let p: Point3<f64> = frame.world_from_camera * frame.camera.unproject(f64::from(u), f64::from(v), d);
+                let p: Point3<f64> = frame.world_from_camera * frame.camera.unproject_pixel(u, v, d);
                 if p.z - (table[0] * p.x + table[1] * p.y + table[2]) > config.min_height_m {
                     grid[r * cols + c] = Some((d, p));
                 }

@@ -717,7 +717,7 @@ fn render(map: &ObjectMap, cam: &PinholeCamera, pose: &Se3, id: u32) -> (DepthIm
     let mut points = Vec::new();
     for v in 0..cam.height {
         for u in 0..cam.width {
-            let dir = pose.rotation * cam.unproject(f64::from(u) + 0.5, f64::from(v) + 0.5, 1.0).coords;
+            let dir = pose.rotation * cam.unproject_pixel(u, v, 1.0).coords;
             if let Some((hit, t)) = occ.cast_ray(&eye, &dir, 5.0) {
                 depth[(v * cam.width + u) as usize] = t as f32;
                 if hit == Some(id) {

@@ -111,8 +111,15 @@ pub fn wrap_angle(a: f64) -> f64 {
     x
 }
 
-/// Pinhole camera intrinsics in the OpenCV convention: x right, y down, z forward; pixel centres at
-/// integer coordinates + 0.5 are *not* assumed: `u = fx · x / z + cx` exactly as OpenCV.
+/// Pinhole camera intrinsics, camera axes as OpenCV (x right, y down, z forward), `u = fx · x / z +
+/// cx`. Image coordinates are continuous with the origin at the image's top-left *corner*: pixel
+/// `(i, j)` (column, row) spans `[i, i + 1) × [j, j + 1)` and its centre is `(i + 0.5, j + 0.5)`.
+/// This is the convention of a rendered image (SAPIEN/OpenGL: a centred principal point is `(w/2,
+/// h/2)`, [`PinholeCamera::from_fovy`]; measured against SAPIEN's position buffer, the ray through
+/// pixel `(i, j)` is at `(i + 0.5, j + 0.5)` to 3e-5 px) and of the line segments
+/// ([`crate::objects::lsd`]). Back-project a pixel of a depth image with
+/// [`PinholeCamera::unproject_pixel`]; the pixel containing a projected point is `(⌊u⌋, ⌊v⌋)`.
+/// OpenCV's calibration puts pixel centres at integers instead: add 0.5 to its `cx`, `cy`.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct PinholeCamera {
     /// Image width in pixels.
@@ -184,6 +191,12 @@ impl PinholeCamera {
     /// Back-project pixel `(u, v)` at depth `depth_m` (along z) into the camera frame.
     pub fn unproject(&self, u: f64, v: f64, depth_m: f64) -> Point3<f64> {
         Point3::new((u - self.cx) / self.fx * depth_m, (v - self.cy) / self.fy * depth_m, depth_m)
+    }
+
+    /// Back-project the centre of pixel `(col, row)` (image coordinates `(col + 0.5, row + 0.5)`) at
+    /// depth `depth_m`: the point a depth image's value at that pixel stands for.
+    pub fn unproject_pixel(&self, col: u32, row: u32, depth_m: f64) -> Point3<f64> {
+        self.unproject(f64::from(col) + 0.5, f64::from(row) + 0.5, depth_m)
     }
 
     /// Whether pixel coordinates are inside the image.

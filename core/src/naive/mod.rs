@@ -201,7 +201,7 @@ impl NaiveMapper {
                 if let Some(d) = frame.depth.at(u, v) {
                     let d = f64::from(d);
                     if d <= self.config.max_depth_m {
-                        let p_in_camera = frame.camera.unproject(f64::from(u), f64::from(v), d);
+                        let p_in_camera = frame.camera.unproject_pixel(u, v, d);
                         out.push(frame.world_from_camera * p_in_camera);
                     }
                 }
@@ -264,7 +264,7 @@ mod tests {
         for v in 0..camera.height {
             for u in 0..camera.width {
                 // Ray through the pixel in world coordinates.
-                let dir_c = camera.unproject(f64::from(u), f64::from(v), 1.0).coords;
+                let dir_c = camera.unproject_pixel(u, v, 1.0).coords;
                 let dir_w = pose.rotation * dir_c;
                 let origin = pose.translation.vector;
                 let t_top = (0.1 - origin.z) / dir_w.z;

@@ -652,7 +652,7 @@ mod tests {
         let mut pix = Vec::new();
         for v in 0..120u32 {
             for u in 0..160u32 {
-                let d = pose.rotation * camera.unproject(f64::from(u), f64::from(v), 1.0).coords;
+                let d = pose.rotation * camera.unproject_pixel(u, v, 1.0).coords;
                 let o = pose.translation.vector;
                 let t_top = (0.1 - o.z) / d.z;
                 let hit = o + d * t_top;

@@ -70,12 +70,15 @@ impl Default for OrbConfig {
     }
 }
 
-/// A keypoint in level-0 pixel coordinates.
+/// A keypoint in level-0 pixel indices: `(x, y)` = `(column, row)`, the centre of pixel `(i, j)`
+/// at `(i, j)` (a keypoint found at level `l` is at `(x_l + 0.5) s − 0.5`). The camera model's
+/// image coordinates put that centre at `(i + 0.5, j + 0.5)` ([`crate::geometry::PinholeCamera`]):
+/// use [`Keypoint::image_point`] wherever a keypoint meets the camera model.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Keypoint {
-    /// Column, level-0 pixels.
+    /// Column index, level-0 pixels.
     pub x: f32,
-    /// Row, level-0 pixels.
+    /// Row index, level-0 pixels.
     pub y: f32,
     /// Pyramid level it was detected at.
     pub level: u8,
@@ -85,6 +88,13 @@ pub struct Keypoint {
     pub angle_rad: f32,
     /// FAST score (largest threshold at which it is still a corner).
     pub score: u16,
+}
+
+impl Keypoint {
+    /// The keypoint in the camera model's image coordinates (pixel centres at index + 0.5).
+    pub fn image_point(&self) -> [f64; 2] {
+        [f64::from(self.x) + 0.5, f64::from(self.y) + 0.5]
+    }
 }
 
 /// Keypoints and their descriptors (same length, same order).
@@ -446,8 +456,10 @@ impl OrbExtractor {
                 }
             }
             out.keypoints.push(Keypoint {
-                x: c.x as f32 * level.scale,
-                y: c.y as f32 * level.scale,
+                // Pixel x_l of level l spans level-0 [x_l s, (x_l + 1) s) (the pyramid resamples
+                // centre-aligned), so its centre's level-0 index is (x_l + 0.5) s − 0.5.
+                x: (c.x as f32 + 0.5) * level.scale - 0.5,
+                y: (c.y as f32 + 0.5) * level.scale - 0.5,
                 level: l as u8,
                 scale: level.scale,
                 angle_rad: angle,

@@ -145,9 +145,13 @@ impl TabletopScene {
         let inv_texel = 1.0 / self.texel_m;
         for v in 0..h {
             for u in 0..w {
-                // Ray with unit z in the camera frame: the ray parameter is the depth.
-                let d_in_camera =
-                    Vector3::new((u as f64 - camera.cx) / camera.fx, (v as f64 - camera.cy) / camera.fy, 1.0);
+                // Ray through the pixel centre with unit z in the camera frame: the ray parameter is
+                // the depth.
+                let d_in_camera = Vector3::new(
+                    (u as f64 + 0.5 - camera.cx) / camera.fx,
+                    (v as f64 + 0.5 - camera.cy) / camera.fy,
+                    1.0,
+                );
                 let d = rot * d_in_camera;
                 let mut best_t = f64::INFINITY;
                 let mut best_st = [0.0, 0.0];

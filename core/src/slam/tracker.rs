@@ -715,7 +715,7 @@ impl Tracker {
                         let k = frame.features.keypoints.get(m.keypoint)?;
                         Some(ObservedPoint {
                             point_id: m.point_id,
-                            pixel: [f64::from(k.x), f64::from(k.y)],
+                            pixel: k.image_point(),
                             p_in_world: world_from_map * p.p_in_map,
                         })
                     })
@@ -945,7 +945,7 @@ impl Tracker {
                 let k = frame.features.keypoints.get(m.keypoint)?;
                 Some(Correspondence {
                     p_in_world: p.p_in_map,
-                    pixel: [f64::from(k.x), f64::from(k.y)],
+                    pixel: k.image_point(),
                     depth_m: frame.depth_m.get(m.keypoint).copied().flatten(),
                     sigma_px: f64::from(k.scale),
                 })
@@ -979,7 +979,8 @@ impl Tracker {
                 continue;
             }
             let r = if scale_radius { radius_px * scale_factor.powi(i32::from(p.level)) } else { radius_px };
-            frame.grid.within(kps, uv[0] as f32, uv[1] as f32, r as f32, &mut cand);
+            // The grid holds keypoint indices (pixel centre at the index): image point − 0.5.
+            frame.grid.within(kps, (uv[0] - 0.5) as f32, (uv[1] - 0.5) as f32, r as f32, &mut cand);
             let (mut best, mut second, mut best_i) = (u32::MAX, u32::MAX, usize::MAX);
             for &i in &cand {
                 let i = i as usize;
@@ -1073,7 +1074,7 @@ impl Tracker {
             }
             observations.push(KfObservation {
                 point_id: m.point_id,
-                pixel: [f64::from(k.x), f64::from(k.y)],
+                pixel: k.image_point(),
                 depth_m: frame.depth_m.get(m.keypoint).copied().flatten(),
                 sigma_px: f64::from(k.scale),
             });
@@ -1088,7 +1089,8 @@ impl Tracker {
             let (Some(k), Some(desc)) = (kps.get(i), frame.features.descriptors.get(i)) else {
                 continue;
             };
-            let p_in_camera = camera.unproject(f64::from(k.x), f64::from(k.y), d);
+            let [ku, kv] = k.image_point();
+            let p_in_camera = camera.unproject(ku, kv, d);
             let id = self.next_point_id;
             self.next_point_id += 1;
             self.points.insert(
@@ -1105,7 +1107,7 @@ impl Tracker {
             );
             observations.push(KfObservation {
                 point_id: id,
-                pixel: [f64::from(k.x), f64::from(k.y)],
+                pixel: k.image_point(),
                 depth_m: Some(d),
                 sigma_px: f64::from(k.scale),
             });
