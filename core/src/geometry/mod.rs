@@ -115,8 +115,8 @@ pub fn wrap_angle(a: f64) -> f64 {
 /// cx`. Image coordinates are continuous with the origin at the image's top-left *corner*: pixel
 /// `(i, j)` (column, row) spans `[i, i + 1) × [j, j + 1)` and its centre is `(i + 0.5, j + 0.5)`.
 /// This is the convention of a rendered image (SAPIEN/OpenGL: a centred principal point is `(w/2,
-/// h/2)`, [`PinholeCamera::from_fovy`]; measured against SAPIEN's position buffer, the ray through
-/// pixel `(i, j)` is at `(i + 0.5, j + 0.5)` to 3e-5 px) and of the line segments
+/// h/2)`, [`PinholeCamera::from_fovy`]; `tests/test_sim.py` checks back-projected pixels against
+/// SAPIEN's position buffer) and of the line segments
 /// ([`crate::objects::lsd`]). Back-project a pixel of a depth image with
 /// [`PinholeCamera::unproject_pixel`]; the pixel containing a projected point is `(⌊u⌋, ⌊v⌋)`.
 /// OpenCV's calibration puts pixel centres at integers instead: add 0.5 to its `cx`, `cy`.

@@ -147,11 +147,7 @@ impl TabletopScene {
             for u in 0..w {
                 // Ray through the pixel centre with unit z in the camera frame: the ray parameter is
                 // the depth.
-                let d_in_camera = Vector3::new(
-                    (u as f64 + 0.5 - camera.cx) / camera.fx,
-                    (v as f64 + 0.5 - camera.cy) / camera.fy,
-                    1.0,
-                );
+                let d_in_camera = camera.unproject_pixel(u as u32, v as u32, 1.0).coords;
                 let d = rot * d_in_camera;
                 let mut best_t = f64::INFINITY;
                 let mut best_st = [0.0, 0.0];
