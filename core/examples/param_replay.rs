@@ -9,7 +9,11 @@
 //! ```
 //! `--config` is a JSON [`ParamConfig`] (missing fields take their defaults); `--objects` prints,
 //! per cuboid that reached the `refined` stage, the lines → refined change (IoU, yaw, centre,
-//! half-extents) next to the truth. Diagnosis only: reports are made by `experiments/ablations.py`.
+//! half-extents) next to the truth; `--yaw ID` prints, for map object `ID`, Alg. 2's score of every
+//! yaw sample and, per frame of the window, the segments and the score at the chosen yaw and at
+//! the truth's (the cube for a yaw is the oriented extent of the object's points above the lowest
+//! 5 mm, an approximation of the estimator's isolation-forest inliers). Diagnosis only: reports
+//! are made by `experiments/ablations.py`.
 
 use std::path::PathBuf;
 
@@ -17,7 +21,7 @@ use nalgebra::{Point3, Vector3};
 use objslam_core::eval::{evaluate, EstObject, EvalConfig, GtObject};
 use objslam_core::geometry::{iou3d, yaw_error_deg, ObjectGeometry, Shape};
 use objslam_core::map::{EstimateStage, Label};
-use objslam_core::objects::yaw::{canonical_cuboid, LineFrame};
+use objslam_core::objects::yaw::{align_yaw, canonical_cuboid, cuboid, frame_score, oriented_extent, LineFrame};
 use objslam_core::objects::{ObjectEstimate, ObjectEstimator, ParamConfig};
 
 #[derive(serde::Deserialize)]
@@ -47,6 +51,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut files: Vec<PathBuf> = Vec::new();
     let mut config = ParamConfig::default();
     let mut per_object = false;
+    let mut yaw_of: Option<u32> = None;
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
         match a.as_str() {
@@ -55,6 +60,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 config = serde_json::from_str(&text)?;
             }
             "--objects" => per_object = true,
+            "--yaw" => yaw_of = Some(args.next().ok_or("--yaw needs a map object id")?.parse()?),
             _ => files.push(PathBuf::from(a)),
         }
     }
@@ -64,6 +70,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let (mut changed, mut refined_n, mut lines_n) = (0usize, 0usize, 0usize);
     for file in &files {
         let dump: Dump = serde_json::from_str(&std::fs::read_to_string(file)?)?;
+        if let Some(id) = yaw_of {
+            print_yaw_scores(&dump, id, &config);
+        }
         let mut estimates: Vec<(u32, Label, ObjectEstimate)> = Vec::new();
         for o in &dump.objects {
             let mut est = ObjectEstimator::new(o.shape, config);
@@ -140,4 +149,52 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     }
     println!("objects with a lines stage: {lines_n}, refinement kept: {refined_n}, changed by it: {changed}");
     Ok(())
+}
+
+/// `--yaw ID`: Alg. 2's scores for one object, per sample and per frame (see the module docs).
+fn print_yaw_scores(dump: &Dump, id: u32, config: &ParamConfig) {
+    let Some(o) = dump.objects.iter().find(|o| o.id == id) else {
+        println!("  no object {id} in the dump");
+        return;
+    };
+    let z0 = o.points_in_world.iter().map(|p| p.z).fold(f64::INFINITY, f64::min);
+    let pts: Vec<Point3<f64>> = o.points_in_world.iter().copied().filter(|p| p.z > z0 + 0.005).collect();
+    let cube = |yaw: f64| {
+        let (c, h) = oriented_extent(&pts, yaw).unwrap_or((Vector3::zeros(), Vector3::repeat(0.01)));
+        cuboid(c, yaw, h)
+    };
+    let center = cube(0.0).center;
+    let truth = dump
+        .ground_truth
+        .iter()
+        .filter(|g| g.label == o.label)
+        .min_by(|a, b| (a.geometry.center - center).norm().total_cmp(&(b.geometry.center - center).norm()));
+    let Some(alignment) = align_yaw(&o.frames, cube, &config.yaw) else {
+        println!("  object {id}: no yaw sample scores above zero");
+        return;
+    };
+    let truth_yaw = truth.map(|t| canonical_cuboid(&t.geometry).yaw_rad);
+    println!(
+        "  object {id} {:?}: {} points above z0 + 5 mm, chosen yaw {:.1} deg, truth {}",
+        o.label,
+        pts.len(),
+        alignment.yaw_rad.to_degrees(),
+        truth_yaw.map_or("-".into(), |y| format!("{:.1} deg", y.to_degrees()))
+    );
+    let row: Vec<String> = alignment.samples.iter().map(|(y, s)| format!("{:.0}:{s:.2}", y.to_degrees())).collect();
+    println!("  samples (deg:score) {}", row.join(" "));
+    for f in &o.frames {
+        let (s_chosen, _) = frame_score(&cube(alignment.yaw_rad), f, &config.yaw);
+        let s_truth = truth_yaw.map(|y| frame_score(&cube(y), f, &config.yaw).0);
+        println!(
+            "  frame {:4} segments {:3} box ({:.0} {:.0})-({:.0} {:.0}) score chosen {s_chosen:.2} truth {}",
+            f.frame,
+            f.segments.len(),
+            f.bbox.min[0],
+            f.bbox.min[1],
+            f.bbox.max[0],
+            f.bbox.max[1],
+            s_truth.map_or("-".into(), |s| format!("{s:.2}"))
+        );
+    }
 }
