@@ -95,6 +95,8 @@ def test_bad_config_names_the_key(ci_overlay) -> None:
         load_run_config(overrides=["param.support_snap_m=-0.01"])
     with pytest.raises(ConfigError, match="param.cylinder_consensus_iterations"):
         load_run_config(overrides=["param.cylinder_consensus_iterations=-1"])
+    with pytest.raises(ConfigError, match="param.window_keep"):
+        load_run_config(overrides=['param.window_keep="newest"'])
 
 
 def test_object_driven_episode_takes_next_best_views(tmp_path, ci_overlay) -> None:

@@ -7,7 +7,7 @@ use objslam_core::geometry::{iou3d, yaw_error_deg, Box2, ObjectGeometry, Pinhole
 use objslam_core::map::EstimateStage;
 use objslam_core::objects::lsd::LineSegment;
 use objslam_core::objects::yaw::{align_yaw, cuboid, oriented_extent, project_edges, LineFrame, YawConfig};
-use objslam_core::objects::{Confidence, FrameUse, ObjectEstimator, ParamConfig};
+use objslam_core::objects::{Confidence, FrameUse, ObjectEstimator, ParamConfig, WindowKeep};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -220,6 +220,54 @@ fn window_is_a_ring_buffer() {
         est.add_frame(line_frame(&mut rng, i, eyes()[i as usize % 5], 0.3));
     }
     assert_eq!(est.window_len(), 3);
+}
+
+/// A frame seeing the object small and misleading: three segments along the edges of the true
+/// cube turned by 45° (what a far view with a textured face can leave in the box).
+fn decoy_frame(index: u32, eye: Vector3<f64>) -> LineFrame {
+    let cam = camera();
+    let t = truth();
+    let decoy = cuboid(t.center, t.yaw_rad + 45f64.to_radians(), t.half_extents);
+    let pose = look_at(eye, t.center);
+    let corners: Vec<[f64; 2]> = project_edges(&t, &cam, &pose).iter().flat_map(|e| [e.a, e.b]).collect();
+    let bbox = Box2::from_points(corners.iter()).unwrap_or_else(|| panic!("no box"));
+    let mut edges = project_edges(&decoy, &cam, &pose);
+    edges.sort_by(|a, b| (b.b[0] - b.a[0]).hypot(b.b[1] - b.a[1]).total_cmp(&(a.b[0] - a.a[0]).hypot(a.b[1] - a.a[1])));
+    let segments = edges.iter().take(3).map(|e| LineSegment::new(e.a, e.b)).collect();
+    LineFrame { frame: index, camera: cam, world_from_camera: pose, bbox, segments }
+}
+
+#[test]
+fn window_keeping_most_segments_outlasts_weak_frames() {
+    // Seven close frames with the cube's edges (+30 % clutter), then ten weak decoy frames. (Alg. 2
+    // weighs frames by their share of aligned segments, so a decoy, all of whose three segments
+    // align, outvotes a close frame: the window must keep more close frames than decoys.)
+    let run = |keep: WindowKeep, seed: u64| {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let mut est = ObjectEstimator::new(Shape::Cuboid, ParamConfig { window_keep: keep, ..Default::default() });
+        for i in 0..7u32 {
+            est.add_frame(line_frame(&mut rng, i, eyes()[i as usize % 5], 0.3));
+        }
+        for i in 0..10u32 {
+            est.add_frame(decoy_frame(10 + i, eyes()[i as usize % 5] * 1.6));
+        }
+        let kept: Vec<u32> = est.window().map(|f| f.frame).collect();
+        let out = est.estimate(&points(&mut rng)).unwrap_or_else(|e| panic!("{e}"));
+        let lines = out.stages.lines.unwrap_or_else(|| panic!("no lines stage"));
+        (kept, yaw_error_deg(&lines, &truth(), 0.05).unwrap_or(f64::NAN))
+    };
+    for seed in [11u64, 12, 13] {
+        // The paper's window: the last ten frames, all decoys, and the yaw follows them (≈ 45° off).
+        let (kept, yae) = run(WindowKeep::Latest, seed);
+        assert_eq!(kept, (10..20).collect::<Vec<_>>(), "seed {seed}");
+        assert!(yae > 30.0, "seed {seed}: the decoys should mislead the last-frames window ({yae:.1}°)");
+        // Keeping the frames with the most segments keeps the seven close ones; among the decoys
+        // (equal counts) the oldest leaves first, so the last three stay. The yaw is then right
+        // to Alg. 2's 6° sampling.
+        let (kept, yae) = run(WindowKeep::MostSegments, seed);
+        assert_eq!(kept, [0, 1, 2, 3, 4, 5, 6, 17, 18, 19], "seed {seed}");
+        assert!(yae <= 4.0, "seed {seed}: yaw error {yae:.1}° with the most-segments window");
+    }
 }
 
 #[test]

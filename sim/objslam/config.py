@@ -133,6 +133,9 @@ class NaiveMapperConfig:
     max_depth_m: float = 3.0
 
 
+WINDOW_KEEP = ("latest", "most_segments")
+
+
 @dataclass(frozen=True)
 class ParamRunConfig:
     """Parameterization knobs a run usually changes (the rest keep the core's ``ParamConfig``
@@ -173,6 +176,15 @@ class ParamRunConfig:
     """Circles through three random side-wall points tried as a second start of the cylinder fit
     (the one with more points on the circle is kept); 0 = the algebraic start only (before
     2026-12-02: a neighbour's points merged into a bottle's cloud pulled that start off the wall)."""
+    window_keep: str = "latest"
+    """Which frames the line-alignment window (``ParamConfig::window_frames`` = 10) keeps once full:
+    ``"latest"`` = the last ten (the paper's "t consecutive images") or ``"most_segments"`` = the ten
+    with the most LSD segments in the object's box (beyond the paper; ``WindowKeep`` in
+    ``core/src/objects/mod.rs``). Alg. 2 weighs every frame by its share of aligned segments, so
+    when an object's last frames see it small, two to five segments each, their noisy votes decide
+    its yaw: main benchmark 2026-12-04, expected-gain scene03 seed 6, a 4.3 × 4.0 cm block 43° off
+    (``cargo run --release -p objslam-core --example param_replay -- <estimator_inputs.json> --yaw 13``
+    on ``--set record.estimator_inputs=true``), the only yaw error above 1.4° in 315 episodes."""
     cylinder_top_from_face: bool = True
     """Beyond the paper: a cylinder's top from the median height of its top face's points instead
     of its highest point, which depth noise lifts ~3 σ above the face (``core/src/objects/cylinder.rs``).
@@ -370,6 +382,8 @@ class RunConfig:
             raise ConfigError("param.iforest_readmit_rings: must be ≥ 0")
         if not (self.param.support_snap_m >= 0.0 and math.isfinite(self.param.support_snap_m)):
             raise ConfigError("param.support_snap_m: must be a finite number ≥ 0")
+        if self.param.window_keep not in WINDOW_KEEP:
+            raise ConfigError(f"param.window_keep: unknown {self.param.window_keep!r}; known: {', '.join(WINDOW_KEEP)}")
         if self.param.cylinder_consensus_iterations < 0:
             raise ConfigError("param.cylinder_consensus_iterations: must be ≥ 0")
         if not (self.param.iforest_readmit_gap > 0 and math.isfinite(self.param.iforest_readmit_gap)):
