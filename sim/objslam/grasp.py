@@ -88,8 +88,8 @@ class GraspRunConfig:
     reobserve: bool = False
     """Before each attempt, look at the target from close views and re-estimate it in a fresh local
     map (the core's pipeline, same settings as the exploration); the refined estimate is grasped.
-    Measured on the main benchmark's estimated maps, 9 seeds, with the defaults below
-    (``reports/grasping.md``): 463/470 (98.5 %) against 468/468 without; grasped x-y centre 2.2 mm
+    Measured on the main benchmark's estimated maps of 2026-12-03, 9 seeds, with the defaults below
+    (``reports/grasping_reobserve_register/``): 463/470 (98.5 %) against 468/468 without; grasped x-y centre 2.2 mm
     from the truth (median; p90 4.6) against 1.8 mm (p90 3.6) for the map's own estimate. The
     steps that got it there, each measured on the same maps: 441/470 as first built (planned from
     the close view, unregistered) → 450/470 returning to ready (``reports/grasping_reobserve_ready/``)
