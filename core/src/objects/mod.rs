@@ -225,6 +225,9 @@ impl Default for ParamConfig {
 /// away, or at the edge of a pass), the window fills with frames of 2-5 segments whose votes are
 /// noise: on the main benchmark (2026-12-04, expected-gain, scene03 seed 6) a 4.3 × 4.0 cm block
 /// ended 43° off in yaw that way (`param_replay --yaw`), its earlier close frames already gone.
+/// [`WindowKeep::MostSegments`] fixes that object but is not better on average over the
+/// benchmark's seeds 0-2 (`reports/exploration_window_keep/`; the run config's
+/// `param.window_keep` docs give the numbers), so the paper's window stays the default.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum WindowKeep {
