@@ -185,7 +185,9 @@ class ParamRunConfig:
     its yaw: main benchmark 2026-12-04, expected-gain scene03 seed 6, a 4.3 × 4.0 cm block 43° off
     (``cargo run --release -p objslam-core --example param_replay -- <estimator_inputs.json> --yaw 13``
     on ``--set record.estimator_inputs=true``), the only yaw error above 1.4° in 315 episodes.
-    With ``most_segments`` that episode's block ends 0.6° off (3D IoU 0.658 → 0.890), but over the
+    With ``most_segments`` that episode's block ends 0.6° off (3D IoU 0.658 → 0.890: the per-object
+    table of ``experiments/run.py --strategy expected-gain --scene scenes/scene03.toml --seed 6
+    --set 'param.window_keep="most_segments"'``, the episode's own path), but over the
     object-driven and expected-gain episodes of seeds 0-2 (``reports/exploration_window_keep/``,
     ``vs_main.md`` pairs them with the main report) 3D IoU changes by −0.013 ± 0.008 and −0.005 ±
     0.008, offset-removed −0.005 ± 0.003 and +0.000 ± 0.002: not better on average (the kept old

@@ -189,8 +189,7 @@ def new_mapper(cfg: RunConfig, scene: SceneSpec) -> Any:
                         "readmit_rings": cfg.param.iforest_readmit_rings,
                         "readmit_gap_factor": cfg.param.iforest_readmit_gap,
                     },
-                    # Only when not the default, so a core built before the option still loads.
-                    **({"window_keep": cfg.param.window_keep} if cfg.param.window_keep != "latest" else {}),
+                    "window_keep": cfg.param.window_keep,
                     # The table top is z = 0 (scene files); 0 = no support snap.
                     **(
                         {"support_z_m": 0.0, "support_snap_m": cfg.param.support_snap_m}
