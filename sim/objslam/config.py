@@ -133,7 +133,7 @@ class NaiveMapperConfig:
     max_depth_m: float = 3.0
 
 
-WINDOW_KEEP = ("latest", "most_segments")
+WINDOW_KEEP = ("latest", "most_segments", "most_segments_yaw")
 
 
 @dataclass(frozen=True)
@@ -192,7 +192,9 @@ class ParamRunConfig:
     ``vs_main.md`` pairs them with the main report) 3D IoU changes by −0.013 ± 0.008 and −0.005 ±
     0.008, offset-removed −0.005 ± 0.003 and +0.000 ± 0.002: not better on average (the kept old
     frames carry older poses into the refinement, which also uses the window), so ``latest`` stays
-    the default."""
+    the default. ``"most_segments_yaw"``: Alg. 2's yaw sampling on the ten frames with the most
+    segments, the refinement on the last ten (tests that explanation; measured in
+    ``reports/exploration_window_keep_yaw/``)."""
     cylinder_top_from_face: bool = True
     """Beyond the paper: a cylinder's top from the median height of its top face's points instead
     of its highest point, which depth noise lifts ~3 σ above the face (``core/src/objects/cylinder.rs``).

@@ -237,6 +237,10 @@ pub enum WindowKeep {
     /// The `t` frames with the most segments: a full window drops the frame with the fewest
     /// (the oldest of those on ties), which may be the frame just added.
     MostSegments,
+    /// Alg. 2 (yaw sampling) on the `t` frames with the most segments, the refinement on the
+    /// latest `t`: the yaw is voted by the frames that saw the object's edges best, and the
+    /// refinement's reprojection still uses the newest poses.
+    MostSegmentsYaw,
 }
 
 /// How much to trust an estimate.
@@ -319,7 +323,12 @@ pub enum FrameUse {
 pub struct ObjectEstimator {
     shape: Shape,
     config: ParamConfig,
+    /// The latest `t` frames ([`WindowKeep::Latest`] and the refinement of
+    /// [`WindowKeep::MostSegmentsYaw`]) or the `t` with most segments ([`WindowKeep::MostSegments`]).
     window: VecDeque<LineFrame>,
+    /// The `t` frames with most segments, kept only for [`WindowKeep::MostSegmentsYaw`] (Alg. 2's
+    /// frames).
+    yaw_window: VecDeque<LineFrame>,
     last: Option<ObjectEstimate>,
     last_line_yaw: Option<f64>,
 }
@@ -327,13 +336,13 @@ pub struct ObjectEstimator {
 impl ObjectEstimator {
     /// An estimator for an object modelled by `shape` (from [`crate::map::Label::shape`]).
     pub fn new(shape: Shape, config: ParamConfig) -> Self {
-        Self { shape, config, window: VecDeque::new(), last: None, last_line_yaw: None }
+        Self { shape, config, window: VecDeque::new(), yaw_window: VecDeque::new(), last: None, last_line_yaw: None }
     }
 
     /// Re-express the window's camera poses and the last estimate in a world frame moved by the
     /// rigid `delta` (`new_world ← old_world`; see [`crate::pipeline::ObjectPipeline::transform_world`]).
     pub fn transform_world(&mut self, delta: &crate::geometry::Se3) {
-        for f in &mut self.window {
+        for f in self.window.iter_mut().chain(self.yaw_window.iter_mut()) {
             f.world_from_camera = delta * f.world_from_camera;
         }
         if let Some(last) = &mut self.last {
@@ -360,6 +369,16 @@ impl ObjectEstimator {
         self.window.iter()
     }
 
+    /// Every frame the estimator holds (the window and, for [`WindowKeep::MostSegmentsYaw`], Alg. 2's
+    /// frames), each once, oldest first: adding them in this order to a fresh estimator with the
+    /// same config rebuilds both windows (used to record estimator inputs for replay).
+    pub fn held_frames(&self) -> Vec<LineFrame> {
+        let mut all: Vec<LineFrame> = self.window.iter().chain(self.yaw_window.iter()).cloned().collect();
+        all.sort_by_key(|f| f.frame);
+        all.dedup_by_key(|f| f.frame);
+        all
+    }
+
     /// The shape this estimator models.
     pub fn shape(&self) -> Shape {
         self.shape
@@ -377,14 +396,22 @@ impl ObjectEstimator {
         }
         frame.segments.retain(|s| s.is_finite() && s.length_px() > 0.0);
         let segments = frame.segments.len();
+        let t = self.config.window_frames.max(1);
+        // `min_by_key` returns the first minimum: the oldest of the frames with fewest segments.
+        let fewest =
+            |w: &VecDeque<LineFrame>| w.iter().enumerate().min_by_key(|(_, f)| f.segments.len()).map_or(0, |(k, _)| k);
+        if self.config.window_keep == WindowKeep::MostSegmentsYaw {
+            self.yaw_window.push_back(frame.clone());
+            while self.yaw_window.len() > t {
+                let drop = fewest(&self.yaw_window);
+                self.yaw_window.remove(drop);
+            }
+        }
         self.window.push_back(frame);
-        while self.window.len() > self.config.window_frames.max(1) {
+        while self.window.len() > t {
             let drop = match self.config.window_keep {
-                WindowKeep::Latest => 0,
-                // `min_by_key` returns the first minimum: the oldest of the frames with fewest.
-                WindowKeep::MostSegments => {
-                    self.window.iter().enumerate().min_by_key(|(_, f)| f.segments.len()).map_or(0, |(k, _)| k)
-                }
+                WindowKeep::Latest | WindowKeep::MostSegmentsYaw => 0,
+                WindowKeep::MostSegments => fewest(&self.window),
             };
             self.window.remove(drop);
         }
@@ -518,11 +545,16 @@ impl ObjectEstimator {
             return Ok(out);
         }
         let frames: Vec<LineFrame> = self.window.iter().cloned().collect();
+        let yaw_frames: Vec<LineFrame> = if self.config.window_keep == WindowKeep::MostSegmentsYaw {
+            self.yaw_window.iter().cloned().collect()
+        } else {
+            frames.clone()
+        };
         let geometry_for_yaw = |yaw: f64| {
             oriented_extent(&inliers, yaw)
                 .map_or(cuboid(robust.center, yaw, robust.half_extents), |(c, s)| cuboid(c, yaw, s))
         };
-        let Some(alignment) = align_yaw(&frames, geometry_for_yaw, &self.config.yaw) else {
+        let Some(alignment) = align_yaw(&yaw_frames, geometry_for_yaw, &self.config.yaw) else {
             return Ok(iforest_final(stages));
         };
         let lines = canonical_cuboid(&geometry_for_yaw(alignment.yaw_rad));

@@ -592,7 +592,7 @@ impl ObjectPipeline {
                     label: o.label,
                     shape: est.shape(),
                     points_in_world: o.points_in_world,
-                    frames: est.window().cloned().collect(),
+                    frames: est.held_frames(),
                 })
             })
             .collect()
