@@ -176,25 +176,24 @@ class ParamRunConfig:
     """Circles through three random side-wall points tried as a second start of the cylinder fit
     (the one with more points on the circle is kept); 0 = the algebraic start only (before
     2026-12-02: a neighbour's points merged into a bottle's cloud pulled that start off the wall)."""
-    window_keep: str = "latest"
-    """Which frames the line-alignment window (``ParamConfig::window_frames`` = 10) keeps once full:
-    ``"latest"`` = the last ten (the paper's "t consecutive images") or ``"most_segments"`` = the ten
-    with the most LSD segments in the object's box (beyond the paper; ``WindowKeep`` in
-    ``core/src/objects/mod.rs``). Alg. 2 weighs every frame by its share of aligned segments, so
-    when an object's last frames see it small, two to five segments each, their noisy votes decide
-    its yaw: main benchmark 2026-12-04, expected-gain scene03 seed 6, a 4.3 × 4.0 cm block 43° off
+    window_keep: str = "most_segments_yaw"
+    """Which frames the line-alignment window (``ParamConfig::window_frames`` = 10) keeps once full
+    (``WindowKeep`` in ``core/src/objects/mod.rs``): ``"most_segments_yaw"`` (default since
+    2026-12-04, beyond the paper) = Alg. 2's yaw sampling on the ten frames with the most LSD
+    segments in the object's box, the refinement on the last ten; ``"latest"`` = the last ten for
+    both (the paper's "t consecutive images"); ``"most_segments"`` = the most-segment ten for both.
+    Alg. 2 weighs every frame by its share of aligned segments, so when an object's last frames see
+    it small, two to five segments each, their noisy votes decide its yaw: with ``"latest"``, main
+    benchmark of 2026-12-04, expected-gain scene03 seed 6, a 4.3 × 4.0 cm block ended 43° off
     (``cargo run --release -p objslam-core --example param_replay -- <estimator_inputs.json> --yaw 13``
     on ``--set record.estimator_inputs=true``), the only yaw error above 1.4° in 315 episodes.
-    With ``most_segments`` that episode's block ends 0.6° off (3D IoU 0.658 → 0.890: the per-object
-    table of ``experiments/run.py --strategy expected-gain --scene scenes/scene03.toml --seed 6
-    --set 'param.window_keep="most_segments"'``, the episode's own path), but over the
-    object-driven and expected-gain episodes of seeds 0-2 (``reports/exploration_window_keep/``,
-    ``vs_main.md`` pairs them with the main report) 3D IoU changes by −0.013 ± 0.008 and −0.005 ±
-    0.008, offset-removed −0.005 ± 0.003 and +0.000 ± 0.002: not better on average (the kept old
-    frames carry older poses into the refinement, which also uses the window), so ``latest`` stays
-    the default. ``"most_segments_yaw"``: Alg. 2's yaw sampling on the ten frames with the most
-    segments, the refinement on the last ten (tests that explanation; measured in
-    ``reports/exploration_window_keep_yaw/``)."""
+    Nine seeds, 315 episodes paired (``reports/exploration_window_keep_yaw/main_vs_before.md``):
+    ``"most_segments_yaw"`` against ``"latest"`` leaves that block 0.3° off, expected-gain's mean yaw
+    error 0.45° → 0.27°, mean 3D IoU and offset-removed 3D IoU within their standard errors
+    (−0.000 to +0.001, +0.001 ± 0.001), views unchanged; the episodes that moved mostly took
+    another path after a yaw changed, and with it another SLAM offset. ``"most_segments"`` also
+    fixes the block but on seeds 0-2 (``reports/exploration_window_keep/``) costs 3D IoU −0.013 ±
+    0.008 (object-driven): the refinement then reprojects into old frames with old poses."""
     cylinder_top_from_face: bool = True
     """Beyond the paper: a cylinder's top from the median height of its top face's points instead
     of its highest point, which depth noise lifts ~3 σ above the face (``core/src/objects/cylinder.rs``).
