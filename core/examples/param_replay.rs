@@ -169,7 +169,13 @@ fn print_yaw_scores(dump: &Dump, id: u32, config: &ParamConfig) {
         .iter()
         .filter(|g| g.label == o.label)
         .min_by(|a, b| (a.geometry.center - center).norm().total_cmp(&(b.geometry.center - center).norm()));
-    let Some(alignment) = align_yaw(&o.frames, cube, &config.yaw) else {
+    // The frames Alg. 2 uses under this config (the dump holds every frame the estimator held).
+    let mut est = ObjectEstimator::new(o.shape, *config);
+    for f in &o.frames {
+        est.add_frame(f.clone());
+    }
+    let frames: Vec<LineFrame> = est.yaw_frames().cloned().collect();
+    let Some(alignment) = align_yaw(&frames, cube, &config.yaw) else {
         println!("  object {id}: no yaw sample scores above zero");
         return;
     };
@@ -183,7 +189,7 @@ fn print_yaw_scores(dump: &Dump, id: u32, config: &ParamConfig) {
     );
     let row: Vec<String> = alignment.samples.iter().map(|(y, s)| format!("{:.0}:{s:.2}", y.to_degrees())).collect();
     println!("  samples (deg:score) {}", row.join(" "));
-    for f in &o.frames {
+    for f in &frames {
         let (s_chosen, _) = frame_score(&cube(alignment.yaw_rad), f, &config.yaw);
         let s_truth = truth_yaw.map(|y| frame_score(&cube(y), f, &config.yaw).0);
         println!(

@@ -253,6 +253,7 @@ fn window_keeping_most_segments_outlasts_weak_frames() {
         }
         let kept: Vec<u32> = est.window().map(|f| f.frame).collect();
         let held: Vec<u32> = est.held_frames().iter().map(|f| f.frame).collect();
+        let voting: Vec<u32> = est.yaw_frames().map(|f| f.frame).collect();
         let pts = points(&mut rng);
         let out = est.estimate(&pts).unwrap_or_else(|e| panic!("{e}"));
         let lines = out.stages.lines.unwrap_or_else(|| panic!("no lines stage"));
@@ -264,24 +265,27 @@ fn window_keeping_most_segments_outlasts_weak_frames() {
         let again = replay.estimate(&pts).unwrap_or_else(|e| panic!("{e}"));
         let again_lines = again.stages.lines.unwrap_or_else(|| panic!("no lines stage in the replay"));
         assert!((again_lines.yaw_rad - lines.yaw_rad).abs() < 1e-12, "replay of {held:?} changed the yaw");
-        (kept, held, yaw_error_deg(&lines, &truth(), 0.05).unwrap_or(f64::NAN))
+        (kept, held, voting, yaw_error_deg(&lines, &truth(), 0.05).unwrap_or(f64::NAN))
     };
     for seed in [11u64, 12, 13] {
         // The paper's window: the last ten frames, all decoys, and the yaw follows them (≈ 45° off).
-        let (kept, held, yae) = run(WindowKeep::Latest, seed);
+        let (kept, held, voting, yae) = run(WindowKeep::Latest, seed);
         assert_eq!(kept, (10..20).collect::<Vec<_>>(), "seed {seed}");
         assert_eq!(held, kept, "seed {seed}");
+        assert_eq!(voting, kept, "seed {seed}");
         assert!(yae > 30.0, "seed {seed}: the decoys should mislead the last-frames window ({yae:.1}°)");
         // Keeping the frames with the most segments keeps the seven close ones; among the decoys
         // (equal counts) the oldest leaves first, so the last three stay. The yaw is then right
         // to Alg. 2's 6° sampling.
-        let (kept, _, yae) = run(WindowKeep::MostSegments, seed);
+        let (kept, _, voting, yae) = run(WindowKeep::MostSegments, seed);
+        assert_eq!(voting, kept, "seed {seed}");
         assert_eq!(kept, [0, 1, 2, 3, 4, 5, 6, 17, 18, 19], "seed {seed}");
         assert!(yae <= 4.0, "seed {seed}: yaw error {yae:.1}° with the most-segments window");
         // Most segments for Alg. 2 only: the window (the refinement's frames) stays the latest ten,
         // the estimator also holds the seven close frames, and the yaw is right as above.
-        let (kept, held, yae) = run(WindowKeep::MostSegmentsYaw, seed);
+        let (kept, held, voting, yae) = run(WindowKeep::MostSegmentsYaw, seed);
         assert_eq!(kept, (10..20).collect::<Vec<_>>(), "seed {seed}");
+        assert_eq!(voting, [0, 1, 2, 3, 4, 5, 6, 17, 18, 19], "seed {seed}");
         assert_eq!(held, [0, 1, 2, 3, 4, 5, 6].into_iter().chain(10..20).collect::<Vec<_>>(), "seed {seed}");
         assert!(yae <= 4.0, "seed {seed}: yaw error {yae:.1}° with the most-segments yaw window");
     }

@@ -378,6 +378,13 @@ impl ObjectEstimator {
         self.window.iter()
     }
 
+    /// The frames Alg. 2 samples the yaw on, oldest first (the window, or for
+    /// [`WindowKeep::MostSegmentsYaw`] the frames with the most segments).
+    pub fn yaw_frames(&self) -> impl Iterator<Item = &LineFrame> {
+        let own = self.config.window_keep == WindowKeep::MostSegmentsYaw;
+        self.yaw_window.iter().filter(move |_| own).chain(self.window.iter().filter(move |_| !own))
+    }
+
     /// Every frame the estimator holds (the window and, for [`WindowKeep::MostSegmentsYaw`], Alg. 2's
     /// frames), each once, oldest first: adding them in this order to a fresh estimator with the
     /// same config rebuilds both windows (used to record estimator inputs for replay).
@@ -555,11 +562,7 @@ impl ObjectEstimator {
             return Ok(out);
         }
         let frames: Vec<LineFrame> = self.window.iter().cloned().collect();
-        let yaw_frames: Vec<LineFrame> = if self.config.window_keep == WindowKeep::MostSegmentsYaw {
-            self.yaw_window.iter().cloned().collect()
-        } else {
-            frames.clone()
-        };
+        let yaw_frames: Vec<LineFrame> = self.yaw_frames().cloned().collect();
         let geometry_for_yaw = |yaw: f64| {
             oriented_extent(&inliers, yaw)
                 .map_or(cuboid(robust.center, yaw, robust.half_extents), |(c, s)| cuboid(c, yaw, s))
