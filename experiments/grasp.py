@@ -402,8 +402,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--reobserve", nargs="*", default=[], choices=SOURCES,
         help=(
             "map sources whose grasps re-observe the target first (default: none; on the estimated "
-            "maps of the main benchmark of 2026-12-03, 9 seeds, re-observation gave 463/470 against "
-            "100 %% without: reports/grasping_reobserve_register/)"
+            "maps of the main benchmark of 2026-12-04, 9 seeds, re-observation gave 460/470 against "
+            "466/468 without: reports/grasping_reobserve/)"
         ),
     )
     ap.add_argument(
