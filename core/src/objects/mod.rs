@@ -381,8 +381,9 @@ impl ObjectEstimator {
     /// The frames Alg. 2 samples the yaw on, oldest first (the window, or for
     /// [`WindowKeep::MostSegmentsYaw`] the frames with the most segments).
     pub fn yaw_frames(&self) -> impl Iterator<Item = &LineFrame> {
-        let own = self.config.window_keep == WindowKeep::MostSegmentsYaw;
-        self.yaw_window.iter().filter(move |_| own).chain(self.window.iter().filter(move |_| !own))
+        let frames =
+            if self.config.window_keep == WindowKeep::MostSegmentsYaw { &self.yaw_window } else { &self.window };
+        frames.iter()
     }
 
     /// Every frame the estimator holds (the window and, for [`WindowKeep::MostSegmentsYaw`], Alg. 2's
