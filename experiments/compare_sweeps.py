@@ -14,7 +14,14 @@ import json
 import statistics
 from pathlib import Path
 
-METRICS = (("iou3d", ".3f"), ("cde_cm", ".2f"), ("iou3d_aligned", ".3f"), ("views", ".1f"), ("ate_mm", ".2f"))
+METRICS = (
+    ("iou3d", ".3f"),
+    ("cde_cm", ".2f"),
+    ("yae_deg", ".2f"),
+    ("iou3d_aligned", ".3f"),
+    ("views", ".1f"),
+    ("ate_mm", ".2f"),
+)
 # An episode counts as changed when its 3D IoU differs by more than this (re-runs of the same
 # episode agree to ~1e-6; see the determinism tests).
 IOU_CHANGED = 1e-3
@@ -72,15 +79,23 @@ def compare(changed: Path, baseline: Path) -> str:
     if moved:
         lines += [
             "",
-            "| strategy | scene | seed | iou3d baseline | iou3d changed | lost frames baseline | lost frames changed |",
-            "|---|---|---:|---:|---:|---:|---:|",
+            (
+                "| strategy | scene | seed | iou3d baseline | iou3d changed | yae_deg baseline | yae_deg changed "
+                "| lost frames baseline | lost frames changed |"
+            ),
+            "|---|---|---:|---:|---:|---:|---:|---:|---:|",
         ]
         for k in moved:
             lines.append(
                 f"| {k[0]} | {k[1]} | {k[2]} | {old[k]['iou3d']:.3f} | {new[k]['iou3d']:.3f} | "
+                f"{_fmt(old[k].get('yae_deg'), '.1f')} | {_fmt(new[k].get('yae_deg'), '.1f')} | "
                 f"{old[k].get('lost_frames', '-')} | {new[k].get('lost_frames', '-')} |"
             )
     return "\n".join(lines) + "\n"
+
+
+def _fmt(value: float | None, spec: str) -> str:
+    return "-" if value is None else format(value, spec)
 
 
 def main() -> None:
