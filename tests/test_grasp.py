@@ -176,3 +176,28 @@ def test_register_local_removes_the_local_maps_common_offset() -> None:
     np.testing.assert_allclose(reg[0]["geometry"]["center"][:2], np.array([0.50, 0.00]) + refine, atol=1e-12)
     skewed = register_local(partial, target, far_nb, 0.06)  # without the bound
     assert abs(skewed[0]["geometry"]["center"][0] - 0.502) > 0.005
+
+
+@pytest.mark.parametrize("retries", [0, 2])
+def test_a_finger_landing_on_the_rim_moves_the_hand_over_and_the_grasp_succeeds(ci_overlay, retries) -> None:
+    # scene03's 7.4 cm cup leaves the open fingers 3 mm a side. A map centre 5 mm off along the
+    # closing axis puts a finger on its rim: blind, the approach collides; with contact retries the
+    # touch stops the descent, the hand moves towards the touched side and the grasp lifts the cup.
+    scene = load_scene(SCENES[2])
+    cfg = load_run_config(overlays=[ci_overlay], overrides=[], strategy="init")
+    session = GraspSession(scene, cfg, GraspRunConfig(contact_retries=retries))
+    gt = gt_objects(scene, session.world.ground_truth())
+    cup = next(g for g in gt if g["label"] == "cup" and 2 * g["geometry"]["half_extents"][0] > 0.072)
+    true_c = np.array(cup["geometry"]["center"])
+    off = {**cup, "geometry": {**cup["geometry"], "center": (true_c + [0.0, 0.005, 0.0]).tolist()}}
+    out = session.attempt(0, off, [g for g in gt if g["id"] != cup["id"]], cup["id"])
+    if retries == 0:
+        assert not out["success"] and out["cause"] == "collided"
+        assert "contact_shifts_m" not in out
+        return
+    assert out["success"] and out["cause"] == "none"
+    assert len(out["contact_shifts_m"]) == 1
+    # The hand moved back towards the true centre: the grasped centre is within 2 mm of it.
+    grasped = np.asarray(session.last_plan["world_from_tcp_grasp"])[:2, 3]
+    assert np.hypot(*(grasped - true_c[:2])) < 0.002
+    assert np.hypot(*np.subtract(session.last_target["geometry"]["center"][:2], true_c[:2])) < 0.002

@@ -145,6 +145,20 @@ class GraspRunConfig:
     reobserve_replace_m: float = 0.15
     """Map objects within this x-y distance of the refined target are replaced, as obstacles, by
     the local map's objects (the close views see that neighbourhood), metres."""
+    contact_retries: int = 2
+    """Beyond the paper: a finger that lands on something during the approach (an upward force of at
+    least ``contact_force_n`` on a finger: it came down on the target's rim, the map's centre being
+    off by more than the fingers' clearance) stops the descent; the hand backs up
+    ``contact_backoff_m``, moves towards the touched side by the clearance the plan left on each side
+    plus ``contact_extra_shift_m`` (the least the centre must be off for that finger to land on the
+    object) and descends again, at most this many times per attempt. 0 = the approach is executed
+    blind, as before 2026-12-05."""
+    contact_force_n: float = 5.0
+    """Upward force on a finger that stops the approach, newtons."""
+    contact_backoff_m: float = 0.015
+    """How far the hand rises after a touch before it moves sideways, metres."""
+    contact_extra_shift_m: float = 0.001
+    """Sideways move beyond the planned clearance per side after a touch, metres."""
     defer_unreachable: bool = True
     """An object the planner finds no collision-free grasp or path for (``no_ik`` / ``no_path``:
     nothing moved) is put back in the queue and planned again after the next executed attempt, when
@@ -197,13 +211,24 @@ class GraspSession:
         q = self.world.qpos()
         return float(q[7] + q[8])
 
-    def execute(self, traj: dict[str, Any], finger_m: float, on_step: Callable[[], None] | None = None) -> float:
+    def execute(
+        self,
+        traj: dict[str, Any],
+        finger_m: float,
+        on_step: Callable[[], None] | None = None,
+        stop: Callable[[], bool] | None = None,
+    ) -> float:
         """Track a planned joint trajectory (:meth:`SimWorld.track`), then settle; returns the final
-        joint error, rad."""
+        joint error, rad. ``stop`` (checked after every physics step): when it returns True the arm
+        holds where it is (it settles there) and the error is measured from that posture."""
+        goal = np.asarray(traj["positions"], dtype=np.float64)[-1]
         for _ in self.world.track(traj, finger_m):
             if on_step is not None:
                 on_step()
-        goal = np.asarray(traj["positions"], dtype=np.float64)[-1]
+            if stop is not None and stop():
+                goal = self.world.qpos()[:7].copy()
+                self.world.set_arm_targets(goal, finger_m)
+                break
         for _ in range(int(self.cfg.settle_s * PHYSICS_HZ)):
             self.world._step()
             if on_step is not None:
@@ -338,6 +363,72 @@ class GraspSession:
                 best = (key, o)
         return (best[1] if best else None), local, frames
 
+    # ----- contact during the approach ---------------------------------------------------------------
+    def _touch(self) -> np.ndarray | None:
+        """Where the fingers feel an upward push of at least ``contact_force_n`` (the force-weighted
+        contact point, world) or None."""
+        pts = [(p, f) for p, f in self.world.finger_contacts() if f[2] > 0.0]
+        fz = sum(f[2] for _, f in pts)
+        if fz < self.cfg.contact_force_n:
+            return None
+        return sum(p * f[2] for p, f in pts) / fz
+
+    def approach(
+        self, plan: dict[str, Any], target: dict[str, Any], neighbours: list[dict[str, Any]], open_half: float
+    ) -> tuple[float, dict[str, Any], dict[str, Any], list[float]]:
+        """Execute the plan's approach; on a touch (``GraspRunConfig.contact_retries``) back up,
+        move towards the touched side and descend again. Returns the final joint error, the plan and
+        target as grasped (the grasp and lift poses, and the target's centre, moved by the shifts),
+        and the signed shifts along the closing axis, metres (empty: no touch)."""
+        cfg = self.cfg
+        touched: list[np.ndarray] = []
+
+        def stop() -> bool:
+            p = self._touch()
+            if p is not None:
+                touched.append(p)
+                return True
+            return False
+
+        err = self.execute(plan["approach"], open_half, stop=stop if cfg.contact_retries > 0 else None)
+        shifts: list[float] = []
+        obs = json.dumps([n["geometry"] for n in neighbours])
+        axis = np.asarray(plan["world_from_tcp_grasp"], dtype=np.float64)[:3, 1]  # the closing axis
+        clearance = open_half - 0.5 * float(plan["expected_closed_width_m"])
+        while touched and len(shifts) < cfg.contact_retries:
+            p = touched.pop()
+            tcp = self.planner.forward_tcp(self.q_arm())
+            side = 1.0 if float(np.dot(p - tcp[:3, 3], axis)) > 0.0 else -1.0
+            shift = side * (max(clearance, 0.0) + cfg.contact_extra_shift_m)
+            shifts.append(round(shift, 5))
+            grasp = np.array(plan["world_from_tcp_grasp"], dtype=np.float64)
+            grasp[:3, 3] += shift * axis
+            above = grasp.copy()
+            above[2, 3] = max(above[2, 3], tcp[2, 3]) + cfg.contact_backoff_m
+            up = tcp.copy()
+            up[2, 3] = above[2, 3]
+            moves = []
+            q = self.q_arm()
+            for pose in (up, above, grasp):
+                r = self.planner.plan_linear(q, pose, obs)
+                if not r["ok"]:
+                    break
+                moves.append(r)
+                q = np.asarray(r["positions"], dtype=np.float64)[-1]
+            lift = grasp.copy()
+            lift[2, 3] = float(plan["world_from_tcp_lift"][2, 3])
+            r_lift = self.planner.plan_linear(q, lift, obs) if len(moves) == 3 else {"ok": False}
+            if not r_lift["ok"]:
+                break  # no straight way to the shifted grasp: stay where the touch left the hand
+            for r in moves[:2]:
+                self.execute(r, open_half)
+            err = self.execute(moves[2], open_half, stop=stop)
+            c = np.array(target["geometry"]["center"], dtype=np.float64)
+            c[:2] += shift * axis[:2]
+            target = {**target, "geometry": {**target["geometry"], "center": c.tolist()}}
+            plan = {**plan, "world_from_tcp_grasp": grasp, "world_from_tcp_lift": lift, "approach": moves[2], "lift": r_lift}
+        return err, plan, target, shifts
+
     # ----- one attempt ------------------------------------------------------------------------------
     def attempt(self, k: int, target: dict[str, Any], neighbours: list[dict[str, Any]], gt_id: int | None) -> dict[str, Any]:
         """Plan and execute one grasp of map object ``target``; returns the outcome record."""
@@ -378,7 +469,11 @@ class GraspSession:
         start = self.gt_positions()
         # Open the fingers while moving to the pre-grasp pose.
         err_pre = self.execute(plan["to_pregrasp"], open_half)
-        err_app = self.execute(plan["approach"], open_half)
+        err_app, plan, target, touches = self.approach(plan, target, neighbours, open_half)
+        if touches:
+            out["contact_shifts_m"] = touches
+            self._log_plan(k, plan)
+            self.last_plan, self.last_target = plan, target
         now = self.gt_positions()
         moved = {oid: float(np.linalg.norm(now[oid] - start[oid])) for oid in start}
         collided = max(err_pre, err_app) > 0.02 or any(d > cfg.disturb_m for d in moved.values())

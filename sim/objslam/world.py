@@ -276,6 +276,7 @@ class SimWorld:
             )
         links = robot.get_links()
         self.hand = next(link for link in links if link.name == "panda_hand")
+        self.fingers = [link for link in links if link.name in ("panda_leftfinger", "panda_rightfinger")]
         self.qlimits = np.asarray(robot.get_qlimits(), dtype=np.float64)
         # Kinematics, IK and collision checks of every camera move go through the core's planner
         # (the same one that plans the grasps), against the table, the arm itself and the obstacles
@@ -311,6 +312,28 @@ class SimWorld:
             if self._last_camera_xyz is not None:
                 self.camera_path_length_m += float(np.linalg.norm(xyz - self._last_camera_xyz))
             self._last_camera_xyz = xyz
+
+    def finger_contacts(self) -> list[tuple[np.ndarray, np.ndarray]]:
+        """What the fingers feel after the last physics step: one ``(position, force)`` per contact
+        point between a finger and anything but the robot (world frame; force on the finger,
+        newtons: impulse over the step). The sensor a force-sensing hand gives (a real Panda's
+        external wrench estimate resolves the same: its direction and the moment arm of the
+        contact); it does not say what was touched."""
+        fingers = {f.entity.per_scene_id for f in self.fingers}
+        out: list[tuple[np.ndarray, np.ndarray]] = []
+        for c in self.scene.get_contacts():
+            a, b = (x.entity.per_scene_id for x in c.bodies)
+            if a in fingers and b not in self.robot_actor_ids:
+                sign = 1.0
+            elif b in fingers and a not in self.robot_actor_ids:
+                sign = -1.0
+            else:
+                continue
+            for p in c.points:
+                f = sign * PHYSICS_HZ * np.asarray(p.impulse, dtype=np.float64)
+                if np.any(f != 0.0):
+                    out.append((np.asarray(p.position, dtype=np.float64), f))
+        return out
 
     # ----- kinematics -----------------------------------------------------------------------------
     def hand_from_camera_cv(self) -> np.ndarray:
