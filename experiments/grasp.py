@@ -64,10 +64,12 @@ def _session(scene: Any, cfg: Any, map_objects: list[dict], source: str, run_dir
 def _grasp_config(a: argparse.Namespace, source: str) -> Any:
     from objslam.grasp import GraspRunConfig
 
+    extra = {} if a.contact_retries is None else {"contact_retries": a.contact_retries}
     return GraspRunConfig(
         reobserve=source in a.reobserve,
         reobserve_register=not a.reobserve_unregistered,
         reobserve_return_ready=not a.reobserve_from_view,
+        **extra,
     )
 
 
@@ -254,6 +256,8 @@ def _rows(sessions: list[str]) -> list[dict[str, Any]]:
                     # Sessions written before these options existed behaved as False.
                     "reobserve_register": bool(d["config"].get("reobserve_register", False)),
                     "reobserve_return_ready": bool(d["config"].get("reobserve_return_ready", False)),
+                    "contact_retries": int(d["config"].get("contact_retries", 0)),
+                    "touches": len(r.get("contact_shifts_m", [])),
                     "success": bool(r["success"]),
                     "cause": r["cause"],
                     "map_id": r.get("map_id"),
@@ -283,10 +287,11 @@ def write_reports(
         report.update(comparison_sessions=comparison, comparison_rows=comp, comparison_note=comparison_note)
     (out / "grasping.json").write_text(json.dumps(report, indent=2) + "\n")
     def variant(r: dict[str, Any]) -> str:
+        blind = " (blind approach)" if r["contact_retries"] == 0 else ""
         if not r["reobserve"]:
-            return r["map_source"]
+            return r["map_source"] + blind
         how = [w for w, on in (("registered", r["reobserve_register"]), ("from the close view", not r["reobserve_return_ready"])) if on]
-        return r["map_source"] + " + re-observation" + (f" ({', '.join(how)})" if how else "")
+        return r["map_source"] + " + re-observation" + (f" ({', '.join(how)})" if how else "") + blind
 
     def variant_key(v: str) -> tuple[int, str]:
         return (SOURCES.index(v.split(" ")[0]), v)
@@ -362,6 +367,22 @@ def write_reports(
             lines.append(f"| {src} | {len(rs)} | {_rate(rs)} | " + ", ".join(f"{c} {n}" for c, n in cs.most_common()) + " |")
         lines.append("")
     comp_by = {f"comparison: {v}": [r for r in comp if variant(r) == v] for v in sorted({variant(r) for r in comp})}
+    touched = [(name, rs) for name, rs in [*by.items(), *comp_by.items()] if rs and rs[0]["contact_retries"] > 0]
+    if touched:
+        lines += [
+            "## Touches during the approach",
+            "",
+            "A finger that lands on something on the way down (an upward force ≥ `contact_force_n` on a",
+            "finger) stops the descent; the hand backs up, moves towards the touched side by the clearance",
+            "the plan left on each side + 1 mm and descends again (`GraspRunConfig.contact_retries`).",
+            "",
+            "| rows | attempts | attempts with a touch | of them lifted | touches |",
+            "|---|---:|---:|---:|---:|",
+        ]
+        for name, rs in touched:
+            t = [r for r in rs if r["touches"]]
+            lines.append(f"| {name} | {len(rs)} | {len(t)} | {sum(r['success'] for r in t)} | {sum(r['touches'] for r in t)} |")
+        lines.append("")
     measured = [(name, rs) for name, rs in [*by.items(), *comp_by.items()] if any(r["grasped_xy_err_mm"] is not None for r in rs)]
     if measured:
         lines += [
@@ -415,6 +436,10 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument(
         "--reobserve-from-view", action="store_true",
         help="plan the grasp from the last close view instead of the ready posture (GraspRunConfig.reobserve_return_ready = false; before 2026-12-03)",
+    )
+    ap.add_argument(
+        "--contact-retries", type=int, default=None, metavar="N",
+        help="descents after a finger lands on something (GraspRunConfig.contact_retries; default 2; 0 = blind approach, before 2026-12-05)",
     )
     ap.add_argument("--tag", default="", help="suffix of the session files (grasp_<source><tag>.json)")
     ap.add_argument("--manifest", default=str(REPO / "runs" / "grasp_sweep.json"), help="the sweep's list of session files")

@@ -27,6 +27,13 @@ Choices (config fields of :class:`GraspRunConfig`):
   object is then skipped as ``already_grasped``). Success rows have cause ``"none"``.
 - Graspable in ground truth: narrowest horizontal width ≤ the gripper's 8 cm opening minus 4 mm.
   Map objects the planner finds too wide are attempts only when their true object is graspable.
+- Touches (``contact_retries``, beyond the paper): the hand feels an upward force on a finger
+  (:meth:`~objslam.world.SimWorld.finger_contacts`, what a Panda's external wrench estimate gives:
+  force and where along the fingers it acts, not what was touched). A finger that lands on the
+  target's rim during the approach (the map's centre off by more than the 3 mm a side a 7.4 cm cup
+  leaves the open fingers) stops the descent; the hand backs up, moves towards the touched side by
+  the planned clearance + 1 mm (the least the centre can be off for that finger to land on the
+  object) and descends again. The target's centre (for placing) moves with the hand.
 - Re-observation (``reobserve``, off by default): before each attempt, close views of the target
   (``reobserve_views``: two top-down by default, or top-down and two obliques) are fused into a
   fresh local map by the core's pipeline (same settings as the exploration); the local object
@@ -149,10 +156,11 @@ class GraspRunConfig:
     """Beyond the paper: a finger that lands on something during the approach (an upward force of at
     least ``contact_force_n`` on a finger: it came down on the target's rim, the map's centre being
     off by more than the fingers' clearance) stops the descent; the hand backs up
-    ``contact_backoff_m``, moves towards the touched side by the clearance the plan left on each side
-    plus ``contact_extra_shift_m`` (the least the centre must be off for that finger to land on the
-    object) and descends again, at most this many times per attempt. 0 = the approach is executed
-    blind, as before 2026-12-05."""
+    ``contact_backoff_m``, the target's estimate moves towards the touched side by the clearance the
+    plan left on each side plus ``contact_extra_shift_m`` (the least the centre must be off for that
+    finger to land on the object) and a fresh grasp plan from there descends again, at most this many
+    times per attempt; with no retry left, or no plan for the moved estimate, the hand goes on down as
+    planned. 0 = the approach is executed blind, as before 2026-12-05."""
     contact_force_n: float = 5.0
     """Upward force on a finger that stops the approach, newtons."""
     contact_backoff_m: float = 0.015
@@ -377,9 +385,10 @@ class GraspSession:
         self, plan: dict[str, Any], target: dict[str, Any], neighbours: list[dict[str, Any]], open_half: float
     ) -> tuple[float, dict[str, Any], dict[str, Any], list[float]]:
         """Execute the plan's approach; on a touch (``GraspRunConfig.contact_retries``) back up,
-        move towards the touched side and descend again. Returns the final joint error, the plan and
-        target as grasped (the grasp and lift poses, and the target's centre, moved by the shifts),
-        and the signed shifts along the closing axis, metres (empty: no touch)."""
+        move the target's estimate towards the touched side and grasp it with a fresh plan from
+        there; with no retry left or none plannable, go on down as planned (the blind approach).
+        Returns the final joint error, the plan and target as grasped (the target's centre moved by
+        the shifts) and the signed shifts along the closing axis, metres (empty: no touch)."""
         cfg = self.cfg
         touched: list[np.ndarray] = []
 
@@ -393,40 +402,35 @@ class GraspSession:
         err = self.execute(plan["approach"], open_half, stop=stop if cfg.contact_retries > 0 else None)
         shifts: list[float] = []
         obs = json.dumps([n["geometry"] for n in neighbours])
-        axis = np.asarray(plan["world_from_tcp_grasp"], dtype=np.float64)[:3, 1]  # the closing axis
-        clearance = open_half - 0.5 * float(plan["expected_closed_width_m"])
-        while touched and len(shifts) < cfg.contact_retries:
+        while touched:
             p = touched.pop()
             tcp = self.planner.forward_tcp(self.q_arm())
-            side = 1.0 if float(np.dot(p - tcp[:3, 3], axis)) > 0.0 else -1.0
-            shift = side * (max(clearance, 0.0) + cfg.contact_extra_shift_m)
-            shifts.append(round(shift, 5))
-            grasp = np.array(plan["world_from_tcp_grasp"], dtype=np.float64)
-            grasp[:3, 3] += shift * axis
-            above = grasp.copy()
-            above[2, 3] = max(above[2, 3], tcp[2, 3]) + cfg.contact_backoff_m
-            up = tcp.copy()
-            up[2, 3] = above[2, 3]
-            moves = []
-            q = self.q_arm()
-            for pose in (up, above, grasp):
-                r = self.planner.plan_linear(q, pose, obs)
-                if not r["ok"]:
-                    break
-                moves.append(r)
-                q = np.asarray(r["positions"], dtype=np.float64)[-1]
-            lift = grasp.copy()
-            lift[2, 3] = float(plan["world_from_tcp_lift"][2, 3])
-            r_lift = self.planner.plan_linear(q, lift, obs) if len(moves) == 3 else {"ok": False}
-            if not r_lift["ok"]:
-                break  # no straight way to the shifted grasp: stay where the touch left the hand
-            for r in moves[:2]:
-                self.execute(r, open_half)
-            err = self.execute(moves[2], open_half, stop=stop)
-            c = np.array(target["geometry"]["center"], dtype=np.float64)
-            c[:2] += shift * axis[:2]
-            target = {**target, "geometry": {**target["geometry"], "center": c.tolist()}}
-            plan = {**plan, "world_from_tcp_grasp": grasp, "world_from_tcp_lift": lift, "approach": moves[2], "lift": r_lift}
+            if len(shifts) < cfg.contact_retries:
+                axis = np.asarray(plan["world_from_tcp_grasp"], dtype=np.float64)[:3, 1]  # the closing axis
+                clearance = 0.5 * (float(plan["open_width_m"]) - float(plan["expected_closed_width_m"]))
+                side = 1.0 if float(np.dot(p - tcp[:3, 3], axis)) > 0.0 else -1.0
+                shift = side * (max(clearance, 0.0) + cfg.contact_extra_shift_m)
+                c = np.array(target["geometry"]["center"], dtype=np.float64)
+                c[:2] += shift * axis[:2]
+                moved = {**target, "geometry": {**target["geometry"], "center": c.tolist()}}
+                up = tcp.copy()
+                up[2, 3] += cfg.contact_backoff_m
+                r = self.planner.plan_linear(self.q_arm(), up, obs)
+                if r["ok"]:
+                    self.execute(r, open_half)
+                # A fresh plan for the moved target from here: its own pre-grasp, approach and lift.
+                g = self.planner.plan_grasp(self.q_arm(), json.dumps(moved["geometry"]), obs)
+                if g["ok"]:
+                    shifts.append(round(shift, 5))
+                    plan, target = g, moved
+                    self.execute(plan["to_pregrasp"], open_half)
+                    err = self.execute(plan["approach"], open_half, stop=stop)
+                    continue
+            # No retry left (or none plannable): go on down as planned, as a blind approach would.
+            r = self.planner.plan_linear(self.q_arm(), np.asarray(plan["world_from_tcp_grasp"], dtype=np.float64), obs)
+            if r["ok"]:
+                err = self.execute(r, open_half)
+            break
         return err, plan, target, shifts
 
     # ----- one attempt ------------------------------------------------------------------------------
