@@ -340,6 +340,8 @@ def write_reports(
     for c in CAUSES:
         if any(counts[s][c] for s in sources):
             lines.append(f"| {c} | " + " | ".join(str(counts[s][c]) for s in sources) + " |")
+    if not any(counts.values()):
+        lines.append("| (no failure) | " + " | ".join("0" for _ in sources) + " |")
     lines += [
         "",
         "Causes: `no_ik` no collision-free IK for any candidate; `no_path` IK but no collision-free path;",
