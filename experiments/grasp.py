@@ -36,10 +36,28 @@ SOURCES = ("estimated", "ground_truth", "init_only")
 CAUSES = ("no_ik", "no_path", "too_wide", "collided", "missed", "slipped", "wrong_object", "phantom", "not_found", "not_in_map")
 
 
-def _session(scene: Any, cfg: Any, map_objects: list[dict], source: str, run_dir: Path, gcfg: Any, tag: str) -> Path:
+def perturb_centres(map_objects: list[dict], error_mm: float, seed: int) -> list[dict]:
+    """The map with every object's centre moved ``error_mm`` in a horizontal direction drawn per
+    object (seeded by the run seed and the object id): a map error of known size, to measure how
+    much of it the grasp absorbs (``--centre-error-mm``). The sizes, yaws and heights are kept."""
+    import numpy as np
+
+    out = []
+    for o in map_objects:
+        theta = np.random.default_rng([seed, 11, int(o["id"])]).uniform(0.0, 2.0 * math.pi)
+        c = list(o["geometry"]["center"])
+        c[0] += 1e-3 * error_mm * math.cos(theta)
+        c[1] += 1e-3 * error_mm * math.sin(theta)
+        out.append({**o, "geometry": {**o["geometry"], "center": c}})
+    return out
+
+
+def _session(scene: Any, cfg: Any, map_objects: list[dict], source: str, run_dir: Path, gcfg: Any, tag: str, centre_error_mm: float = 0.0) -> Path:
     from objslam import _native
     from objslam.grasp import config_dict, run_grasp_session
 
+    if centre_error_mm:
+        map_objects = perturb_centres(map_objects, centre_error_mm, cfg.seed)
     t0 = time.perf_counter()
     rec = _native.Recorder(str(run_dir / f"grasp_{source}{tag}.rrd"), "objslam-grasp") if cfg.record.enabled else None
     try:
@@ -54,6 +72,7 @@ def _session(scene: Any, cfg: Any, map_objects: list[dict], source: str, run_dir
         "map_run": str(run_dir),
         "wall_s": time.perf_counter() - t0,
         "config": config_dict(gcfg),
+        "centre_error_mm": centre_error_mm,
         "rows": rows,
     }
     path = run_dir / f"grasp_{source}{tag}.json"
@@ -115,7 +134,7 @@ def regrasp(a: argparse.Namespace, command: str) -> list[str]:
         cfg = load_run_config(overlays=a.config, overrides=overrides, strategy="object-driven")
         scene = load_scene(REPO / "scenes" / f"{d['scene']}.toml")
         objs = _map_objects(d["map_source"], scene, run_dir)
-        path = _session(scene, cfg, objs, d["map_source"], run_dir, _grasp_config(a, d["map_source"]), a.tag)
+        path = _session(scene, cfg, objs, d["map_source"], run_dir, _grasp_config(a, d["map_source"]), a.tag, a.centre_error_mm)
         sessions.append(str(path))
         _print_session(path, "reused map, ")
         _write_manifest(sessions, command, Path(a.manifest))
@@ -127,7 +146,7 @@ def _grasp_on(a: argparse.Namespace, scene: Any, cfg: Any, source: str, run_dir:
     (said on stderr: one failed session never stops the sweep)."""
     try:
         objs = _map_objects(source, scene, run_dir)
-        path = _session(scene, cfg, objs, source, run_dir, _grasp_config(a, source), a.tag)
+        path = _session(scene, cfg, objs, source, run_dir, _grasp_config(a, source), a.tag, a.centre_error_mm)
     except Exception as e:  # noqa: BLE001 - one failed session never stops the sweep
         print(f"{scene.name} seed {cfg.seed} {source}: grasp session failed: {type(e).__name__}: {e}", file=sys.stderr)
         return None
@@ -257,6 +276,7 @@ def _rows(sessions: list[str]) -> list[dict[str, Any]]:
                     "reobserve_register": bool(d["config"].get("reobserve_register", False)),
                     "reobserve_return_ready": bool(d["config"].get("reobserve_return_ready", False)),
                     "contact_retries": int(d["config"].get("contact_retries", 0)),
+                    "centre_error_mm": float(d.get("centre_error_mm", 0.0)),
                     "touches": len(r.get("contact_shifts_m", [])),
                     "success": bool(r["success"]),
                     "cause": r["cause"],
@@ -288,6 +308,8 @@ def write_reports(
     (out / "grasping.json").write_text(json.dumps(report, indent=2) + "\n")
     def variant(r: dict[str, Any]) -> str:
         blind = " (blind approach)" if r["contact_retries"] == 0 else ""
+        if r["centre_error_mm"]:
+            blind = f" + {r['centre_error_mm']:g} mm centre error" + blind
         if not r["reobserve"]:
             return r["map_source"] + blind
         how = [w for w, on in (("registered", r["reobserve_register"]), ("from the close view", not r["reobserve_return_ready"])) if on]
@@ -442,6 +464,10 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument(
         "--contact-retries", type=int, default=None, metavar="N",
         help="descents after a finger lands on something (GraspRunConfig.contact_retries; default 2; 0 = blind approach, before 2026-12-05)",
+    )
+    ap.add_argument(
+        "--centre-error-mm", type=float, default=0.0, metavar="D",
+        help="move every map object's centre D mm in a seeded horizontal direction before grasping (robustness to map error)",
     )
     ap.add_argument("--tag", default="", help="suffix of the session files (grasp_<source><tag>.json)")
     ap.add_argument("--manifest", default=str(REPO / "runs" / "grasp_sweep.json"), help="the sweep's list of session files")

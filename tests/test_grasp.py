@@ -201,3 +201,22 @@ def test_a_finger_landing_on_the_rim_moves_the_hand_over_and_the_grasp_succeeds(
     grasped = np.asarray(session.last_plan["world_from_tcp_grasp"])[:2, 3]
     assert np.hypot(*(grasped - true_c[:2])) < 0.002
     assert np.hypot(*np.subtract(session.last_target["geometry"]["center"][:2], true_c[:2])) < 0.002
+
+
+def test_centre_errors_are_seeded_and_of_the_stated_size() -> None:
+    import sys
+
+    sys.path.insert(0, str(SCENES[0].parents[1] / "experiments"))
+    import grasp as grasp_cli
+
+    scene = load_scene(SCENES[2])
+    gt = gt_objects(scene)
+    a = grasp_cli.perturb_centres(gt, 6.0, seed=3)
+    assert a == grasp_cli.perturb_centres(gt, 6.0, seed=3)
+    moved = [np.subtract(p["geometry"]["center"], g["geometry"]["center"]) for p, g in zip(a, gt)]
+    for d in moved:
+        assert np.hypot(d[0], d[1]) == pytest.approx(0.006, abs=1e-12) and d[2] == 0.0
+    # Directions differ between objects and between seeds.
+    assert len({round(float(np.arctan2(d[1], d[0])), 6) for d in moved}) == len(gt)
+    assert a != grasp_cli.perturb_centres(gt, 6.0, seed=4)
+    assert all(p["geometry"]["half_extents"] == g["geometry"]["half_extents"] for p, g in zip(a, gt))
