@@ -316,9 +316,10 @@ class SimWorld:
     def finger_contacts(self) -> list[tuple[np.ndarray, np.ndarray]]:
         """What the fingers feel after the last physics step: one ``(position, force)`` per contact
         point between a finger and anything but the robot (world frame; force on the finger,
-        newtons: impulse over the step). The sensor a force-sensing hand gives (a real Panda's
-        external wrench estimate resolves the same: its direction and the moment arm of the
-        contact); it does not say what was touched."""
+        newtons: impulse over the step). A force-sensing hand's information (a real Panda's
+        external wrench estimate gives a contact's force and moment arm); it does not say what was
+        touched. PhysX reports the normal impulse only, no friction: a finger landing on a rim is
+        felt (vertical normal), an object held by friction pressing on its support is not."""
         fingers = {f.entity.per_scene_id for f in self.fingers}
         out: list[tuple[np.ndarray, np.ndarray]] = []
         for c in self.scene.get_contacts():
