@@ -9,8 +9,9 @@ ABLATION_ARGS ?=
 MATCH_SIM_ARGS ?=
 GRASP_ARGS ?=
 PLACE_ARGS ?=
+ROBUSTNESS_ARGS ?=
 
-.PHONY: help setup run test test-rust test-py bench benchmark associate parameterize slam grasp place match match-sim report view lint fmt clean
+.PHONY: help setup run test test-rust test-py bench benchmark associate parameterize slam grasp grasp-robustness place match match-sim report view lint fmt clean
 
 help: ## List the targets
 	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*## "}; {printf "  \033[1m%-12s\033[0m %s\n", $$1, $$2}'
@@ -48,6 +49,9 @@ slam: setup ## Pose accuracy: scenes × pose sources (slam, kinematics) → repo
 
 grasp: setup ## Grasp success: 7 scenes × seeds × map sources (estimated, ground_truth, init_only) → reports/grasping.{md,json}
 	$(PY) experiments/grasp.py $(GRASP_ARGS)
+
+grasp-robustness: setup ## Grasp success vs an injected map centre error (0-9 mm), blind approach vs contact retries → reports/grasping_robustness/
+	$(PY) experiments/grasp_robustness.py --run $(ROBUSTNESS_ARGS)
 
 place: setup ## Placement tasks on the maps of the last grasp sweep (runs/grasp_sweep.json) → reports/placement.{md,json}
 	$(PY) experiments/place.py $(PLACE_ARGS)

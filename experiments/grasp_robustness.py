@@ -1,11 +1,14 @@
 """Grasp success against a map centre error of known size, with and without contact retries.
 
+    python experiments/grasp_robustness.py --run [--errors 0 3 6 9] [--retries 0 2] [--seeds 0 1 2] --out reports/grasping_robustness
     python experiments/grasp_robustness.py --manifest runs/X/rob.json [--manifest ...] --out reports/grasping_robustness
 
-Reads grasp session files made with ``experiments/grasp.py --centre-error-mm D`` (every map object's
-centre moved D mm in a seeded horizontal direction; the ground-truth source gives a map whose only
-error is that one) and ``--contact-retries N``; writes ``robustness.md`` / ``.json`` and
-``robustness.png``: success per centre error and approach, and per class.
+``--run`` grasps on the ground-truth maps of the exploration benchmark's scenes (the map's only
+error is the one injected) with ``experiments/grasp.py --sources ground_truth --centre-error-mm D
+--contact-retries N`` for every D and N (two processes, the scenes split between them; manifests
+under ``runs/grasp_robustness/``), then reports. Otherwise it reads the sessions of the given
+manifests. Writes ``robustness.md`` / ``.json`` and ``robustness.png``: success per centre error and
+approach, and per class.
 """
 
 from __future__ import annotations
@@ -14,7 +17,7 @@ import argparse
 import json
 import shlex
 import sys
-from collections import defaultdict
+from collections import Counter, defaultdict
 from pathlib import Path
 from typing import Any
 
@@ -74,6 +77,7 @@ def write(rows: list[dict[str, Any]], out: Path, command: str) -> dict[str, Any]
                     "successes": sum(r["success"] for r in g),
                     "success_rate": sum(r["success"] for r in g) / len(g),
                     "collided": sum(r["cause"] == "collided" for r in g),
+                    "failures": dict(Counter(r["cause"] for r in g if not r["success"]).most_common()),
                     "with_touch": sum(r["touches"] > 0 for r in g),
                 }
             )
@@ -111,9 +115,10 @@ def write(rows: list[dict[str, Any]], out: Path, command: str) -> dict[str, Any]
     ]
     for e in errors:
         lines.append(f"| {e:g} | " + " | ".join(cell(e, m) for m in modes) + " |")
-    lines += ["", "## Collisions and touches", "", "| centre error, mm | approach | collided | attempts with a touch |", "|---:|---|---:|---:|"]
+    lines += ["", "## Failures and touches", "", "| centre error, mm | approach | failures by cause | attempts with a touch |", "|---:|---|---|---:|"]
     for s in summary:
-        lines.append(f"| {s['centre_error_mm']:g} | {approach(s['contact_retries'])} | {s['collided']} | {s['with_touch']} |")
+        causes = ", ".join(f"{c} {n}" for c, n in s["failures"].items()) or "none"
+        lines.append(f"| {s['centre_error_mm']:g} | {approach(s['contact_retries'])} | {causes} | {s['with_touch']} |")
     classes = sorted({r["class"] for r in rows})
     lines += ["", "## Per class", "", "| class | centre error, mm | " + " | ".join(approach(m) for m in modes) + " |", "|---|---:|" + "---:|" * len(modes)]
     for c in classes:
@@ -145,17 +150,56 @@ def write(rows: list[dict[str, Any]], out: Path, command: str) -> dict[str, Any]
     return report
 
 
+def run_sweeps(a: argparse.Namespace) -> list[str]:
+    """The grasp sessions of every (centre error, retries) pair; returns their manifests."""
+    import subprocess
+
+    scenes = [f"scenes/scene0{i}.toml" for i in range(1, 8)]
+    halves = [scenes[:4], scenes[4:]]
+    manifests = []
+    for e in a.errors:
+        for n in a.retries:
+            tag = f"_c{e:g}_r{n}"
+            procs, parts = [], []
+            for i, half in enumerate(halves):
+                m = REPO / "runs" / "grasp_robustness" / f"c{e:g}_r{n}_{i}.json"
+                parts.append(str(m))
+                cmd = [
+                    sys.executable, str(REPO / "experiments" / "grasp.py"), "--maps-from-benchmark", a.maps_from_benchmark,
+                    "--sources", "ground_truth", "--scenes", *half, "--seeds", *map(str, a.seeds),
+                    "--centre-error-mm", f"{e:g}", "--contact-retries", str(n), "--tag", tag,
+                    "--manifest", str(m), "--out", str(REPO / "runs" / "grasp_robustness" / f"report{tag}_{i}"),
+                ]
+                procs.append(subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.DEVNULL))
+            for p in procs:
+                if p.wait() != 0:
+                    raise SystemExit(f"grasp.py failed for centre error {e:g} mm, retries {n}")
+            print(f"centre error {e:g} mm, contact retries {n}: done", flush=True)
+            manifests += parts
+    return manifests
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--manifest", action="append", required=True, help="grasp sweep manifest (repeatable)")
+    ap.add_argument("--manifest", action="append", default=[], help="grasp sweep manifest (repeatable)")
+    ap.add_argument("--run", action="store_true", help="run the grasp sessions first (see the module docs)")
+    ap.add_argument("--errors", nargs="+", type=float, default=[0.0, 3.0, 6.0, 9.0], help="centre errors, mm (with --run)")
+    ap.add_argument("--retries", nargs="+", type=int, default=[0, 2], help="contact retries (with --run)")
+    ap.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2], help="seeds (with --run)")
+    ap.add_argument("--maps-from-benchmark", default="reports/exploration.json", help="exploration sweep whose scenes' worlds are used (with --run)")
     ap.add_argument("--out", default=str(REPO / "reports" / "grasping_robustness"))
     a = ap.parse_args(argv)
+    if a.run:
+        a.manifest += run_sweeps(a)
+    if not a.manifest:
+        ap.error("give --manifest or --run")
     rows, commands = load_rows(a.manifest)
     if not rows:
         print("no attempts in the manifests", file=sys.stderr)
         return 1
     command = "python experiments/grasp_robustness.py " + " ".join(shlex.quote(x) for x in (argv if argv is not None else sys.argv[1:]))
-    command += "` on the sessions of `" + "`, `".join(commands)
+    if not a.run:
+        command += "` on the sessions of `" + "`, `".join(commands)
     write(rows, Path(a.out), command)
     print(f"{len(rows)} attempts → {a.out}/robustness.md")
     return 0
