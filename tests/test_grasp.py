@@ -220,3 +220,26 @@ def test_centre_errors_are_seeded_and_of_the_stated_size() -> None:
     assert len({round(float(np.arctan2(d[1], d[0])), 6) for d in moved}) == len(gt)
     assert a != grasp_cli.perturb_centres(gt, 6.0, seed=4)
     assert all(p["geometry"]["half_extents"] == g["geometry"]["half_extents"] for p, g in zip(a, gt))
+
+
+def test_robustness_report_counts_success_failures_and_touches_per_cell(tmp_path) -> None:
+    import sys
+
+    sys.path.insert(0, str(SCENES[0].parents[1] / "experiments"))
+    import grasp_robustness
+
+    def row(err: float, retries: int, ok: bool, cause: str, touches: int = 0, cls: str = "cup") -> dict:
+        return {"scene": "scene03", "seed": 0, "map_source": "ground_truth", "centre_error_mm": err,
+                "contact_retries": retries, "object": "gt2", "class": cls, "success": ok, "cause": cause,
+                "touches": touches}
+
+    rows = [row(6, 0, False, "collided"), row(6, 0, True, "none", cls="can"),
+            row(6, 2, True, "none", touches=1), row(6, 2, False, "no_ik", cls="can")]
+    rep = grasp_robustness.write(rows, tmp_path, "test")
+    cells = {(s["centre_error_mm"], s["contact_retries"]): s for s in rep["summary"]}
+    assert cells[(6.0, 0)]["successes"] == 1 and cells[(6.0, 0)]["collided"] == 1
+    assert cells[(6.0, 2)]["with_touch"] == 1 and cells[(6.0, 2)]["failures"] == {"no_ik": 1}
+    md = (tmp_path / "robustness.md").read_text()
+    assert "| 6 | 1/2 (50.0 %) | 1/2 (50.0 %) |" in md
+    assert "| 6 | blind approach | collided 1 | 0 |" in md
+    assert (tmp_path / "robustness.png").stat().st_size > 0
