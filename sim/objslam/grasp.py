@@ -102,8 +102,10 @@ class GraspRunConfig:
     the close view, unregistered) → 450/470 returning to ready (``reports/grasping_reobserve_ready/``)
     → 463/470 registered as well (``reports/grasping_reobserve_register/``). Re-run on the main
     benchmark's maps of stop 29 (2026-12-04, every current default; ``reports/grasping_reobserve/``):
-    460/470 (97.9 %) against 466/468 without (both with the blind approach, ``contact_retries = 0``); grasped centre 2.2 mm (p90 4.7) against the map's
-    1.8 mm (p90 3.8): the close views still do not beat the map, so re-observation stays off."""
+    460/470 (97.9 %) against 466/468 without (both with the blind approach, ``contact_retries = 0``;
+    ``reports/grasping_reobserve/blind_approach/``); with contact retries (2026-12-05) 465/470
+    against 468/468; grasped centre 2.2 mm (p90 4.7) against the map's 1.8 mm (p90 3.8): the close
+    views still do not beat the map, so re-observation stays off."""
     reobserve_views: str = "top"
     """``"top"``: two top-down views above the estimate (0.36 and 0.29 m); ``"top+oblique"``: a
     top-down view and two obliques from the robot's side."""
