@@ -463,7 +463,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     ap.add_argument(
         "--contact-retries", type=int, default=None, metavar="N",
-        help="descents after a finger lands on something (GraspRunConfig.contact_retries; default 2; 0 = blind approach, before 2026-12-05)",
+        help="descents after a finger lands on something (GraspRunConfig.contact_retries; default 2; 0 = blind approach, before stop 30 (2026-12-04))",
     )
     ap.add_argument(
         "--centre-error-mm", type=float, default=0.0, metavar="D",

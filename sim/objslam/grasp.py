@@ -103,7 +103,7 @@ class GraspRunConfig:
     → 463/470 registered as well (``reports/grasping_reobserve_register/``). Re-run on the main
     benchmark's maps of stop 29 (2026-12-04, every current default; ``reports/grasping_reobserve/``):
     460/470 (97.9 %) against 466/468 without (both with the blind approach, ``contact_retries = 0``;
-    ``reports/grasping_reobserve/blind_approach/``); with contact retries (2026-12-05) 465/470
+    ``reports/grasping_reobserve/blind_approach/``); with contact retries (stop 30, 2026-12-04) 465/470
     against 468/468; grasped centre 2.2 mm (p90 4.7) against the map's 1.8 mm (p90 3.8): the close
     views still do not beat the map, so re-observation stays off."""
     reobserve_views: str = "top"
@@ -162,7 +162,7 @@ class GraspRunConfig:
     plan left on each side plus ``contact_extra_shift_m`` (the least the centre must be off for that
     finger to land on the object) and a fresh grasp plan from there descends again, at most this many
     times per attempt; with no retry left, or no plan for the moved estimate, the hand goes on down as
-    planned. 0 = the approach is executed blind, as before 2026-12-05."""
+    planned. 0 = the approach is executed blind, as before stop 30 (2026-12-04)."""
     contact_force_n: float = 5.0
     """Upward force on a finger that stops the approach, newtons."""
     contact_backoff_m: float = 0.015
