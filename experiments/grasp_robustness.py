@@ -22,33 +22,19 @@ from pathlib import Path
 from typing import Any
 
 REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO / "experiments"))
+
+import grasp as grasp_cli  # the session files' row builder
 
 
 def load_rows(manifests: list[str]) -> tuple[list[dict[str, Any]], list[str]]:
+    """The attempt rows of the manifests' sessions (``grasp.py``'s own row builder: map source,
+    ``centre_error_mm``, ``contact_retries``, ``touches``, outcome) and the commands that made them."""
     rows, commands = [], []
     for m in manifests:
         man = json.loads(Path(m).read_text())
         commands.append(man.get("command", m))
-        for p in man["sessions"]:
-            d = json.loads(Path(p).read_text())
-            retries = int(d["config"].get("contact_retries", 0))
-            for r in d["rows"]:
-                if r.get("skipped"):
-                    continue
-                rows.append(
-                    {
-                        "scene": d["scene"],
-                        "seed": d["seed"],
-                        "map_source": d["map_source"],
-                        "centre_error_mm": float(d.get("centre_error_mm", 0.0)),
-                        "contact_retries": retries,
-                        "object": r["object"],
-                        "class": r["class"],
-                        "success": bool(r["success"]),
-                        "cause": r["cause"],
-                        "touches": len(r.get("contact_shifts_m", [])),
-                    }
-                )
+        rows += grasp_cli._rows(man["sessions"])
     return rows, commands
 
 
