@@ -205,6 +205,7 @@ class SimWorld:
             a.per_scene_id: (oid, spec.objects[oid].cls) for oid, a in self.object_actors.items()
         }
         self.robot_actor_ids = {link.entity.per_scene_id for link in self.robot.get_links()}
+        self.finger_actor_ids = {link.entity.per_scene_id for link in self.fingers}
         # Let objects settle on the table.
         for _ in range(PHYSICS_HZ // 4):
             self._step()
@@ -320,7 +321,7 @@ class SimWorld:
         external wrench estimate gives a contact's force and moment arm); it does not say what was
         touched. PhysX reports the normal impulse only, no friction: a finger landing on a rim is
         felt (vertical normal), an object held by friction pressing on its support is not."""
-        fingers = {f.entity.per_scene_id for f in self.fingers}
+        fingers = self.finger_actor_ids
         out: list[tuple[np.ndarray, np.ndarray]] = []
         for c in self.scene.get_contacts():
             a, b = (x.entity.per_scene_id for x in c.bodies)
