@@ -391,6 +391,19 @@ def write_reports(
             lines.append(f"| {src} | {len(rs)} | {_rate(rs)} | " + ", ".join(f"{c} {n}" for c, n in cs.most_common()) + " |")
         lines.append("")
     comp_by = {f"comparison: {v}": [r for r in comp if variant(r) == v] for v in sorted({variant(r) for r in comp})}
+    failed = [(name, r) for name, rs in [*by.items(), *comp_by.items()] for r in rs if not r["success"]]
+    if failed:
+        lines += [
+            "## Failed attempts",
+            "",
+            "| rows | scene | seed | object | class | width across the fingers in the map, cm | cause | touches |",
+            "|---|---|---:|---|---|---:|---|---:|",
+        ]
+        for name, r in failed:
+            w = r["expected_closed_width_m"]
+            width = f"{100.0 * w:.1f}" if w is not None else "-"
+            lines.append(f"| {name} | {r['scene']} | {r['seed']} | {r['object']} | {r['class']} | {width} | {r['cause']} | {r['touches']} |")
+        lines.append("")
     touched = [(name, rs) for name, rs in [*by.items(), *comp_by.items()] if rs and rs[0]["contact_retries"] > 0]
     if touched:
         lines += [
