@@ -1,11 +1,11 @@
 """Placement tasks from object maps: ``python experiments/place.py [--maps-from runs/grasp_sweep.json ...]
-[--tasks ...] [--scenes ...] [--seeds ...] [--reobserve] [--out reports]``.
+[--tasks ...] [--scenes ...] [--seeds ...] [--reobserve] [--no-feel-support] [--tag T] [--out reports]``.
 
 The maps are the object-driven exploration maps of ``make grasp`` sweeps (their manifests list the
 run folders; mapping is not repeated). For every scene and seed, each of the paper's three tasks
 (:mod:`objslam.place`: ``block_in_cup``, ``cups_by_volume``, ``bottles_by_height``) runs in a fresh
 simulated world when the scene has the classes it needs; the result goes to
-``place_<task>.json`` in the map's run folder. Reports: ``<out>/placement.json`` = {"command",
+``place_<task><tag>.json`` in the map's run folder. Reports: ``<out>/placement.json`` = {"command",
 "rows": [{"task", "seed", "scene", "success", "reason", ...}]} and ``<out>/placement.md`` (success
 per task over scenes × seeds, failure reasons), built from those files.
 """
@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import json
 import shlex
+import statistics
 import sys
 from collections import Counter
 from pathlib import Path
@@ -37,6 +38,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seeds", nargs="*", type=int, default=None)
     ap.add_argument("--reobserve", action="store_true", help="look at each target from close views before grasping it")
     ap.add_argument("--no-reobserve", action="store_true", help=argparse.SUPPRESS)  # the default; kept for old commands
+    ap.add_argument("--no-feel-support", action="store_true",
+                    help="let go at the release gap without feeling for the support (before stop 31)")
+    ap.add_argument("--tag", default="", help="suffix of the task files (place_<task><tag>.json): variants beside the defaults")
     ap.add_argument("--config", action="append", default=[])
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     ap.add_argument("--out", default="reports")
@@ -51,7 +55,7 @@ def main(argv: list[str] | None = None) -> int:
         if (a.scenes and d["scene"] not in a.scenes) or (a.seeds is not None and d["seed"] not in a.seeds):
             continue
         maps.append((d["scene"], d["seed"], Path(d["map_run"])))
-    cfg = PlaceConfig(grasp=GraspRunConfig(reobserve=a.reobserve))
+    cfg = PlaceConfig(grasp=GraspRunConfig(reobserve=a.reobserve), feel_support=not a.no_feel_support)
     files = []
     not_run: list[dict[str, Any]] = []
     for scene_name, seed, run_dir in sorted(set(maps)):
@@ -69,8 +73,8 @@ def main(argv: list[str] | None = None) -> int:
                 if res.get("detail"):
                     not_run.append({"task": task, "scene": scene_name, "seed": seed, "detail": res["detail"]})
                 continue
-            res.update(scene=scene_name, seed=seed, map_run=str(run_dir), reobserve=a.reobserve)
-            f = run_dir / f"place_{task}.json"
+            res.update(scene=scene_name, seed=seed, map_run=str(run_dir), reobserve=a.reobserve, feel_support=cfg.feel_support)
+            f = run_dir / f"place_{task}{a.tag}.json"
             f.write_text(json.dumps(res, indent=2) + "\n")
             files.append(str(f))
             print(f"{scene_name} seed {seed} {task:<18} {'success' if res['success'] else res['reason']}", flush=True)
@@ -103,6 +107,7 @@ def main(argv: list[str] | None = None) -> int:
     for t in a.tasks:
         for reason, c in sorted(Counter(x["reason"] for x in rows if x["task"] == t and not x["success"]).items()):
             lines.append(f"| {t} | {reason} | {c} |")
+    lines += release_table(rows, a.tasks)
     if not_run:
         lines += ["", "## Not run (infeasible for the gripper)", "", "| task | scene | seed | why |", "|---|---|---:|---|"]
         lines += [f"| {r['task']} | {r['scene']} | {r['seed']} | {r['detail']} |" for r in not_run]
@@ -110,6 +115,41 @@ def main(argv: list[str] | None = None) -> int:
     (out / "placement.md").write_text("\n".join(lines))
     print(f"{len(rows)} rows → {a.out}/placement.md")
     return 0
+
+
+def release_table(rows: list[dict[str, Any]], tasks: list[str]) -> list[str]:
+    """Markdown lines: per task, how the items were let go (``PlaceConfig.feel_support``: contact
+    felt, stuck, no slow descent) and how high above their support in ground truth."""
+    out = [
+        "",
+        "## Letting go",
+        "",
+        (
+            "Every put-down of a task's items (set-aside moves excluded). Slow descent: from 1 cm above the"
+            " release gap the hand goes on down until it feels the support (`PlaceConfig.feel_support`)."
+            " True gap: the item's true bottom above the true surface under it when the fingers open"
+            " (ground truth, judging only)."
+        ),
+        "",
+        "| task | put-downs | contact felt | stuck at the start | no slow descent | slow descent, mm (median / max) | true gap, mm (median / max) |",
+        "|---|---:|---:|---:|---:|---:|---:|",
+    ]
+
+    def spread(v: list[float]) -> str:
+        return f"{statistics.median(v):.1f} / {max(v):.1f}" if v else "-"
+
+    for t in tasks:
+        td = [st["touchdown"] for r in rows if r["task"] == t for st in r.get("steps", []) if st.get("touchdown") is not None]
+        if not td:
+            continue
+        how = Counter(x.get("how", "none") for x in td)
+        depth = [1000 * x["depth_m"] for x in td if "depth_m" in x]
+        gaps = [1000 * x["true_gap_m"] for x in td if x.get("true_gap_m") is not None]
+        out.append(
+            f"| {t} | {len(td)} | {how['contact']} | {how['stuck']} | {len(td) - how['contact'] - how['stuck']} | "
+            f"{spread(depth)} | {spread(gaps)} |"
+        )
+    return out
 
 
 if __name__ == "__main__":

@@ -21,8 +21,12 @@ experiment's rule; scene02's cups are 7.8 and 8.4 cm wide): the report lists it 
 Every grasp goes through :class:`~objslam.grasp.GraspSession` (planner, PD drives, the grasp
 physics); a place motion is the planner's ``plan_to_pose`` to a pre-place pose 12 cm above the slot
 (carrying the held object's estimate, so that it too clears the map objects), a straight-line
-descent (``plan_linear``) until the held object's estimated bottom is 1 cm above its support,
-opening, and a straight retreat up, with the hand across the line. Choices are fields of
+descent (``plan_linear``) until the held object's estimated bottom is 1 cm above its release gap
+(1 cm above its support; 5 mm for tall items), a slow descent until the hand feels the support
+through the item (beyond the paper, :attr:`PlaceConfig.feel_support`: a guarded move on the
+arm's external-wrench estimate, :meth:`~objslam.world.SimWorld.external_wrench`), opening, and a
+straight retreat up, with the hand across the line. Without the feel, the descent ends at the
+release gap and the item drops from there (before stop 31). Choices are fields of
 :class:`PlaceConfig`. A task whose classes the scene (or the map) lacks is not run.
 """
 
@@ -40,7 +44,7 @@ import numpy as np
 from .config import RunConfig
 from .grasp import MAX_GRASP_WIDTH_M, GraspRunConfig, GraspSession, match_gt, narrowest_width
 from .scene import SceneSpec, gt_objects
-from .world import GRIPPER_OPEN_M, READY_QPOS
+from .world import GRIPPER_OPEN_M, PHYSICS_HZ, READY_QPOS
 
 TASKS = ("block_in_cup", "cups_by_volume", "bottles_by_height")
 
@@ -73,6 +77,38 @@ class PlaceConfig:
     fell over (bottles_by_height 9/12 with 1 cm on the maps of reports/grasping, 12/12 with 5 mm;
     cups and blocks keep 1 cm: with 5 mm the later grasps of a cups_by_volume run started from
     other arm configurations and one finger met a cup with 3 mm of clearance: 7/8)."""
+    feel_support: bool = True
+    """Beyond the paper: the descent stops ``feel_start_m`` above the release-gap pose and the hand
+    goes on down slowly until it feels the support through the held item, then lets go there
+    (nothing felt ``feel_depth_m`` below the release-gap pose: it lets go at the end). The sense is
+    the hand stalling while the upward force of :meth:`~objslam.world.SimWorld.external_wrench`
+    rises by ``feel_force_n`` within ``feel_window_s`` (a guarded move). A rise, not a level: the
+    estimate carries the joints' friction (PhysX joint friction, proportional to the joint loads),
+    which it does not model: 30-50 N of apparent upward force during a descent, up to 200 N held by
+    static friction after the arm stops, drifting by ~1 N per 0.05 s during the slow descent; an
+    item meeting the table adds 15-20 N within a few physics steps (scene04 seed 8's bottles).
+    False: let go at the release gap, as before (stop 30)."""
+    feel_start_m: float = 0.01
+    """The slow descent starts this far above the release-gap pose, metres."""
+    feel_depth_m: float = 0.02
+    """The slow descent ends this far below the release-gap pose, metres."""
+    feel_speed_m_s: float = 0.02
+    """Speed of the slow descent, m/s."""
+    feel_window_s: float = 0.05
+    """Stall and force rise are measured over this window, seconds."""
+    feel_stall_ratio: float = 0.5
+    """The TCP has stalled when it descends less than this fraction of the commanded descent."""
+    feel_armed_m: float = 0.001
+    """Contact is sensed only once the TCP has descended this far (the breakaway from the joints'
+    static friction at the start stalls the arm while the estimate rises by 9-16 N), metres."""
+    feel_stuck_m: float = 0.012
+    """Not armed when this much descent has been commanded: the item stands on its support already,
+    let go, metres. The breakaway takes 4.7-7.4 mm of commanded descent (0.23-0.37 s; six slow
+    descents of scenes 02, 04, 05 and 07, seed 0), the force estimate rising 9-16 N meanwhile; with
+    5 mm, 53 of 161 descents stopped there as stuck, the hand still 1-2 cm above the support."""
+    feel_force_n: float = 4.0
+    """Rise of the upward force within ``feel_window_s`` that means the item stands on its support,
+    newtons."""
     clear_blockers: bool = True
     """``block_in_cup``: when the chosen block has no collision-free grasp, the neighbour without
     which it would have one is first put down elsewhere on the table (:meth:`Placer.move_aside`)."""
@@ -148,10 +184,36 @@ class Placer:
         self.cfg = cfg
         self.message = ""
         """The planner's message of the last failed place."""
+        self.touchdown: dict[str, Any] | None = None
+        """What :meth:`feel_down` felt in the last place (empty without :attr:`PlaceConfig.feel_support`;
+        None: no place motion ran), and ``true_gap_m`` (:meth:`true_gap` when the hand opened)."""
+        self.held_gt: int | None = None
+        """Ground-truth id of the last picked object (judging only)."""
 
     def pick(self, target: dict[str, Any], obstacles: list[dict[str, Any]], gt_id: int | None) -> dict[str, Any]:
         """Grasp and lift ``target``; the result of :meth:`GraspSession.attempt`."""
+        self.held_gt = gt_id
         return self.s.attempt(self.s.frame, target, obstacles, gt_id)
+
+    def true_gap(self) -> float | None:
+        """Judging only (ground truth, never used by the robot): how far the held item's true bottom
+        is above the true surface under its centre (the table, or the top of an object whose
+        footprint it is over), metres; None without a ground-truth match."""
+        if self.held_gt is None:
+            return None
+        now = {g["id"]: g["geometry"] for g in gt_objects(self.s.scene, self.s.world.ground_truth())}
+        held = now.get(self.held_gt)
+        if held is None:
+            return None
+        support = max(
+            [0.0]
+            + [
+                g["center"][2] + g["half_extents"][2]
+                for i, g in now.items()
+                if i != self.held_gt and math.dist(g["center"][:2], held["center"][:2]) < footprint_radius(g)
+            ]
+        )
+        return held["center"][2] - held["half_extents"][2] - support
 
     def blocker(
         self, target: dict[str, Any], candidates: list[dict[str, Any]], obstacles: list[dict[str, Any]]
@@ -187,6 +249,61 @@ class Placer:
     def release_gap(self, height_m: float) -> float:
         """How far above its support an item of estimated height ``height_m`` is let go, metres."""
         return self.cfg.tall_release_gap_m if height_m >= self.cfg.tall_item_height_m else self.cfg.release_gap_m
+
+    def feel_down(self, q_from: np.ndarray, target: np.ndarray, obs: str, held: tuple[str, Any]) -> dict[str, Any]:
+        """The slow descent of :attr:`PlaceConfig.feel_support` towards ``target``: planned from
+        ``q_from`` (where the descent before it was planned to end: the arm stands within a
+        fraction of a millimetre of it, and a plan from the measured joints can start inside the
+        planner's clearance of a neighbour) with the held item ``held`` (``(geometry json,
+        world_from_tcp at the grasp)``, its lower part trimmed: that part is meant to meet the
+        support), re-timed to a constant
+        ``feel_speed_m_s``, stopped on contact: after the TCP has moved ``feel_armed_m``, it descends
+        less than ``feel_stall_ratio`` of what was commanded within ``feel_window_s`` while the upward
+        force rises by ``feel_force_n`` in that window; or when the TCP has not moved ``feel_armed_m``
+        by the time ``feel_stuck_m`` was commanded (the item already stands on its support). Returns
+        ``{"felt", "how" ("contact" | "stuck" | "none"), "depth_m" (how far the TCP went down),
+        "force_n" (the force's rise over the last window)}``, or ``{"felt": False, "cause"}`` with no
+        plan."""
+        s, cfg, world = self.s, self.cfg, self.s.world
+        r = s.planner.plan_linear(q_from, target, obs, *held)
+        if not r["ok"]:
+            return {"felt": False, "cause": r["cause"]}
+        pos = np.asarray(r["positions"], dtype=np.float64)
+        z = np.array([s.planner.forward_tcp(q)[2, 3] for q in pos])
+        t = np.maximum.accumulate(np.abs(z - z[0])) / cfg.feel_speed_m_s
+        keep = np.r_[True, np.diff(t) > 1e-6]
+        t, pos = t[keep], pos[keep]
+        slow = {"times_s": t, "positions": pos, "velocities": np.gradient(pos, t, axis=0) if len(t) > 1 else 0 * pos,
+                "duration_s": float(t[-1])}
+        z0 = float(s.planner.forward_tcp(s.q_arm())[2, 3])
+        window = max(1, round(cfg.feel_window_s * PHYSICS_HZ))
+        commanded = cfg.feel_speed_m_s * window / PHYSICS_HZ  # descent commanded per window
+        zs: list[float] = []
+        fz: list[float] = []
+        state: dict[str, Any] = {"how": "none", "rise": float("nan")}
+
+        def felt() -> bool:
+            zs.append(z0 - float(s.planner.forward_tcp(world.qpos()[:7])[2, 3]))
+            fz.append(float(world.external_wrench()[2]))
+            if len(zs) <= window:
+                return False
+            state["rise"] = fz[-1] - fz[-1 - window]
+            if max(zs) < cfg.feel_armed_m:
+                # Not moving yet: the joints' static friction, or the item already on its support.
+                if len(zs) * cfg.feel_speed_m_s / PHYSICS_HZ >= cfg.feel_stuck_m:
+                    state["how"] = "stuck"
+                    return True
+                return False
+            stalled = zs[-1] - zs[-1 - window] < cfg.feel_stall_ratio * commanded
+            if stalled and state["rise"] >= cfg.feel_force_n:
+                state["how"] = "contact"
+                return True
+            return False
+
+        s.execute(slow, 0.0, stop=felt)
+        depth = z0 - float(s.planner.forward_tcp(s.q_arm())[2, 3])
+        return {"felt": state["how"] != "none", "how": state["how"], "depth_m": round(depth, 5),
+                "force_n": round(state["rise"], 2)}
 
     def can_place(self, slots: list[tuple[float, float]], heights: list[float], obstacles: list[dict[str, Any]]) -> bool:
         """Whether every slot can take its item (estimated height) among ``obstacles``: from the
@@ -226,12 +343,32 @@ class Placer:
             if not pre["ok"]:
                 failed, self.message = f"preplace_{pre['cause']}", pre["message"]
                 continue
-            down = s.planner.plan_linear(pre["positions"][-1], top_down(x, y, z, yaw), obs, *held_args)
+            feel = self.cfg.feel_support
+            z_down = z + (self.cfg.feel_start_m if feel else 0.0)
+            down = s.planner.plan_linear(pre["positions"][-1], top_down(x, y, z_down, yaw), obs, *held_args)
             if not down["ok"]:
                 failed, self.message = f"descent_{down['cause']}", down["message"]
                 continue
             s.execute(pre, 0.0)
             s.execute(down, 0.0)
+            q_down = np.asarray(down["positions"], dtype=np.float64)[-1]
+            if feel:
+                # The held item's collision model without the part that goes below its release-gap
+                # pose (and 5 mm more): the arm and hand and the rest of the item still clear the map.
+                trim = min(self.cfg.feel_depth_m + self.release_gap(2.0 * g["half_extents"][2]) + 0.005, g["half_extents"][2])
+                trimmed = {**g, "center": [*g["center"][:2], g["center"][2] + trim / 2],
+                           "half_extents": [*g["half_extents"][:2], g["half_extents"][2] - trim / 2]}
+                felt_args = (json.dumps(trimmed), plan["world_from_tcp_grasp"])
+                self.touchdown = self.feel_down(q_down, top_down(x, y, z - self.cfg.feel_depth_m, yaw), obs, felt_args)
+            else:
+                self.touchdown = {}
+            if feel and "cause" in self.touchdown:
+                # No slow descent for the hand alone: the rest of the way to the release gap, as without.
+                rest = s.planner.plan_linear(q_down, top_down(x, y, z, yaw), obs, *held_args)
+                if rest["ok"]:
+                    s.execute(rest, 0.0)
+            gap = self.true_gap()
+            self.touchdown["true_gap_m"] = None if gap is None else round(gap, 5)
             s.hold(0.5, GRIPPER_OPEN_M)
             up = s.planner.plan_linear(s.q_arm(), top_down(x, y, z + self.cfg.preplace_height_m, yaw), obs)
             if up["ok"]:
@@ -282,8 +419,11 @@ def run_place_task(
             out["reason"] = f"pick_{res['cause']}"
             return out
         cg = cup["geometry"]
+        placer.touchdown = None
         err = placer.place(cg["center"][0], cg["center"][1], cg["center"][2] + cg["half_extents"][2],
                            [m for m in others(block) if m["id"] != cup["id"]])
+        if placer.touchdown is not None:
+            out["steps"][-1]["touchdown"] = placer.touchdown
         if err:
             out["reason"] = err
         session.hold(1.0, GRIPPER_OPEN_M)
@@ -356,7 +496,10 @@ def run_place_task(
         if res.get("open_width_m") is None:  # nothing was grasped (planning failed)
             out["reason"] = out["reason"] or f"pick_{res['cause']}"
             continue
+        placer.touchdown = None
         err = placer.place(x, y, 0.0, others(o))
+        if placer.touchdown is not None:
+            out["steps"][-1]["touchdown"] = placer.touchdown
         if err:
             out["reason"] = out["reason"] or err
             out["steps"][-1].update(place=err, message=placer.message)
