@@ -80,14 +80,16 @@ class PlaceConfig:
     feel_support: bool = True
     """Beyond the paper: the descent stops ``feel_start_m`` above the release-gap pose and the hand
     goes on down slowly until it feels the support through the held item, then lets go there
-    (nothing felt ``feel_depth_m`` below the release-gap pose: it lets go at the end). The sense is
-    the hand stalling while the upward force of :meth:`~objslam.world.SimWorld.external_wrench`
-    rises by ``feel_force_n`` within ``feel_window_s`` (a guarded move). A rise, not a level: the
-    estimate carries the joints' friction (PhysX joint friction, proportional to the joint loads),
-    which it does not model: 30-50 N of apparent upward force during a descent, up to 200 N held by
-    static friction after the arm stops, drifting by ~1 N per 0.05 s during the slow descent; an
-    item meeting the table adds 15-20 N within a few physics steps (scene04 seed 8's bottles).
-    False: let go at the release gap, as before (stop 30)."""
+    (nothing felt ``feel_depth_m`` below the release-gap pose: it lets go at the end; no slow
+    descent plannable: it goes on to the release gap as without). The sense is the hand stalling
+    while the upward force of :meth:`~objslam.world.SimWorld.external_wrench` rises by
+    ``feel_force_n`` within ``feel_window_s`` (a guarded move). A rise, not a level: the estimate
+    carries the joints' friction (PhysX joint friction, proportional to the joint loads), which it
+    does not model: 17-66 N of apparent upward force in the middle of the descent before, 38-139 N
+    held at the start of the slow descent, drifting by up to 2.6 N per 0.05 s during it (six slow
+    descents: scene04 seed 8's bottles, scene03 seed 0's cups, on their maps). When the item
+    meets its support the rise over the window is 4.3-77 N (medians: blocks 8, cups 8, bottles
+    22; ``reports/placement.json``). False: let go at the release gap, as before (stop 30)."""
     feel_start_m: float = 0.01
     """The slow descent starts this far above the release-gap pose, metres."""
     feel_depth_m: float = 0.02
@@ -99,13 +101,15 @@ class PlaceConfig:
     feel_stall_ratio: float = 0.5
     """The TCP has stalled when it descends less than this fraction of the commanded descent."""
     feel_armed_m: float = 0.001
-    """Contact is sensed only once the TCP has descended this far (the breakaway from the joints'
-    static friction at the start stalls the arm while the estimate rises by 9-16 N), metres."""
+    """Contact is sensed only once the TCP has descended this far: at the start the arm stands
+    still until its drives overcome the joints' static friction (15-31 physics steps in seven slow
+    descents of scene04 seed 8, scene03 seed 0 and scene02 seed 0), metres."""
     feel_stuck_m: float = 0.012
     """Not armed when this much descent has been commanded: the item stands on its support already,
-    let go, metres. The breakaway takes 4.7-7.4 mm of commanded descent (0.23-0.37 s; six slow
-    descents of scenes 02, 04, 05 and 07, seed 0), the force estimate rising 9-16 N meanwhile; with
-    5 mm, 53 of 161 descents stopped there as stuck, the hand still 1-2 cm above the support."""
+    let go, metres. The breakaway above takes 1.3-2.6 mm of commanded descent. A slow descent
+    planned from the measured joints instead of the planned end of the descent before it starts
+    without the drives' preload and took 4.7-7.4 mm (six descents of scenes 02, 04, 05, 07, seed 0);
+    with this at 5 mm, 53 of 161 descents stopped as stuck, the hand still 1-2 cm above the support."""
     feel_force_n: float = 4.0
     """Rise of the upward force within ``feel_window_s`` that means the item stands on its support,
     newtons."""
@@ -256,8 +260,7 @@ class Placer:
         fraction of a millimetre of it, and a plan from the measured joints can start inside the
         planner's clearance of a neighbour) with the held item ``held`` (``(geometry json,
         world_from_tcp at the grasp)``, its lower part trimmed: that part is meant to meet the
-        support), re-timed to a constant
-        ``feel_speed_m_s``, stopped on contact: after the TCP has moved ``feel_armed_m``, it descends
+        support), re-timed to a constant ``feel_speed_m_s``, stopped on contact: after the TCP has moved ``feel_armed_m``, it descends
         less than ``feel_stall_ratio`` of what was commanded within ``feel_window_s`` while the upward
         force rises by ``feel_force_n`` in that window; or when the TCP has not moved ``feel_armed_m``
         by the time ``feel_stuck_m`` was commanded (the item already stands on its support). Returns
@@ -363,7 +366,7 @@ class Placer:
             else:
                 self.touchdown = {}
             if feel and "cause" in self.touchdown:
-                # No slow descent for the hand alone: the rest of the way to the release gap, as without.
+                # No slow descent plannable: the rest of the way to the release gap, as without the feel.
                 rest = s.planner.plan_linear(q_down, top_down(x, y, z, yaw), obs, *held_args)
                 if rest["ok"]:
                     s.execute(rest, 0.0)
