@@ -362,9 +362,10 @@ class SimWorld:
         TCP's Jacobian (finite differences of the planner's kinematics). At rest with joint
         friction off it gives back a force applied at the TCP within 1.5 N (``tests/test_place_feel.py``).
         Not modelled: the arm's inertia (accelerations show as wrench) and the joints' friction
-        (PhysX's, proportional to the joint loads: 30-50 N of apparent force during an ordinary
-        descent, up to 200 N held by static friction after it), so it is read as a change over a
-        short window, not as a level (:meth:`~objslam.place.Placer.feel_down`)."""
+        (PhysX's, proportional to the joint loads: 17-66 N of apparent upward force during a
+        put-down descent, up to 139 N held by static friction after it; ``PlaceConfig.feel_support``),
+        so it is read as a change over a short window, not as a level
+        (:meth:`~objslam.place.Placer.feel_down`)."""
         q = self.qpos()[:7]
         t0 = self.planner.forward_tcp(q)
         jac = np.empty((6, 7))
