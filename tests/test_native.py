@@ -118,3 +118,25 @@ def test_stub_lists_every_public_native_name() -> None:
         assert all(hasattr(real, m) for m in methods), (cls.name, [m for m in methods if not hasattr(real, m)])
         public = {m for m in dir(real) if not m.startswith("_")}
         assert public - methods == set(), (cls.name, sorted(public - methods))
+
+
+def test_tcp_jacobian_is_the_derivative_of_forward_tcp() -> None:
+    from objslam.world import READY_QPOS, panda_urdf_path
+
+    planner = objslam._native.Planner(str(panda_urdf_path()))
+    rng = np.random.default_rng(3)
+    lim = planner.joint_limits()
+    for q in (READY_QPOS[:7], rng.uniform(lim[:, 0] + 0.1, lim[:, 1] - 0.1)):
+        jac = planner.tcp_jacobian(q)
+        assert jac.shape == (6, 7)
+        t0, h = planner.forward_tcp(q), 1e-6
+        for i in range(7):
+            d = q.copy()
+            d[i] += h
+            t1 = planner.forward_tcp(d)
+            np.testing.assert_allclose(jac[:3, i], (t1[:3, 3] - t0[:3, 3]) / h, atol=1e-5)
+            r = t1[:3, :3] @ t0[:3, :3].T
+            w = 0.5 * np.array([r[2, 1] - r[1, 2], r[0, 2] - r[2, 0], r[1, 0] - r[0, 1]]) / h
+            np.testing.assert_allclose(jac[3:, i], w, atol=1e-5)
+    with pytest.raises(ValueError, match="q"):
+        planner.tcp_jacobian(np.zeros(6))

@@ -310,6 +310,14 @@ impl PlannerPy {
         Ok(matrix_py(py, &self.inner.forward_tcp(&q)))
     }
 
+    /// The TCP's geometric Jacobian (6, 7) at arm joints `q` (7,): rows linear then angular
+    /// velocity, world frame.
+    fn tcp_jacobian<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let q = joints(q, "q")?;
+        let j = self.inner.tcp_jacobian(&q);
+        Ok(Array2::from_shape_fn((6, j.ncols()), |(r, c)| j[(r, c)]).to_pyarray(py))
+    }
+
     /// `world_from_link` (4x4) of every chain link at `q`, by link name.
     fn link_poses<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyDict>> {
         let q = joints(q, "q")?;

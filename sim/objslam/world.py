@@ -300,8 +300,6 @@ class SimWorld:
         for j, t in zip(self.joints, q):
             j.set_drive_target(float(t))
             j.set_drive_velocity_target(0.0)
-        self._arm_target = np.array(q[:7], dtype=np.float64)
-        self._arm_velocity_target = np.zeros(7)
 
     def qpos(self) -> np.ndarray:
         """Measured joint positions."""
@@ -350,33 +348,24 @@ class SimWorld:
         physics step: PhysX's reported joint velocity stays at up to 0.03 rad/s with the arm at rest
         under a steady load (its solver's correction, not motion), and with it a 20 N force at the
         TCP came out as 13 N (at rest, position errors alone give it back)."""
-        q = self.qpos()[:7]
-        dq = self._arm_velocity
-        tau = ARM_STIFFNESS * (self._arm_target - q) + ARM_DAMPING * (self._arm_velocity_target - dq)
+        arm = self.joints[:7]
+        target = np.array([float(np.ravel(j.get_drive_target())[0]) for j in arm])
+        velocity_target = np.array([float(np.ravel(j.get_drive_velocity_target())[0]) for j in arm])
+        tau = ARM_STIFFNESS * (target - self.qpos()[:7]) + ARM_DAMPING * (velocity_target - self._arm_velocity)
         return np.clip(tau, -ARM_FORCE_LIMIT, ARM_FORCE_LIMIT)
 
     def external_wrench(self) -> np.ndarray:
         """Estimated wrench on the hand from outside the robot, expressed at the TCP in world axes:
         ``[fx, fy, fz, mx, my, mz]`` (N, N·m), as a Panda's ``O_F_ext_hat_K`` gives it: the drive
         torques balance gravity-compensated statics, ``Jᵀ w = −τ``, solved by least squares with the
-        TCP's Jacobian (finite differences of the planner's kinematics). At rest with joint
+        TCP's geometric Jacobian (the core planner's kinematics, ``Planner.tcp_jacobian``). At rest with joint
         friction off it gives back a force applied at the TCP within 1.5 N (``tests/test_place_feel.py``).
         Not modelled: the arm's inertia (accelerations show as wrench) and the joints' friction
         (PhysX's, proportional to the joint loads: 17-66 N of apparent upward force during a
         put-down descent, up to 139 N held by static friction after it; ``PlaceConfig.feel_support``),
         so it is read as a change over a short window, not as a level
         (:meth:`~objslam.place.Placer.feel_down`)."""
-        q = self.qpos()[:7]
-        t0 = self.planner.forward_tcp(q)
-        jac = np.empty((6, 7))
-        h = 1e-6
-        for i in range(7):
-            dq = q.copy()
-            dq[i] += h
-            t1 = self.planner.forward_tcp(dq)
-            jac[:3, i] = (t1[:3, 3] - t0[:3, 3]) / h
-            d = t1[:3, :3] @ t0[:3, :3].T  # small rotation: its axis-angle vector from the skew part
-            jac[3:, i] = 0.5 * np.array([d[2, 1] - d[1, 2], d[0, 2] - d[2, 0], d[1, 0] - d[0, 1]]) / h
+        jac = self.planner.tcp_jacobian(self.qpos()[:7])
         w, *_ = np.linalg.lstsq(jac.T, -self.arm_drive_torques(), rcond=None)
         return w
 
@@ -648,8 +637,6 @@ class SimWorld:
                 j.set_drive_velocity_target(float(dq_arm[i]) if dq_arm is not None else 0.0)
             else:
                 j.set_drive_target(float(finger_m))
-        self._arm_target = np.array(q_arm[:7], dtype=np.float64)
-        self._arm_velocity_target = np.zeros(7) if dq_arm is None else np.array(dq_arm[:7], dtype=np.float64)
 
     def track(self, traj: dict[str, Any], finger_m: float) -> Iterator[int]:
         """Track a sampled joint trajectory of the core planner (``times_s``, ``positions``,

@@ -416,6 +416,11 @@ impl Planner {
         self.chain.forward(q)
     }
 
+    /// The TCP's 6×7 geometric Jacobian at `q` (rows: linear, angular velocity; world frame).
+    pub fn tcp_jacobian(&self, q: &JointVector) -> nalgebra::Matrix6xX<f64> {
+        self.chain.forward_with_jacobian(q).1
+    }
+
     /// `world_from_link` of every chain link at `q` with their names (for recording).
     pub fn link_poses(&self, q: &JointVector) -> Vec<(String, Se3)> {
         self.chain.link_names().into_iter().map(String::from).zip(self.chain.forward_all(q)).collect()
