@@ -190,7 +190,7 @@ class Placer:
         """The planner's message of the last failed place."""
         self.touchdown: dict[str, Any] | None = None
         """What :meth:`feel_down` felt in the last place (empty without :attr:`PlaceConfig.feel_support`;
-        None: no place motion ran), and ``true_gap_m`` (:meth:`true_gap` when the hand opened)."""
+        None: the last :meth:`place` ran no motion), and ``true_gap_m`` (:meth:`true_gap` when the hand opened)."""
         self.held_gt: int | None = None
         """Ground-truth id of the last picked object (judging only)."""
 
@@ -330,6 +330,7 @@ class Placer:
         motions are plannable with it, else the grasp's (the held object turns with the hand: its
         collision model is round about the hand's axis)."""
         s, plan, held = self.s, self.s.last_plan, self.s.last_target
+        self.touchdown = None
         if plan is None or held is None:
             return "no_grasp"
         g = held["geometry"]
@@ -422,7 +423,6 @@ def run_place_task(
             out["reason"] = f"pick_{res['cause']}"
             return out
         cg = cup["geometry"]
-        placer.touchdown = None
         err = placer.place(cg["center"][0], cg["center"][1], cg["center"][2] + cg["half_extents"][2],
                            [m for m in others(block) if m["id"] != cup["id"]])
         if placer.touchdown is not None:
@@ -499,7 +499,6 @@ def run_place_task(
         if res.get("open_width_m") is None:  # nothing was grasped (planning failed)
             out["reason"] = out["reason"] or f"pick_{res['cause']}"
             continue
-        placer.touchdown = None
         err = placer.place(x, y, 0.0, others(o))
         if placer.touchdown is not None:
             out["steps"][-1]["touchdown"] = placer.touchdown
