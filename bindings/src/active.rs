@@ -255,6 +255,8 @@ impl ActiveMapperPy {
                 reasons.set_item(*k, *v)?;
             }
             out.set_item("lost_by_reason", reasons)?;
+            out.set_item("map_resets", t.epoch())?;
+            out.set_item("map_extensions", t.n_extensions())?;
         }
         Ok(Some(out))
     }

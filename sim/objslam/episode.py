@@ -219,6 +219,7 @@ def new_mapper(cfg: RunConfig, scene: SceneSpec) -> Any:
                 "motion_gate_floor_m": cfg.slam_motion_gate_m,
                 "motion_gate_floor_deg": cfg.slam_motion_gate_deg,
                 "motion_gate_references": cfg.slam_motion_gate_references,
+                "extend_after_unmapped": cfg.slam_extend_after_unmapped,
                 "kinematic_noise": {**to_dict(cfg.pose_noise), "seed": kinematic_noise_seed(cfg.seed, scene.seed)},
                 **({"ransac": {"seed": seeds["ransac"]}} if seeds else {}),
             }

@@ -95,9 +95,14 @@
 //! 7. Lost frames output the prior; within the view of the last tracked frame, the prior's
 //!    motion since that frame carries the SLAM pose forward instead (the bias cancels, only the
 //!    jitter accumulates). The map is kept: only [`TrackerConfig::reset_after_lost`] consecutive
-//!    lost frames that *show the scene* (enough keypoints with depth) drop it; frames that hide
-//!    it (e.g. the camera facing the robot's own links, whose pixels carry no depth) are counted
-//!    apart ([`Tracker::n_lost_scene_hidden`], [`Tracker::lost_by_reason`]).
+//!    lost frames that *contradict the map* (enough keypoints with depth and enough map points
+//!    predicted in view, yet no consensus, or a gated pose) drop it; frames that hide the scene
+//!    (e.g. the camera facing the robot's own links, whose pixels carry no depth) are counted
+//!    apart ([`Tracker::n_lost_scene_hidden`], [`Tracker::lost_by_reason`]). Frames that show a
+//!    scene the map does not cover (few map points predicted in view: the camera has swept past
+//!    the mapped region) *extend* the map after [`TrackerConfig::extend_after_unmapped`] of them:
+//!    a keyframe at the frame's output pose, fixed in bundle adjustment, that tracking goes on
+//!    from ([`Tracker::n_extensions`]); the old map stays, and tracking returns to it.
 //!
 //! Choices where the paper is vague, all config fields: the minimal solver, the grid
 //! distribution (round-robin over cells instead of ORB-SLAM2's quadtree), the local window
