@@ -51,8 +51,8 @@ pub struct ActiveMapperPy {
     /// Pose used for each frame and the true pose, for ATE / RPE.
     poses_used: Vec<Se3>,
     poses_true: Vec<Se3>,
-    /// The tracker's map epoch and world ← map gauge when the object map was last moved with it.
-    gauge: Option<(u32, Se3)>,
+    /// The tracker's world ← map gauge when the object map was last moved with it.
+    gauge: Option<Se3>,
 }
 
 #[pymethods]
@@ -129,11 +129,11 @@ impl ActiveMapperPy {
                 .map_err(input_err)?;
             frame.world_from_camera = out.world_from_camera;
             if self.mapper.config().follow_slam_gauge {
-                let now = (tracker.epoch(), tracker.world_from_map());
-                // Within one SLAM map the gauge change is a change of the world frame; across a
-                // map re-initialisation the gauges relate different maps and nothing is moved.
-                if let Some(before) = self.gauge.filter(|(epoch, _)| *epoch == now.0) {
-                    let delta = now.1 * before.1.inverse();
+                // The gauge change is a change of the world frame (one map frame across the
+                // tracker's resets).
+                let now = tracker.world_from_map();
+                if let Some(before) = self.gauge {
+                    let delta = now * before.inverse();
                     if delta.translation.vector.norm() > 1e-9 || delta.rotation.angle() > 1e-9 {
                         self.mapper.transform_world(&delta);
                     }
@@ -255,7 +255,7 @@ impl ActiveMapperPy {
                 reasons.set_item(*k, *v)?;
             }
             out.set_item("lost_by_reason", reasons)?;
-            out.set_item("map_resets", t.epoch())?;
+            out.set_item("map_resets", t.n_resets())?;
             out.set_item("map_extensions", t.n_extensions())?;
         }
         Ok(Some(out))

@@ -390,21 +390,72 @@ fn frames_of_an_unmapped_scene_extend_the_map_instead_of_resetting_it() {
         "extension: lost {:?}, extensions {}, resets {}, ATE after {ate:.4} m",
         tracker.lost_by_reason(),
         tracker.n_extensions(),
-        tracker.epoch()
+        tracker.n_resets()
     );
     assert_eq!(TrackerConfig::default().extend_after_unmapped, 3);
     assert_eq!(tracker.n_extensions(), 1);
-    assert_eq!(tracker.epoch(), 0, "the map was reset");
+    assert_eq!(tracker.n_resets(), 0, "the map was reset");
     assert_eq!(tracker.lost_by_reason().get("too_few_inliers"), Some(&3));
     assert_eq!(tracker.n_lost(), 3);
     assert!(ate < 0.005, "ATE {ate}");
     // Without it (the behaviour before), the stretch counts towards the reset (10 frames): the
     // map is dropped and the stretch's scene becomes the new map; tracking does not come back.
     let (tracker, ate) = unmapped_stretch(0);
-    eprintln!("no extension: lost {:?}, resets {}, ATE after {ate:.4} m", tracker.lost_by_reason(), tracker.epoch());
+    eprintln!("no extension: lost {:?}, resets {}, ATE after {ate:.4} m", tracker.lost_by_reason(), tracker.n_resets());
     assert_eq!(tracker.n_extensions(), 0);
-    assert!(tracker.epoch() >= 1);
+    assert!(tracker.n_resets() >= 1);
     assert!(tracker.n_lost() > 12, "lost {}", tracker.n_lost());
+}
+
+#[test]
+fn a_reset_keeps_the_map_frame_and_the_gauge() {
+    // 16 tracked frames (8 views), then 10 frames of another texture on the same geometry at frame
+    // 15's pose (map points in view, depth agrees, no consensus: frames that contradict the map),
+    // which reset it; then the sequence goes on from frame 15. The new map starts at the pose
+    // dead-reckoned from the last tracked frame in the same frame and gauge: the world ← map
+    // gauge does not jump, and the frames after the reset keep the SLAM's accuracy.
+    let seq = sequence();
+    let cam = camera();
+    let mut tracker = Tracker::new(TrackerConfig::default()).unwrap_or_else(|e| panic!("{e}"));
+    let (other_grey, other_depth) = TabletopScene::tabletop(99).render(&cam, &gt_pose(15));
+    let mut track = |tracker: &mut Tracker, grey: &GreyImage, depth: &DepthImage, i: usize| {
+        let gt = gt_pose(i);
+        let input = TrackInput {
+            grey,
+            depth,
+            camera: &cam,
+            world_from_camera_fk: gt,
+            view_index: (i / FRAMES_PER_VIEW) as u64,
+            world_from_camera_gt: Some(gt),
+        };
+        tracker.track(&input).unwrap_or_else(|e| panic!("frame {i}: {e}"))
+    };
+    for i in 0..16 {
+        let (g, d) = &seq.frames[i];
+        assert!(track(&mut tracker, g, d, i).is_ok());
+    }
+    let gauge_before = tracker.world_from_map();
+    for _ in 0..10 {
+        let out = track(&mut tracker, &other_grey, &other_depth, 15);
+        assert!(matches!(out.state, TrackingState::Lost { reason: LostReason::TooFewInliers { .. } }));
+    }
+    assert_eq!(tracker.n_resets(), 1);
+    assert_eq!(tracker.n_map_points(), 0);
+    let (g, d) = &seq.frames[15];
+    track(&mut tracker, g, d, 15);
+    let jump = (tracker.world_from_map().translation.vector - gauge_before.translation.vector).norm();
+    let (mut est, mut truth) = (Vec::new(), Vec::new());
+    for i in 16..N_FRAMES {
+        let (g, d) = &seq.frames[i];
+        let out = track(&mut tracker, g, d, i);
+        assert!(out.is_ok(), "frame {i}: {:?}", out.state);
+        est.push(out.world_from_camera);
+        truth.push(seq.gt[i]);
+    }
+    let ate = ate_rmse_m(&est, &truth).unwrap_or_else(|e| panic!("{e}"));
+    eprintln!("reset: gauge moved {:.2} mm, ATE after {:.2} mm", jump * 1e3, ate * 1e3);
+    assert!(jump < 1e-3, "the gauge jumped {jump} m at the reset");
+    assert!(ate < 0.005, "ATE {ate}");
 }
 
 #[test]

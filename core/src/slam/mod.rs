@@ -108,7 +108,8 @@
 //! distribution (round-robin over cells instead of ORB-SLAM2's quadtree), the local window
 //! (most recent keyframes instead of the covisibility graph), the anchor, the depth residual
 //! weight, and no loop closing / relocalisation (a lost streak of
-//! [`TrackerConfig::reset_after_lost`] frames re-initialises the map at the prior instead).
+//! [`TrackerConfig::reset_after_lost`] frames that contradict the map re-initialises it at the
+//! frame's pose estimate, in the same map frame and gauge, instead).
 //!
 //! # Evaluation
 //! [`metrics`] computes ATE RMSE (no alignment: estimate and truth share the world frame) and

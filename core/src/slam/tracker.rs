@@ -342,7 +342,6 @@ struct KeyFrame {
 
 #[derive(Debug, Clone, Copy)]
 struct FrameRecord {
-    epoch: u32,
     map_from_camera: Option<Se3>,
     world_from_camera: Se3,
 }
@@ -515,7 +514,7 @@ pub struct Tracker {
     keyframes: Vec<KeyFrame>,
     next_point_id: u64,
     frame_index: u64,
-    epoch: u32,
+    n_resets: u32,
     anchor: Anchor,
     /// Last tracked frame: map ← camera, its prior, its view index.
     last: Option<(Se3, Se3, u64)>,
@@ -592,7 +591,7 @@ impl Tracker {
             keyframes: Vec::new(),
             next_point_id: 0,
             frame_index: 0,
-            epoch: 0,
+            n_resets: 0,
             anchor: Anchor::new(&config.kinematic_noise, config.anchor_huber),
             last: None,
             view_tracked: VecDeque::new(),
@@ -623,10 +622,12 @@ impl Tracker {
         self.keyframes.len()
     }
 
-    /// Map epoch: incremented when the tracker gives up its map and starts a new one (after a
-    /// lost streak). World ← map gauges of different epochs relate different map frames.
-    pub fn epoch(&self) -> u32 {
-        self.epoch
+    /// How many times the tracker gave up its map and started a new one
+    /// ([`TrackerConfig::reset_after_lost`]). The new map continues the old map's frame and world
+    /// ← map gauge (it starts at the frame's pose estimate in that frame), so one gauge relates
+    /// every frame's SLAM pose to the world across resets.
+    pub fn n_resets(&self) -> u32 {
+        self.n_resets
     }
 
     /// Number of lost frames so far.
@@ -669,14 +670,14 @@ impl Tracker {
     }
 
     /// The trajectory so far, one pose per tracked call, re-expressed with the latest world ← map
-    /// anchor for frames of the current map (the SLAM's best estimate of the whole trajectory at
+    /// anchor for tracked frames (the SLAM's best estimate of the whole trajectory at
     /// this time; the online poses are the `world_from_camera` of each [`TrackOutput`]).
     pub fn trajectory(&self) -> Vec<Se3> {
         let w = self.world_from_map();
         self.records
             .iter()
             .map(|r| match r.map_from_camera {
-                Some(m) if r.epoch == self.epoch => w * m,
+                Some(m) => w * m,
                 _ => r.world_from_camera,
             })
             .collect()
@@ -770,7 +771,6 @@ impl Tracker {
                 }
                 self.last = Some((map_from_camera, prior, input.view_index));
                 self.records.push(FrameRecord {
-                    epoch: self.epoch,
                     map_from_camera: Some(map_from_camera),
                     world_from_camera: out.world_from_camera,
                 });
@@ -819,11 +819,7 @@ impl Tracker {
                 {
                     self.extend_map(&frame, camera, &out.world_from_camera, &prior, input.view_index);
                 }
-                self.records.push(FrameRecord {
-                    epoch: self.epoch,
-                    map_from_camera: None,
-                    world_from_camera: out.world_from_camera,
-                });
+                self.records.push(FrameRecord { map_from_camera: None, world_from_camera: out.world_from_camera });
             }
         }
         out.n_map_points = self.points.len();
@@ -857,13 +853,18 @@ impl Tracker {
         self.last = Some((map_from_camera, *prior, view_index));
     }
 
+    /// Drop the map's points and keyframes. The map frame, the world ← map gauge (with every view
+    /// it was fitted to) and the last tracked frame stay: the next frame with depth starts the new
+    /// map at its pose estimate in the same frame (dead-reckoned from the last tracked frame
+    /// within its view, else the prior through the gauge), so the object map, placed with the
+    /// gauge, stays where it is. (Before 2026-12-05 the gauge restarted from the new map's
+    /// first view, and the object map, moved with the new gauge's early corrections by up to a
+    /// view's 1 cm bias, left the world frame the old views had fixed.)
     fn reset_map(&mut self) {
         self.points.clear();
         self.keyframes.clear();
-        self.anchor = Anchor::new(&self.config.kinematic_noise, self.config.anchor_huber);
-        self.last = None;
         self.view_tracked.clear();
-        self.epoch += 1;
+        self.n_resets += 1;
         self.lost_streak = 0;
         self.unmapped_streak = 0;
     }
@@ -901,7 +902,14 @@ impl Tracker {
             if valid < self.config.min_init_points {
                 return Err(LostReason::NoDepth { valid, required: self.config.min_init_points });
             }
-            return Ok((anchored, Vec::new(), 0));
+            // After a reset: dead-reckoned from the last tracked frame within its view.
+            let start = match self.last {
+                Some((last_map_from_camera, last_prior, last_view)) if last_view == view_index => {
+                    last_map_from_camera * (last_prior.inverse() * prior)
+                }
+                _ => anchored,
+            };
+            return Ok((start, Vec::new(), 0));
         }
         let mut seeds = Vec::with_capacity(2);
         // The prior's motion since the last tracked frames of this view (same bias): the gate's
