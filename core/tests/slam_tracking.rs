@@ -418,7 +418,7 @@ fn a_reset_keeps_the_map_frame_and_the_gauge() {
     let cam = camera();
     let mut tracker = Tracker::new(TrackerConfig::default()).unwrap_or_else(|e| panic!("{e}"));
     let (other_grey, other_depth) = TabletopScene::tabletop(99).render(&cam, &gt_pose(15));
-    let mut track = |tracker: &mut Tracker, grey: &GreyImage, depth: &DepthImage, i: usize| {
+    let track = |tracker: &mut Tracker, grey: &GreyImage, depth: &DepthImage, i: usize| {
         let gt = gt_pose(i);
         let input = TrackInput {
             grey,
