@@ -97,6 +97,8 @@ def test_bad_config_names_the_key(ci_overlay) -> None:
         load_run_config(overrides=["param.cylinder_consensus_iterations=-1"])
     with pytest.raises(ConfigError, match="param.window_keep"):
         load_run_config(overrides=['param.window_keep="newest"'])
+    with pytest.raises(ConfigError, match="slam_extend_after_unmapped"):
+        load_run_config(overrides=["slam_extend_after_unmapped=-1"])
 
 
 def test_object_driven_episode_takes_next_best_views(tmp_path, ci_overlay) -> None:
@@ -208,6 +210,7 @@ def test_slam_pose_source_beats_noisy_kinematics(tmp_path, ci_overlay) -> None:
     # The final trajectory (all frames re-expressed with the last gauge) is scored too, absolute.
     assert 0.0 < slam["ate_final_rmse_m"] < kin["ate_rmse_m"], (slam["ate_final_rmse_m"], kin["ate_rmse_m"])
     assert slam["lost_frames_scene_hidden"] == 0 and slam["lost_by_reason"] == {}
+    assert slam["map_resets"] == 0 and slam["map_extensions"] == 0
 
 
 def test_object_clouds_from_slam_map_points(tmp_path, ci_overlay) -> None:
