@@ -59,6 +59,27 @@ fn run(seq: &Sequence, config: TrackerConfig) -> (Vec<Se3>, Vec<Se3>, usize, Tra
     (online, tracker.trajectory(), lost, tracker)
 }
 
+/// Track one frame whose prior and ground truth are both `gt` (the prior's noise is the
+/// tracker's), panicking on a typed error.
+fn track_at(
+    tracker: &mut Tracker,
+    cam: &PinholeCamera,
+    grey: &GreyImage,
+    depth: &DepthImage,
+    gt: Se3,
+    view: u64,
+) -> objslam_core::slam::TrackOutput {
+    let input = TrackInput {
+        grey,
+        depth,
+        camera: cam,
+        world_from_camera_fk: gt,
+        view_index: view,
+        world_from_camera_gt: Some(gt),
+    };
+    tracker.track(&input).unwrap_or_else(|e| panic!("{e}"))
+}
+
 #[test]
 fn slam_beats_the_kinematic_prior_on_a_synthetic_sequence() {
     let seq = sequence();
@@ -303,16 +324,7 @@ fn frames_that_hide_the_scene_keep_the_map_and_tracking_resumes() {
     let no_depth = DepthImage { width: 640, height: 480, data: vec![0.0; 640 * 480] };
     let (mut est, mut truth) = (Vec::new(), Vec::new());
     let track = |tracker: &mut Tracker, grey: &GreyImage, depth: &DepthImage, i: usize, view: u64| {
-        let gt = gt_pose(i);
-        let input = TrackInput {
-            grey,
-            depth,
-            camera: &cam,
-            world_from_camera_fk: gt,
-            view_index: view,
-            world_from_camera_gt: Some(gt),
-        };
-        tracker.track(&input).unwrap_or_else(|e| panic!("frame {i}: {e}"))
+        track_at(tracker, &cam, grey, depth, gt_pose(i), view)
     };
     for i in 0..8 {
         let (g, d) = &seq.frames[i];
@@ -350,17 +362,8 @@ fn unmapped_stretch(extend_after_unmapped: usize) -> (Tracker, f64) {
     let aside =
         Se3::from_parts(nalgebra::Translation3::new(0.0, 1.5, 0.0), nalgebra::UnitQuaternion::identity()) * gt_pose(7);
     let (aside_grey, aside_depth) = TabletopScene::tabletop(3).render(&cam, &aside);
-    let mut track = |grey: &GreyImage, depth: &DepthImage, gt: Se3, view: u64| {
-        let input = TrackInput {
-            grey,
-            depth,
-            camera: &cam,
-            world_from_camera_fk: gt,
-            view_index: view,
-            world_from_camera_gt: Some(gt),
-        };
-        tracker.track(&input).unwrap_or_else(|e| panic!("{e}"))
-    };
+    let mut track =
+        |grey: &GreyImage, depth: &DepthImage, gt: Se3, view: u64| track_at(&mut tracker, &cam, grey, depth, gt, view);
     for i in 0..8 {
         let (g, d) = &seq.frames[i];
         assert!(track(g, d, gt_pose(i), (i / FRAMES_PER_VIEW) as u64).is_ok());
@@ -419,16 +422,7 @@ fn a_reset_keeps_the_map_frame_and_the_gauge() {
     let mut tracker = Tracker::new(TrackerConfig::default()).unwrap_or_else(|e| panic!("{e}"));
     let (other_grey, other_depth) = TabletopScene::tabletop(99).render(&cam, &gt_pose(15));
     let track = |tracker: &mut Tracker, grey: &GreyImage, depth: &DepthImage, i: usize| {
-        let gt = gt_pose(i);
-        let input = TrackInput {
-            grey,
-            depth,
-            camera: &cam,
-            world_from_camera_fk: gt,
-            view_index: (i / FRAMES_PER_VIEW) as u64,
-            world_from_camera_gt: Some(gt),
-        };
-        tracker.track(&input).unwrap_or_else(|e| panic!("frame {i}: {e}"))
+        track_at(tracker, &cam, grey, depth, gt_pose(i), (i / FRAMES_PER_VIEW) as u64)
     };
     for i in 0..16 {
         let (g, d) = &seq.frames[i];
