@@ -6,7 +6,7 @@ use numpy::PyReadonlyArray2;
 use numpy::{PyArray2, ToPyArray};
 use objslam_core::active::{ActiveConfig, ActiveSession, NextView};
 use objslam_core::association::metrics::{association_metrics, MetricsConfig, ObjectGtIds};
-use objslam_core::explore::{ExploreError, ObservedPoints, TableRect};
+use objslam_core::explore::{ExploreError, ObservedPoints, Strategy, TableRect};
 use objslam_core::frame::GreyImage;
 use objslam_core::geometry::Se3;
 use objslam_core::map::EstimateStage;
@@ -40,6 +40,9 @@ fn matrix_py<'py>(py: Python<'py>, t: &Se3) -> Bound<'py, PyArray2<f64>> {
     let arr = numpy::ndarray::Array2::from_shape_fn((4, 4), |(r, c)| rows[r][c]);
     arr.to_pyarray(py)
 }
+
+/// A candidate view and the map object it was sampled around.
+type TargetedView<'py> = (Bound<'py, PyArray2<f64>>, Option<u32>);
 
 /// Mapper + exploration session (see `objslam_core::active`).
 #[pyclass(module = "objslam._native", name = "ActiveMapper")]
@@ -219,6 +222,133 @@ impl ActiveMapperPy {
             }
         }
         Ok(out)
+    }
+
+    /// The paper's per-object features at this decision step, one dict per map object (map order):
+    /// {"object_id", "entropy_bits" (H_obj), "normalized_entropy" (H̄_obj), "occupied_ratio" (R_o),
+    /// "history_iou" (R_IoU from the estimate history, or None), "normalized_volume" (V̄_obj),
+    /// "volume_probability" (p(V̄)), "explore" (s(x) = 1), "cells_occupied", "cells_free",
+    /// "cells_unknown"}. For strategies outside the core (`objslam.strategy`).
+    #[pyo3(signature = (*, intrinsics, width, height))]
+    fn object_features<'py>(
+        &self,
+        py: Python<'py>,
+        intrinsics: &Bound<'py, PyAny>,
+        width: u32,
+        height: u32,
+    ) -> PyResult<Vec<Bound<'py, PyDict>>> {
+        let cam = camera(intrinsics, width, height)?;
+        let features = self.session.object_features(&self.mapper.map(), &cam).map_err(explore_err)?;
+        features
+            .iter()
+            .map(|f| {
+                let d = PyDict::new(py);
+                d.set_item("object_id", f.object_id)?;
+                d.set_item("entropy_bits", f.entropy_bits)?;
+                d.set_item("normalized_entropy", f.normalized_entropy)?;
+                d.set_item("occupied_ratio", f.occupied_ratio)?;
+                d.set_item("history_iou", f.history_iou)?;
+                d.set_item("normalized_volume", f.normalized_volume)?;
+                d.set_item("volume_probability", f.volume_probability)?;
+                d.set_item("explore", f.explore)?;
+                d.set_item("cells_occupied", f.grid.occupied)?;
+                d.set_item("cells_free", f.grid.free)?;
+                d.set_item("cells_unknown", f.grid.unknown)?;
+                Ok(d)
+            })
+            .collect()
+    }
+
+    /// The candidate views the utility strategies would sample at this step around the objects
+    /// `around` (map object ids; None = every object), without the reachability filter: a list
+    /// of (4x4 `world_from_camera`, target object id).
+    #[pyo3(signature = (*, around = None))]
+    fn candidate_views<'py>(&self, py: Python<'py>, around: Option<Vec<u32>>) -> PyResult<Vec<TargetedView<'py>>> {
+        let views = self.session.candidate_views(&self.mapper.map(), around.as_deref()).map_err(explore_err)?;
+        Ok(views.iter().map(|v| (matrix_py(py, &v.world_from_camera), v.target_object)).collect())
+    }
+
+    /// Score views with a utility: `utility` = "object-driven" (the paper's f) or
+    /// "expected-gain" (with its motion cost from `world_from_camera`, the camera now). One dict
+    /// per view: {"utility", "motion_cost", "objects": [{"object_id", "entropy_term", "r_iou",
+    /// "h_iou", "h_v", "visible_cells", "s", "total"}]}. Objects whose s(x) = 0 add nothing
+    /// unless `explore_every_object`.
+    #[pyo3(signature = (*, intrinsics, width, height, views, utility, world_from_camera, explore_every_object = false))]
+    #[allow(clippy::too_many_arguments)]
+    fn score_views<'py>(
+        &self,
+        py: Python<'py>,
+        intrinsics: &Bound<'py, PyAny>,
+        width: u32,
+        height: u32,
+        views: Vec<Bound<'py, PyAny>>,
+        utility: &str,
+        world_from_camera: &Bound<'py, PyAny>,
+        explore_every_object: bool,
+    ) -> PyResult<Vec<Bound<'py, PyDict>>> {
+        let cam = camera(intrinsics, width, height)?;
+        let current = pose(world_from_camera, "world_from_camera")?;
+        let strategy = match utility {
+            "object-driven" => Strategy::ObjectDriven,
+            "expected-gain" => Strategy::ExpectedGain,
+            other => {
+                return Err(input_err(format!(
+                    "utility: expected \"object-driven\" or \"expected-gain\", got {other:?}"
+                )))
+            }
+        };
+        let poses: Vec<Se3> = views
+            .iter()
+            .enumerate()
+            .map(|(i, v)| pose(v, "views").map_err(|e| input_err(format!("views[{i}]: {e}"))))
+            .collect::<PyResult<_>>()?;
+        let scores = self
+            .session
+            .score_views(&self.mapper.map(), &cam, &poses, strategy, &current, explore_every_object)
+            .map_err(explore_err)?;
+        scores
+            .iter()
+            .map(|s| {
+                let d = PyDict::new(py);
+                d.set_item("utility", s.utility)?;
+                d.set_item("motion_cost", s.motion_cost)?;
+                let objects: Vec<Bound<'py, PyDict>> = s
+                    .objects
+                    .iter()
+                    .map(|o| {
+                        let od = PyDict::new(py);
+                        od.set_item("object_id", o.object_id)?;
+                        od.set_item("entropy_term", o.entropy_term)?;
+                        od.set_item("r_iou", o.r_iou)?;
+                        od.set_item("h_iou", o.h_iou)?;
+                        od.set_item("h_v", o.h_v)?;
+                        od.set_item("visible_cells", o.visible_cells)?;
+                        od.set_item("s", o.s)?;
+                        od.set_item("total", o.total)?;
+                        Ok(od)
+                    })
+                    .collect::<PyResult<_>>()?;
+                d.set_item("objects", objects)?;
+                Ok(d)
+            })
+            .collect()
+    }
+
+    /// The paper's stopping rule now: "all_explored" (every object's s(x) = 0), "max_views"
+    /// (the budget after Init is spent) or None.
+    #[pyo3(signature = (*, intrinsics, width, height))]
+    fn paper_stop(&self, intrinsics: &Bound<'_, PyAny>, width: u32, height: u32) -> PyResult<Option<String>> {
+        let cam = camera(intrinsics, width, height)?;
+        let stop = self.session.paper_stop(&self.mapper.map(), &cam).map_err(explore_err)?;
+        stop.map(|r| {
+            serde_json::to_value(r).map_err(|e| json_err("reason", e)).map(|v| v.as_str().unwrap_or("?").to_string())
+        })
+        .transpose()
+    }
+
+    /// The view budget after Init (`explore.max_views`).
+    fn max_views(&self) -> usize {
+        self.session.max_views()
     }
 
     /// The camera pose used for the last frame (4x4), or None before the first frame.

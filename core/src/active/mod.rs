@@ -403,7 +403,7 @@ impl ActiveSession {
         if self.views_taken >= self.explore.max_views {
             return Ok(NextView::Stop { reason: SessionStop::MaxViews });
         }
-        let step_seed = self.config.seed.wrapping_mul(0x9E37_79B9_7F4A_7C15).wrapping_add(self.views_taken as u64 + 1);
+        let step_seed = self.step_seed();
         match self.strategy {
             Strategy::Init => Ok(NextView::Stop { reason: SessionStop::StrategyDone }),
             Strategy::Coverage => {
@@ -563,5 +563,64 @@ impl ActiveSession {
                 })
             }
         }
+    }
+
+    /// The seed of this decision step (the run seed mixed with the number of views taken): the
+    /// random strategy's view and every candidate sample of the step draw from it.
+    fn step_seed(&self) -> u64 {
+        self.config.seed.wrapping_mul(0x9E37_79B9_7F4A_7C15).wrapping_add(self.views_taken as u64 + 1)
+    }
+
+    /// The paper's per-object features x = (H_obj, H̄_obj, R_o, R_IoU, V̄_obj, s) of every map
+    /// object (map order) at this step, as the utility strategies see them: the decision-step
+    /// view for a strategy outside the core (`objslam.strategy`, Python).
+    pub fn object_features(
+        &self,
+        map: &ObjectMap,
+        camera: &PinholeCamera,
+    ) -> Result<Vec<explore::ObjectFeatures>, ExploreError> {
+        Ok(UtilityContext::new(map, &self.grids, &self.history, camera, &self.explore)?.features())
+    }
+
+    /// The candidate views the utility strategies would sample at this step around the objects
+    /// `around` (`None` = every object): the same sampler, configuration and step seed, no
+    /// reachability filter (ask it per view, as the built-in strategies do in utility order).
+    pub fn candidate_views(&self, map: &ObjectMap, around: Option<&[u32]>) -> Result<Vec<CandidateView>, ExploreError> {
+        let always = |_: &Se3| true;
+        sample_candidates_around(map, around, &self.candidates, &self.explore.grid, &always, self.step_seed())
+    }
+
+    /// Score views with a utility strategy's utility at this step ([`Strategy::ObjectDriven`]:
+    /// the paper's f; [`Strategy::ExpectedGain`]: expected entropy reduction with the occlusion
+    /// and pose-convergence terms, minus the motion cost from `current`). Objects whose s(x) = 0
+    /// add nothing, as in the built-in strategies; `explore_every_object` counts them all (the
+    /// built-in strategies' behaviour once `stop_when_explored` is off). The discovery gain of
+    /// unseen table cells is not included.
+    pub fn score_views(
+        &self,
+        map: &ObjectMap,
+        camera: &PinholeCamera,
+        views: &[Se3],
+        strategy: Strategy,
+        current: &Se3,
+        explore_every_object: bool,
+    ) -> Result<Vec<explore::ViewScore>, ExploreError> {
+        let mut ctx = UtilityContext::new(map, &self.grids, &self.history, camera, &self.explore)?;
+        if explore_every_object {
+            ctx.explore_every_object();
+        }
+        ctx.score_all(views, strategy, Some(current))
+    }
+
+    /// Whether the paper's stopping rule ends exploration now: every object's s(x) = 0
+    /// ([`StopReason::AllExplored`]) or the view budget is spent ([`StopReason::MaxViews`]).
+    pub fn paper_stop(&self, map: &ObjectMap, camera: &PinholeCamera) -> Result<Option<SessionStop>, ExploreError> {
+        let features = self.object_features(map, camera)?;
+        Ok(stop_reason(&features, self.views_taken, &self.explore).map(SessionStop::from))
+    }
+
+    /// The view budget after Init (`explore.max_views`).
+    pub fn max_views(&self) -> usize {
+        self.explore.max_views
     }
 }

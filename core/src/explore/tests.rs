@@ -983,3 +983,58 @@ fn unexplained_evidence_draws_a_view_centred_on_the_unmapped_object() {
     // min_new_cells, so the session stops.
     assert_eq!(run(ActiveConfig { discovery_evidence_max_views: 0, ..evidence }).0, all_explored);
 }
+
+#[test]
+fn the_decision_step_view_reproduces_the_built_in_utility_strategies() {
+    // A strategy outside the core (Python) sees the step through `object_features`,
+    // `candidate_views` and `score_views`; the argmax of the paper's utility over the candidates
+    // around the objects still to explore is the built-in object-driven decision (discovery off),
+    // and likewise for expected-gain, here with the reachability filter dropping the best view.
+    use crate::active::{ActiveConfig, ActiveSession, NextView, SessionStop};
+    use crate::frame::Frame;
+    let map = map_of(vec![
+        object(Label::Block, [0.45, 0.1, 0.04], 0.3, [0.04, 0.03, 0.04]),
+        object(Label::Can, [0.6, -0.1, 0.06], 0.0, [0.033, 0.033, 0.06]),
+    ]);
+    let cam = PinholeCamera::from_fovy(96, 72, 0.8).unwrap_or_else(|e| panic!("{e}"));
+    let top = view(Point3::new(0.5, 0.0, 0.5), [0.5, 0.0, 0.04]);
+    for strategy in [Strategy::ObjectDriven, Strategy::ExpectedGain] {
+        let config = ActiveConfig { strategy: strategy.as_str().into(), seed: 7, ..ActiveConfig::default() };
+        let mut s = ActiveSession::new(config, table()).unwrap_or_else(|e| panic!("{e}"));
+        for id in 0..2 {
+            let (depth, points) = render(&map, &cam, &top, id);
+            let frame = Frame { index: id, camera: cam, depth, world_from_camera: top, detections: Vec::new() };
+            let observed = [ObservedPoints { object_id: id, points_in_world: points }];
+            s.integrate_frame(&map, &frame, &observed).unwrap_or_else(|e| panic!("{e}"));
+        }
+        s.view_done(&map, false);
+        let features = s.object_features(&map, &cam).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(features.len(), 2);
+        assert!(features.iter().all(|f| f.explore), "sides unseen: both still to explore");
+        assert_eq!(s.paper_stop(&map, &cam).unwrap_or_else(|e| panic!("{e}")), None);
+        let around: Vec<u32> = features.iter().filter(|f| f.explore).map(|f| f.object_id).collect();
+        let views: Vec<Se3> = s
+            .candidate_views(&map, Some(&around))
+            .unwrap_or_else(|e| panic!("{e}"))
+            .iter()
+            .map(|c| c.world_from_camera)
+            .collect();
+        assert!(views.len() >= 8, "{}", views.len());
+        let scores = s.score_views(&map, &cam, &views, strategy, &top, false).unwrap_or_else(|e| panic!("{e}"));
+        let mut order: Vec<usize> = (0..views.len()).filter(|i| scores[*i].utility.is_finite()).collect();
+        order.sort_by(|a, b| scores[*b].utility.total_cmp(&scores[*a].utility).then(a.cmp(b)));
+        // The best view is unreachable: the second is taken, by both.
+        let banned = views[order[0]];
+        let reachable = |p: &Se3| (p.translation.vector - banned.translation.vector).norm() > 1e-9;
+        let d = s.next_view(&map, &cam, &top, &reachable).unwrap_or_else(|e| panic!("{e}"));
+        let NextView::Move { world_from_camera, utility, .. } = d else { panic!("expected a move: {d:?}") };
+        assert_eq!(world_from_camera, views[order[1]], "{strategy:?}");
+        assert_eq!(utility, scores[order[1]].utility, "{strategy:?}");
+        assert!(scores[order[0]].utility > 0.0);
+        // The budget: after max_views views the paper's rule stops.
+        for _ in 0..s.max_views() {
+            s.view_done(&map, true);
+        }
+        assert_eq!(s.paper_stop(&map, &cam).unwrap_or_else(|e| panic!("{e}")), Some(SessionStop::MaxViews));
+    }
+}
