@@ -127,7 +127,9 @@ def write_reports(rows: list[dict[str, Any]], out: Path, command: str) -> None:
     """Tables and plots from benchmark rows."""
     out.mkdir(parents=True, exist_ok=True)
     ok = [r for r in rows if "error" not in r]
+    # The built-in strategies in report order, then Python strategies (objslam.strategy) as they come.
     strategies = [s for s in STRATEGIES if any(r["strategy"] == s for r in ok)]
+    strategies += list(dict.fromkeys(r["strategy"] for r in ok if r["strategy"] not in STRATEGIES))
     scenes = sorted({r["scene"] for r in ok})
     report = {"command": command, "rows": rows}
     (out / "exploration.json").write_text(json.dumps(report, indent=2) + "\n")
@@ -288,7 +290,7 @@ def _plots(ok: list[dict[str, Any]], strategies: list[str], out: Path, command: 
     fig, axes = plt.subplots(1, 4, figsize=(16, 3.6))
     for ax, (metric, title) in zip(axes, (("iou3d", "3D IoU"), ("iou2d", "2D IoU"), ("cde_cm", "CDE (cm)"), ("yae_deg", "YAE (deg)"))):
         means = [_mean([r[metric] for r in ok if r["strategy"] == s]) or 0.0 for s in strategies]
-        ax.bar(range(len(strategies)), means, color=["C0", "C1", "C2", "C3", "C4"][: len(strategies)])
+        ax.bar(range(len(strategies)), means, color=[f"C{i % 10}" for i in range(len(strategies))])
         ax.set_xticks(range(len(strategies)), strategies, rotation=30, ha="right", fontsize=8)
         ax.set_title(title)
     fig.suptitle(f"mean over scenes and seeds — {command}", fontsize=9)

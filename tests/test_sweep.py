@@ -48,3 +48,23 @@ def test_ray_backend_matches_process_pool(tmp_path: Path, ci_overlay: Path) -> N
         assert json.loads(map_a.read_text()) == json.loads(map_b.read_text())
     # Different seeds are different episodes (the comparison above is not vacuous).
     assert _stable(pool[0]) != _stable(pool[1])
+
+
+def test_compare_sweeps_pairs_one_strategy_with_another(tmp_path: Path) -> None:
+    from compare_sweeps import compare
+
+    def row(strategy: str, seed: int, iou: float, path: float) -> dict:
+        return {"strategy": strategy, "scene": "scene01", "seed": seed, "iou3d": iou, "path_length_m": path}
+
+    sweep = tmp_path / "exploration.json"
+    rows = [row("a", 0, 0.90, 2.0), row("a", 1, 0.80, 3.0), row("b", 0, 0.85, 1.0), row("b", 1, 0.70, 1.0)]
+    sweep.write_text(json.dumps({"command": "x", "rows": rows}))
+    text = compare(sweep, sweep, {"b": "a"})
+    line = next(ln for ln in text.splitlines() if ln.startswith("| b vs a |"))
+    cells = [c.strip() for c in line.strip("|").split("|")]
+    assert cells[1] == "2"  # two paired episodes
+    # iou3d: baseline (a) 0.850, changed (b) 0.775, difference −0.075 ± SE of (−0.05, −0.10) = 0.025.
+    assert cells[2:5] == ["0.850", "0.775", "-0.075 ± 0.025"]
+    assert "--pair b=a" in text
+    # Without --pair each strategy is paired with itself: no difference.
+    assert "| a | 2 | 0.850 | 0.850 | +0.000 ± 0.000" in compare(sweep, sweep)

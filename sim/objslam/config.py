@@ -218,13 +218,14 @@ class PoseNoiseConfig:
     jitter; seeded by the run seed mixed with the scene's seed, ``episode.kinematic_noise_seed``)."""
 
     bias_trans_m: float = 0.01
-    """Per-view translation bias (standard deviation per axis), metres."""
+    """Per-view translation bias, metres: its magnitude, in a direction drawn uniformly on the sphere
+    per view (core ``KinematicNoiseConfig::bias_trans_m``)."""
     bias_rot_deg: float = 1.0
-    """Per-view rotation bias, degrees."""
+    """Per-view rotation bias, degrees: its angle, about an axis drawn uniformly per view."""
     jitter_trans_m: float = 0.0005
-    """Per-frame translation jitter, metres."""
+    """Per-frame translation jitter, standard deviation per axis, metres."""
     jitter_rot_deg: float = 0.05
-    """Per-frame rotation jitter, degrees."""
+    """Per-frame rotation jitter, standard deviation per axis of the rotation vector, degrees."""
 
 
 @dataclass(frozen=True)
@@ -264,7 +265,14 @@ class RunConfig:
     """Scene file (relative to the repository root or absolute)."""
     strategy: str = "object-driven"
     """View-selection strategy: object-driven (the paper's utility), expected-gain, random,
-    coverage or init."""
+    coverage or init; or the label of a Python strategy (``python_strategy``)."""
+    python_strategy: str = ""
+    """A view-selection strategy written in Python (``objslam.strategy``): ``path/to/file.py:Class``
+    (relative to the repository root, or absolute) or ``package.module:Class``; empty (default) =
+    the built-in ``strategy``. With it, ``strategy`` is its label in metrics and reports and must
+    not be a built-in name."""
+    python_strategy_params: dict[str, Any] = field(default_factory=dict)
+    """Keyword arguments of the Python strategy's constructor (a TOML table)."""
     seed: int = 0
     """Seeds sensor noise, the detector, random strategies and (mixed with the scene file's seed)
     the kinematic prior noise."""
@@ -365,8 +373,26 @@ class RunConfig:
 
     def validate(self) -> None:
         """Raise :class:`ConfigError` naming the key if a value is out of range."""
-        if self.strategy not in STRATEGIES:
-            raise ConfigError(f"strategy: unknown {self.strategy!r}; known: {', '.join(STRATEGIES)}")
+        if self.python_strategy:
+            if self.strategy in STRATEGIES:
+                raise ConfigError(
+                    f"strategy: {self.strategy!r} is a built-in strategy; give the python_strategy its own label"
+                )
+            if not self.strategy or "/" in self.strategy:
+                raise ConfigError(f"strategy: {self.strategy!r} is not a usable label (non-empty, no '/')")
+            from .strategy import StrategyError, load_strategy_class
+
+            try:
+                load_strategy_class(self.python_strategy)
+            except StrategyError as e:
+                raise ConfigError(f"python_strategy: {e}") from e
+        elif self.python_strategy_params:
+            raise ConfigError("python_strategy_params: given without a python_strategy")
+        elif self.strategy not in STRATEGIES:
+            raise ConfigError(
+                f"strategy: unknown {self.strategy!r}; known: {', '.join(STRATEGIES)} "
+                "(or set python_strategy for a strategy written in Python)"
+            )
         if self.association_mode not in ASSOCIATION_MODES:
             raise ConfigError(
                 f"association_mode: unknown {self.association_mode!r}; known: {', '.join(ASSOCIATION_MODES)}"
@@ -467,6 +493,10 @@ def _coerce(key: str, t: Any, v: Any) -> Any:
         if not isinstance(v, str):
             raise ConfigError(f"{key}: expected a string, got {v!r}")
         return v
+    if origin is dict:
+        if not isinstance(v, dict):
+            raise ConfigError(f"{key}: expected a table, got {v!r}")
+        return dict(v)
     if origin is tuple:
         args = t.__args__
         if not isinstance(v, list) or len(v) != len(args):

@@ -32,6 +32,7 @@ from .config import REPO_ROOT, RunConfig, to_dict
 from .detector import Detection, SimulatedDetector
 from .evaluation import offset_removed
 from .scene import SceneSpec, gt_objects, load_scene
+from .strategy import DecisionStep, as_view, make_strategy
 from .world import MotionError, SensorFrame, SimWorld, UnreachablePoseError
 
 #: Timing stages reported per frame (milliseconds).
@@ -89,7 +90,8 @@ def active_config(cfg: RunConfig) -> dict[str, Any]:
     """The core's ``ActiveConfig`` JSON from a run config."""
     e = to_dict(cfg.explore)
     e["lambda"] = e.pop("utility_lambda")
-    return {"strategy": cfg.strategy, "seed": cfg.seed, **e}
+    # A Python strategy decides in Python; the core session only keeps the grids and the history.
+    return {"strategy": "init" if cfg.python_strategy else cfg.strategy, "seed": cfg.seed, **e}
 
 
 def _log_decision(rec: Any, decision: dict[str, Any]) -> None:
@@ -112,6 +114,36 @@ def _log_decision(rec: Any, decision: dict[str, Any]) -> None:
     )
     if np.isfinite(decision.get("utility", float("nan"))):
         rec.log_scalar("explore/utility", float(decision["utility"]))
+
+
+def _python_decision(
+    strategy: Any, cfg: RunConfig, scene: SceneSpec, mapper: Any, world: SimWorld, rng: np.random.Generator
+) -> dict[str, Any]:
+    """One decision of a Python strategy (``objslam.strategy``), in the built-in decision's form."""
+    if mapper.views_taken() >= mapper.max_views():
+        return {"action": "stop", "reason": "max_views"}
+    step = DecisionStep(
+        mapper=mapper,
+        intrinsics=world.intrinsics,
+        width=cfg.camera.width,
+        height=cfg.camera.height,
+        world_from_camera=world.world_from_camera_fk(world.qpos()),
+        reachable=world.is_reachable,
+        rng=rng,
+        table_center=(float(scene.table.center[0]), float(scene.table.center[1])),
+        table_size=(float(scene.table.size[0]), float(scene.table.size[1])),
+    )
+    view = as_view(strategy.next_view(step), f"{cfg.python_strategy}.next_view")
+    if view is None:
+        return {"action": "stop", "reason": step.stop_reason or "strategy_done"}
+    decision: dict[str, Any] = {"action": "move", "world_from_camera": view, "utility": float("nan")}
+    if step.logged is not None:
+        views, scores = step.logged
+        decision["candidates"] = [(v, sc, None) for v, sc in zip(views, scores)]
+        same = [sc for v, sc in zip(views, scores) if np.allclose(v, view, atol=1e-12)]
+        if same:
+            decision["utility"] = same[0]
+    return decision
 
 
 def _scene_path(cfg: RunConfig) -> Path:
@@ -407,16 +439,21 @@ def run_episode(
         rec.log_scalar("explore/mean_normalized_entropy", mapper.entropy_curve()[-1])
         _log_table(rec, mapper, cfg.record.grids)
         stop_reason = "strategy_done"
+        user_strategy = make_strategy(cfg.python_strategy, cfg.python_strategy_params) if cfg.python_strategy else None
+        rng_strategy = np.random.default_rng([cfg.seed, 3])
         while True:
             # Candidate views are reachable only with a collision-free arm among the mapped objects.
             world.set_obstacles(mapper.objects_json())
-            decision = mapper.next_view(
-                intrinsics=world.intrinsics,
-                width=cfg.camera.width,
-                height=cfg.camera.height,
-                world_from_camera=world.world_from_camera_fk(world.qpos()),
-                reachable=world.is_reachable,
-            )
+            if user_strategy is None:
+                decision = mapper.next_view(
+                    intrinsics=world.intrinsics,
+                    width=cfg.camera.width,
+                    height=cfg.camera.height,
+                    world_from_camera=world.world_from_camera_fk(world.qpos()),
+                    reachable=world.is_reachable,
+                )
+            else:
+                decision = _python_decision(user_strategy, cfg, scene, mapper, world, rng_strategy)
             if decision["action"] == "stop":
                 stop_reason = decision["reason"]
                 rec.log_event(f"stop: {stop_reason}")

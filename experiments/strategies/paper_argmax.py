@@ -1,0 +1,35 @@
+"""Example Python strategy (``objslam.strategy``), the template to start from: the paper's
+object-driven rule written against the strategy interface.
+
+Stop when the paper's rule says so (every object's s(x) = 0, or the budget); else sample the
+paper's candidate views around the objects still to explore, score them with the paper's utility
+f = Σ ((1 − R_o) H_obj + λ (H_IoU + H_V)) s(x), and take the best reachable one. It chooses the same
+views as the built-in ``object-driven`` with the paper's stopping rule
+(``--set explore.discovery_before_stop=false --set explore.discovery_reserve=false``), so the same
+seed gives the same metrics (``tests/test_strategy.py``). Its config:
+``experiments/configs/strategies/paper-argmax.toml``.
+"""
+
+from __future__ import annotations
+
+
+class PaperArgmax:
+    """The paper's stopping rule, then the argmax of a utility over the reachable candidates."""
+
+    def __init__(self, utility: str = "object-driven") -> None:
+        self.utility = utility
+
+    def next_view(self, step):
+        reason = step.paper_stop()
+        if reason is not None:
+            step.stop_reason = reason
+            return None
+        around = [f["object_id"] for f in step.features() if f["explore"]]
+        views = step.candidates(around)
+        u = step.utilities(views, self.utility)
+        step.log_candidates(views, u)
+        # Reachability (IK and collisions) is asked in utility order, so it runs only for the best.
+        best = step.best_reachable(views, u)
+        if best is None:
+            step.stop_reason = "no_reachable_view"
+        return best

@@ -1,0 +1,251 @@
+"""View-selection strategies written in Python, run by the same episode loop as the built-in ones.
+
+The benchmark's users compare their own strategies with the paper's. A Python strategy is a class
+with a method ``next_view(step) -> 4x4 world_from_camera | None`` (None = stop); a run names it in
+its config::
+
+    strategy = "utility-per-metre"        # the label in metrics.json and the benchmark's tables
+    python_strategy = "experiments/strategies/utility_per_metre.py:UtilityPerMetre"
+
+    [python_strategy_params]              # keyword arguments of the class's constructor
+    metres_per_halving = 0.3
+
+``python_strategy`` is ``path/to/file.py:Class`` (relative to the repository root, or absolute)
+or ``package.module:Class`` (importable). A strategy file ``experiments/configs/strategies/<name>.toml``
+holding these keys makes ``--strategy <name>`` / ``benchmark.py --strategies <name>`` work like a
+built-in name (``utility-per-metre.toml`` is the example).
+
+Every strategy starts with the same Init views; then, once per decision, the episode asks
+``next_view`` with a :class:`DecisionStep`, moves the camera there along the configured path while
+the frames stream into the map, and counts the view. The budget (``explore.max_views`` views after
+Init) ends the episode whatever the strategy says. A step offers what the built-in utility
+strategies see, from the same core code and step seed (``objslam_core::active``): the map objects,
+the paper's per-object features (H_obj, H̄_obj, R_o, R_IoU, V̄_obj, s), the paper's candidate views,
+both utilities with their per-object breakdown, the paper's stopping rule, the table-top cells not
+seen yet (the discovery extension's), the arm's reachability test (IK and collisions with the
+table and the mapped objects) and a random generator seeded by the run seed. The test that pins it: a Python argmax of the paper's utility through this interface
+chooses the same views as the built-in ``object-driven`` (``tests/test_strategy.py``).
+
+A strategy that returns anything but None or a finite rigid 4x4 transform ends the run with a
+:class:`StrategyError` naming what it returned; the run folder keeps the map as it was
+(``map.json.partial``) and is marked INCOMPLETE, like any failed run. A returned pose the arm
+cannot reach is skipped (the view is spent, as a built-in strategy's skipped view is).
+"""
+
+from __future__ import annotations
+
+import importlib
+import importlib.util
+import json
+import re
+import sys
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+REPO_ROOT = Path(__file__).resolve().parents[2]
+
+UTILITIES = ("object-driven", "expected-gain")
+
+
+class StrategyError(RuntimeError):
+    """A Python strategy could not be loaded, or returned something that is not a view."""
+
+
+def load_strategy_class(spec: str) -> type:
+    """The class named by ``python_strategy`` (``file.py:Class`` or ``module:Class``); raises
+    :class:`StrategyError` saying what is wrong with the spec."""
+    if spec.count(":") != 1 or not all(spec.split(":")):
+        raise StrategyError(f"expected 'path/to/file.py:Class' or 'package.module:Class', got {spec!r}")
+    where, name = spec.split(":")
+    if where.endswith(".py"):
+        path = Path(where)
+        if not path.is_absolute():
+            path = REPO_ROOT / path
+        if not path.is_file():
+            raise StrategyError(f"{where}: no such file")
+        mod_name = "objslam_user_strategy_" + re.sub(r"\W", "_", str(path.resolve()))
+        module = sys.modules.get(mod_name)
+        if module is None:
+            loader_spec = importlib.util.spec_from_file_location(mod_name, path)
+            if loader_spec is None or loader_spec.loader is None:
+                raise StrategyError(f"{where}: cannot be loaded as a Python module")
+            module = importlib.util.module_from_spec(loader_spec)
+            sys.modules[mod_name] = module
+            try:
+                loader_spec.loader.exec_module(module)
+            except Exception as e:
+                del sys.modules[mod_name]
+                raise StrategyError(f"{where}: importing it raised {type(e).__name__}: {e}") from e
+    else:
+        try:
+            module = importlib.import_module(where)
+        except Exception as e:
+            raise StrategyError(f"{where}: cannot import ({type(e).__name__}: {e})") from e
+    cls = getattr(module, name, None)
+    if cls is None:
+        raise StrategyError(f"{where} has no {name!r}")
+    if not isinstance(cls, type) or not callable(getattr(cls, "next_view", None)):
+        raise StrategyError(f"{spec}: expected a class with a next_view(step) method")
+    return cls
+
+
+def make_strategy(spec: str, params: dict[str, Any]) -> Any:
+    """An instance of the strategy class, constructed with ``params`` as keyword arguments."""
+    cls = load_strategy_class(spec)
+    try:
+        return cls(**params)
+    except TypeError as e:
+        raise StrategyError(f"{spec}: python_strategy_params do not fit its constructor ({e})") from e
+
+
+def as_view(value: Any, who: str) -> npt.NDArray[np.float64] | None:
+    """None, or ``value`` as a float64 4x4 rigid transform; :class:`StrategyError` otherwise."""
+    if value is None:
+        return None
+    try:
+        m = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError) as e:
+        raise StrategyError(f"{who} returned {type(value).__name__}, not a 4x4 world_from_camera") from e
+    if m.shape != (4, 4):
+        raise StrategyError(f"{who} returned an array of shape {m.shape}, expected (4, 4) world_from_camera")
+    if not np.isfinite(m).all():
+        raise StrategyError(f"{who} returned a pose with non-finite entries")
+    r = m[:3, :3]
+    if not np.allclose(m[3], [0.0, 0.0, 0.0, 1.0], atol=1e-9):
+        raise StrategyError(f"{who} returned a pose whose last row is {m[3].tolist()}, not [0, 0, 0, 1]")
+    if not (np.allclose(r.T @ r, np.eye(3), atol=1e-6) and np.linalg.det(r) > 0.0):
+        raise StrategyError(f"{who} returned a pose whose rotation is not a rotation (R^T R != I or det < 0)")
+    return m
+
+
+class DecisionStep:
+    """What a Python strategy sees at one decision (built by the episode; read-only for the
+    strategy apart from :meth:`log_candidates` and :attr:`stop_reason`)."""
+
+    def __init__(
+        self,
+        *,
+        mapper: Any,
+        intrinsics: npt.NDArray[np.float64],
+        width: int,
+        height: int,
+        world_from_camera: npt.NDArray[np.float64],
+        reachable: Callable[[npt.NDArray[np.float64]], bool],
+        rng: np.random.Generator,
+        table_center: tuple[float, float],
+        table_size: tuple[float, float],
+    ) -> None:
+        self._mapper = mapper
+        self._cam = {"intrinsics": intrinsics, "width": width, "height": height}
+        self._reachable = reachable
+        self.world_from_camera = world_from_camera
+        """The camera pose now (forward kinematics of the arm's joints), 4x4."""
+        self.rng = rng
+        """Random generator seeded by the run seed; one stream for the whole episode."""
+        self.views_taken: int = mapper.views_taken()
+        """Views taken after Init so far."""
+        self.max_views: int = mapper.max_views()
+        """The budget after Init (``explore.max_views``); the episode stops there regardless."""
+        self.table_center = table_center
+        """Table top centre (x, y) in the world frame, metres (the top is z = 0)."""
+        self.table_size = table_size
+        """Table top size (x, y), metres."""
+        self.stop_reason: str | None = None
+        """Set it before returning None to say why the strategy stopped (metrics' ``stop_reason``)."""
+        self.logged: tuple[list[npt.NDArray[np.float64]], list[float]] | None = None
+
+    def objects(self) -> list[dict[str, Any]]:
+        """The map's objects (the map file's object records: id, label, pose, size, stage)."""
+        return json.loads(self._mapper.objects_json())
+
+    def features(self) -> list[dict[str, Any]]:
+        """The paper's per-object features, one dict per map object: ``object_id``,
+        ``entropy_bits`` (H_obj), ``normalized_entropy`` (H̄_obj), ``occupied_ratio`` (R_o),
+        ``history_iou`` (R_IoU or None), ``normalized_volume`` (V̄_obj), ``volume_probability``,
+        ``explore`` (s(x) = 1: still to explore), ``cells_occupied|free|unknown``."""
+        return self._mapper.object_features(**self._cam)
+
+    def candidates(self, around: Sequence[int] | None = None) -> list[npt.NDArray[np.float64]]:
+        """The paper's candidate views sampled around the objects ``around`` (map ids; None =
+        every object), as the built-in utility strategies sample them at this step; not yet
+        filtered by reachability."""
+        return [p for p, _ in self.candidates_with_targets(around)]
+
+    def candidates_with_targets(
+        self, around: Sequence[int] | None = None
+    ) -> list[tuple[npt.NDArray[np.float64], int | None]]:
+        """Like :meth:`candidates`, with the map id of the object each view was sampled around."""
+        return self._mapper.candidate_views(around=None if around is None else [int(i) for i in around])
+
+    def score(
+        self,
+        views: Sequence[npt.NDArray[np.float64]],
+        utility: str = "object-driven",
+        explore_every_object: bool = False,
+    ) -> list[dict[str, Any]]:
+        """Each view's utility and its per-object breakdown (``utility``: "object-driven", the
+        paper's f, or "expected-gain", with its motion cost from the camera now). Objects done
+        (s(x) = 0) add nothing unless ``explore_every_object``."""
+        if utility not in UTILITIES:
+            raise StrategyError(f"score(utility=...): expected one of {', '.join(UTILITIES)}, got {utility!r}")
+        if not len(views):
+            return []
+        return self._mapper.score_views(
+            **self._cam,
+            views=list(views),
+            utility=utility,
+            world_from_camera=self.world_from_camera,
+            explore_every_object=explore_every_object,
+        )
+
+    def utilities(
+        self,
+        views: Sequence[npt.NDArray[np.float64]],
+        utility: str = "object-driven",
+        explore_every_object: bool = False,
+    ) -> npt.NDArray[np.float64]:
+        """The utilities alone, as an array aligned with ``views``."""
+        return np.array([s["utility"] for s in self.score(views, utility, explore_every_object)], dtype=np.float64)
+
+    def reachable(self, world_from_camera: npt.NDArray[np.float64]) -> bool:
+        """Whether the arm can put the camera there (IK, joint limits, no collision with the table
+        or the mapped objects): the test the built-in strategies ask in utility order."""
+        return bool(self._reachable(np.asarray(world_from_camera, dtype=np.float64)))
+
+    def best_reachable(
+        self, views: Sequence[npt.NDArray[np.float64]], scores: Sequence[float]
+    ) -> npt.NDArray[np.float64] | None:
+        """The built-in strategies' argmax rule: the view with the highest finite score that the arm
+        can reach (ties → the lower index), asking reachability in score order so that IK runs
+        only for the best; None when no view with a finite score is reachable."""
+        if len(views) != len(scores):
+            raise StrategyError(f"best_reachable: {len(views)} views but {len(scores)} scores")
+        s = np.asarray(scores, dtype=np.float64)
+        for i in sorted(np.flatnonzero(np.isfinite(s)), key=lambda i: (-s[i], i)):
+            if self.reachable(views[i]):
+                return views[i]
+        return None
+
+    def table_unknown_cells(self) -> tuple[npt.NDArray[np.float64], list[bool]]:
+        """Table-top cells not known yet (neither seen nor under a mapped object; the discovery
+        extension's cells, ``explore.discovery_cell_m``): (N, 3) world centres and, per cell,
+        whether it is unexplained (object evidence that no map object explains)."""
+        return self._mapper.table_unknown_cells()
+
+    def paper_stop(self) -> str | None:
+        """The paper's stopping rule now: "all_explored", "max_views" or None."""
+        return self._mapper.paper_stop(**self._cam)
+
+    def log_candidates(self, views: Sequence[npt.NDArray[np.float64]], scores: Sequence[float]) -> None:
+        """Record the views the strategy weighed and their scores (arrows coloured by score in the
+        recording, as the built-in utility strategies' candidates are)."""
+        if len(views) != len(scores):
+            raise StrategyError(f"log_candidates: {len(views)} views but {len(scores)} scores")
+        self.logged = ([np.asarray(v, dtype=np.float64) for v in views], [float(s) for s in scores])
+
+
+__all__ = ["DecisionStep", "StrategyError", "as_view", "load_strategy_class", "make_strategy"]
