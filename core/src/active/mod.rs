@@ -40,6 +40,7 @@ use crate::explore::{
 use crate::frame::Frame;
 use crate::geometry::{PinholeCamera, Se3};
 use crate::map::ObjectMap;
+use nalgebra::Point3;
 
 /// Settings of a session. The fields mirror the explore module's configs that a run usually
 /// changes; everything else keeps the explore defaults (documented there).
@@ -186,6 +187,20 @@ pub struct ScoredCandidate {
     pub utility: f64,
     /// Whether the reachability callback accepted it (only asked in utility order until one is).
     pub reachable: Option<bool>,
+}
+
+/// What a view would show of the table top not known yet (the discovery extension, beyond the
+/// paper; `explore::discovery`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TableGain {
+    /// Weighted count of the cells it would see (unexplained cells weigh
+    /// `discovery_evidence_weight` while favoured).
+    pub cells: f64,
+    /// Whether favoured unexplained cells are among them.
+    pub unexplained: bool,
+    /// The discovery gain in bits: `cells` × (table cell / object cell)², the term the built-in
+    /// strategies add to the utility times `discovery_weight` (times 1 on a table-only step).
+    pub bits: f64,
 }
 
 /// Why a session stopped.
@@ -436,16 +451,8 @@ impl ActiveSession {
                 let mut ctx = UtilityContext::new(map, &self.grids, &self.history, camera, &self.explore)?;
                 let disc = &self.explore.discovery;
                 let occluders = Occluders::from_map(map, &self.explore.grid);
-                let (mut unknown, evidence) = if disc.enabled() {
-                    self.table_coverage.unknown_cells_with_evidence(&occluders)
-                } else {
-                    (Vec::new(), Vec::new())
-                };
-                // An unexplained cell stands for `evidence_weight` unseen cells until the session
-                // has spent `evidence_max_views` views on them.
-                let favour = disc.evidence_height_m > 0.0 && self.evidence_views < disc.evidence_max_views;
-                let mut weights: Vec<f64> =
-                    evidence.iter().map(|e| if *e && favour { disc.evidence_weight } else { 1.0 }).collect();
+                let (mut unknown, mut weights) =
+                    if disc.enabled() { self.weighted_unknown(&occluders) } else { (Vec::new(), Vec::new()) };
                 let min_new = disc.min_new_cells as f64;
                 let mut unknown_weight: f64 = weights.iter().sum();
                 if unknown_weight < min_new && disc.weight <= 0.0 {
@@ -463,38 +470,18 @@ impl ActiveSession {
                     Some(r) => return Ok(NextView::Stop { reason: r.into() }),
                     None => {}
                 }
-                // Candidates aimed at the unseen table (the same for every use below); the
-                // unexplained cells' targets first.
-                let always = |_: &Se3| true;
-                let table_views = if unknown.is_empty() || !(table_only || disc.reserve || disc.weight > 0.0) {
+                // Candidates aimed at the unseen table (the same for every use below).
+                let table_views = if !(table_only || disc.reserve || disc.weight > 0.0) {
                     Vec::new()
                 } else {
-                    let favoured: Vec<_> =
-                        unknown.iter().zip(&weights).filter(|(_, w)| **w > 1.0).map(|(p, _)| *p).collect();
-                    let mut targets = discovery_targets(&favoured, disc.targets, step_seed);
-                    targets.extend(discovery_targets(&unknown, disc.targets, step_seed));
-                    sample_candidates_at(
-                        &targets,
-                        map,
-                        &self.candidates,
-                        &self.explore.grid,
-                        &always,
-                        step_seed ^ TABLE_CANDIDATE_SEED,
-                    )?
-                };
-                let grid = &self.explore.grid;
-                let sees = |cells: &[nalgebra::Point3<f64>], p: &Se3| {
-                    visible_unknown_indices(cells, camera, p, &occluders, grid, disc)
+                    self.table_views_at(map, &unknown, &weights, step_seed)?
                 };
                 // The budget reserve: the table's share of the views left, taken last.
                 if !table_only && disc.reserve && unknown_weight >= min_new {
                     let left = self.explore.max_views - self.views_taken;
-                    let seen: Vec<Vec<usize>> =
-                        table_views.iter().map(|v| sees(&unknown, &v.world_from_camera)).collect();
-                    let needed = greedy_discovery_views_weighted(&seen, &weights, min_new, left, |i| {
-                        reachable.reachable(&table_views[i].world_from_camera)
-                    });
-                    table_only = needed.len() >= left;
+                    let needed =
+                        self.greedy_table_views(camera, &occluders, &unknown, &weights, &table_views, left, reachable);
+                    table_only = needed >= left;
                 }
                 if !table_only && disc.weight <= 0.0 {
                     unknown.clear(); // the paper's candidates and utility until every object is done
@@ -504,6 +491,7 @@ impl ActiveSession {
                 let around: Vec<u32> = features.iter().filter(|f| f.explore).map(|f| f.object_id).collect();
                 // The argmax rule over reachable views: sample without the reachability filter,
                 // score all, then ask reachability in utility order, so IK runs only for the best.
+                let always = |_: &Se3| true;
                 let mut views: Vec<CandidateView> = if table_only {
                     Vec::new()
                 } else {
@@ -523,17 +511,8 @@ impl ActiveSession {
                 let scores = ctx.score_all(&poses, self.strategy, Some(current))?;
                 // Per candidate: the weighted count of unseen cells it would see, and whether
                 // unexplained ones are among them.
-                let new_cells: Vec<(f64, bool)> = poses
-                    .iter()
-                    .map(|p| {
-                        if unknown.is_empty() {
-                            (0.0, false)
-                        } else {
-                            let idx = sees(&unknown, p);
-                            (idx.iter().map(|i| weights[*i]).sum(), idx.iter().any(|i| weights[*i] > 1.0))
-                        }
-                    })
-                    .collect();
+                let new_cells: Vec<(f64, bool)> =
+                    poses.iter().map(|p| self.table_new_cells(camera, &occluders, &unknown, &weights, p)).collect();
                 let weight = if table_only { 1.0 } else { disc.weight };
                 let bits_per_cell = weight * self.table_coverage.bits_per_cell(self.explore.grid.cell_size_m);
                 let mut scored: Vec<ScoredCandidate> = poses
@@ -622,5 +601,151 @@ impl ActiveSession {
     /// The view budget after Init (`explore.max_views`).
     pub fn max_views(&self) -> usize {
         self.explore.max_views
+    }
+
+    /// The discovery extension's candidate views at this step (beyond the paper;
+    /// `explore::discovery`): sampled at targets among the table cells not known yet, the
+    /// unexplained cells' targets first, as the built-in utility strategies sample them (same
+    /// configuration and step seed); none when every cell is known. Not filtered by reachability.
+    pub fn table_candidate_views(&self, map: &ObjectMap) -> Result<Vec<CandidateView>, ExploreError> {
+        let (unknown, weights) = self.weighted_unknown(&Occluders::from_map(map, &self.explore.grid));
+        self.table_views_at(map, &unknown, &weights, self.step_seed())
+    }
+
+    /// What each view would show of the table not known yet ([`TableGain`]), with the cells
+    /// weighted as the built-in strategies weigh them (an unexplained cell counts
+    /// `discovery_evidence_weight` until `discovery_evidence_max_views` views were spent on such
+    /// cells).
+    pub fn table_gain(&self, map: &ObjectMap, camera: &PinholeCamera, views: &[Se3]) -> Vec<TableGain> {
+        let occluders = Occluders::from_map(map, &self.explore.grid);
+        let (unknown, weights) = self.weighted_unknown(&occluders);
+        let bits_per_cell = self.table_coverage.bits_per_cell(self.explore.grid.cell_size_m);
+        views
+            .iter()
+            .map(|p| {
+                let (cells, unexplained) = self.table_new_cells(camera, &occluders, &unknown, &weights, p);
+                TableGain { cells, unexplained, bits: bits_per_cell * cells }
+            })
+            .collect()
+    }
+
+    /// The weighted count of table cells not known yet (the built-in strategies compare it with
+    /// `discovery_min_new_cells`).
+    pub fn table_unknown_weight(&self, map: &ObjectMap) -> f64 {
+        self.weighted_unknown(&Occluders::from_map(map, &self.explore.grid)).1.iter().sum()
+    }
+
+    /// The budget reserve's count: how many of [`Self::table_candidate_views`] a greedy cover
+    /// takes, each reachable and revealing at least `discovery_min_new_cells` weighted cells not
+    /// revealed by the ones before, at most `limit`. The built-in strategies take a discovery view
+    /// once it is no less than the views left.
+    pub fn table_views_needed(
+        &self,
+        map: &ObjectMap,
+        camera: &PinholeCamera,
+        reachable: &dyn Reachability,
+        limit: usize,
+    ) -> Result<usize, ExploreError> {
+        let occluders = Occluders::from_map(map, &self.explore.grid);
+        let (unknown, weights) = self.weighted_unknown(&occluders);
+        let views = self.table_views_at(map, &unknown, &weights, self.step_seed())?;
+        Ok(self.greedy_table_views(camera, &occluders, &unknown, &weights, &views, limit, reachable))
+    }
+
+    /// A strategy outside the core chose `view`: it counts among the views spent on unexplained
+    /// evidence when it would see such a cell, as the built-in strategies count their own choices
+    /// (call it once per decision, before the move).
+    pub fn note_chosen_view(&mut self, map: &ObjectMap, camera: &PinholeCamera, view: &Se3) {
+        let occluders = Occluders::from_map(map, &self.explore.grid);
+        let (unknown, weights) = self.weighted_unknown(&occluders);
+        let (_, unexplained) = self.table_new_cells(camera, &occluders, &unknown, &weights, view);
+        self.evidence_views += usize::from(unexplained);
+    }
+
+    /// The table cells not known yet and their weights: an unexplained cell stands for
+    /// `evidence_weight` unseen cells until the session has spent `evidence_max_views` views on
+    /// such cells, every other cell for one.
+    fn weighted_unknown(&self, occluders: &Occluders) -> (Vec<Point3<f64>>, Vec<f64>) {
+        let disc = &self.explore.discovery;
+        let (unknown, evidence) = self.table_coverage.unknown_cells_with_evidence(occluders);
+        let favour = disc.evidence_height_m > 0.0 && self.evidence_views < disc.evidence_max_views;
+        let weights = evidence.iter().map(|e| if *e && favour { disc.evidence_weight } else { 1.0 }).collect();
+        (unknown, weights)
+    }
+
+    /// Candidates aimed at `unknown` cells, the favoured (weight > 1) cells' targets first.
+    fn table_views_at(
+        &self,
+        map: &ObjectMap,
+        unknown: &[Point3<f64>],
+        weights: &[f64],
+        step_seed: u64,
+    ) -> Result<Vec<CandidateView>, ExploreError> {
+        if unknown.is_empty() {
+            return Ok(Vec::new());
+        }
+        let n = self.explore.discovery.targets;
+        let favoured: Vec<Point3<f64>> =
+            unknown.iter().zip(weights).filter(|(_, w)| **w > 1.0).map(|(p, _)| *p).collect();
+        let mut targets = discovery_targets(&favoured, n, step_seed);
+        targets.extend(discovery_targets(unknown, n, step_seed));
+        let always = |_: &Se3| true;
+        sample_candidates_at(
+            &targets,
+            map,
+            &self.candidates,
+            &self.explore.grid,
+            &always,
+            step_seed ^ TABLE_CANDIDATE_SEED,
+        )
+    }
+
+    /// The indices of the `unknown` cells a camera at `view` would see.
+    fn table_seen(
+        &self,
+        camera: &PinholeCamera,
+        occluders: &Occluders,
+        unknown: &[Point3<f64>],
+        view: &Se3,
+    ) -> Vec<usize> {
+        if unknown.is_empty() {
+            return Vec::new();
+        }
+        visible_unknown_indices(unknown, camera, view, occluders, &self.explore.grid, &self.explore.discovery)
+    }
+
+    /// The weighted count of `unknown` cells a camera at `view` would see, and whether favoured
+    /// (unexplained) ones are among them.
+    fn table_new_cells(
+        &self,
+        camera: &PinholeCamera,
+        occluders: &Occluders,
+        unknown: &[Point3<f64>],
+        weights: &[f64],
+        view: &Se3,
+    ) -> (f64, bool) {
+        let idx = self.table_seen(camera, occluders, unknown, view);
+        (idx.iter().map(|i| weights[*i]).sum(), idx.iter().any(|i| weights[*i] > 1.0))
+    }
+
+    /// The greedy cover of the unseen table by `views` (see [`Self::table_views_needed`]).
+    #[allow(clippy::too_many_arguments)]
+    fn greedy_table_views(
+        &self,
+        camera: &PinholeCamera,
+        occluders: &Occluders,
+        unknown: &[Point3<f64>],
+        weights: &[f64],
+        views: &[CandidateView],
+        limit: usize,
+        reachable: &dyn Reachability,
+    ) -> usize {
+        let seen: Vec<Vec<usize>> =
+            views.iter().map(|v| self.table_seen(camera, occluders, unknown, &v.world_from_camera)).collect();
+        let min_new = self.explore.discovery.min_new_cells as f64;
+        greedy_discovery_views_weighted(&seen, weights, min_new, limit, |i| {
+            reachable.reachable(&views[i].world_from_camera)
+        })
+        .len()
     }
 }

@@ -964,13 +964,15 @@ fn unexplained_evidence_draws_a_view_centred_on_the_unmapped_object() {
         // The session's per-view curve holds the same count after the last view.
         assert_eq!(s.table_unexplained_curve().len(), frames.len());
         assert_eq!(s.table_unexplained_curve().last(), Some(&n));
-        (s.next_view(&map, &cam, &poses[0], &AlwaysReachable).unwrap_or_else(|e| panic!("{e}")), n)
+        let before = s.clone();
+        (s.next_view(&map, &cam, &poses[0], &AlwaysReachable).unwrap_or_else(|e| panic!("{e}")), n, before)
     };
     let before_stop = ActiveConfig { discovery_before_stop: true, discovery_reserve: true, ..ActiveConfig::default() };
     let all_explored = NextView::Stop { reason: SessionStop::AllExplored };
-    assert_eq!(run(before_stop.clone()), (all_explored.clone(), 0), "without evidence B's cells count as seen");
+    let (d, n, _) = run(before_stop.clone());
+    assert_eq!((d, n), (all_explored.clone(), 0), "without evidence B's cells count as seen");
     let evidence = ActiveConfig { discovery_evidence_height_m: 0.02, ..before_stop };
-    let (d, n) = run(evidence.clone());
+    let (d, n, step) = run(evidence.clone());
     // B (5 cm square, turned 0.3 rad) overlaps 9-16 cells of 2 cm.
     assert!((9..=16).contains(&n), "{n} unexplained cells");
     let NextView::Move { world_from_camera, .. } = d else { panic!("expected a move: {d:?}") };
@@ -979,9 +981,42 @@ fn unexplained_evidence_draws_a_view_centred_on_the_unmapped_object() {
         .project(&(world_from_camera.inverse() * Point3::from(Vector3::from(b))))
         .unwrap_or_else(|| panic!("B behind the camera"));
     assert!(uv[0] > 32.0 && uv[0] < 288.0 && uv[1] > 24.0 && uv[1] < 216.0, "B at {uv:?}");
+    // The same step as a strategy outside the core sees it: the paper's rule says "all
+    // explored", the weighted unseen table is worth a view, and the argmax of the discovery gain
+    // over the table candidates revealing min_new_cells is the built-in choice, gain and pose.
+    let NextView::Move { utility, .. } = d else { unreachable!() };
+    let min_new = evidence.discovery_min_new_cells as f64;
+    assert_eq!(step.paper_stop(&map, &cam).unwrap_or_else(|e| panic!("{e}")), Some(SessionStop::AllExplored));
+    let weight = step.table_unknown_weight(&map);
+    assert!(weight >= min_new && weight >= evidence.discovery_evidence_weight * n as f64, "{weight}");
+    let views: Vec<Se3> = step
+        .table_candidate_views(&map)
+        .unwrap_or_else(|e| panic!("{e}"))
+        .iter()
+        .map(|c| c.world_from_camera)
+        .collect();
+    let gains = step.table_gain(&map, &cam, &views);
+    let best = (0..views.len())
+        .filter(|i| gains[*i].cells >= min_new)
+        .max_by(|a, b| gains[*a].bits.total_cmp(&gains[*b].bits).then(b.cmp(a)))
+        .unwrap_or_else(|| panic!("no table view reveals {min_new} cells"));
+    assert_eq!(views[best], world_from_camera);
+    assert_eq!(gains[best].bits, utility);
+    assert!(gains[best].unexplained);
+    assert!(step.table_views_needed(&map, &cam, &AlwaysReachable, 10).unwrap_or_else(|e| panic!("{e}")) >= 1);
+    // Views chosen outside the core count towards evidence_max_views like the built-in ones:
+    // once spent, the unexplained cells weigh 1.
+    let mut outside = step.clone();
+    for _ in 0..evidence.discovery_evidence_max_views {
+        assert!(outside.table_unknown_weight(&map) > weight - 1e-9);
+        outside.note_chosen_view(&map, &cam, &world_from_camera);
+    }
+    let plain = outside.table_unknown_weight(&map);
+    assert!((weight - plain - (evidence.discovery_evidence_weight - 1.0) * n as f64).abs() < 1e-9, "{weight} {plain}");
     // With no views left for evidence it counts as plain unseen cells: fewer than
     // min_new_cells, so the session stops.
     assert_eq!(run(ActiveConfig { discovery_evidence_max_views: 0, ..evidence }).0, all_explored);
+    assert!(plain < min_new, "{plain}");
 }
 
 #[test]
