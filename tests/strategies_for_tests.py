@@ -1,8 +1,11 @@
-"""Python strategies for tests/test_strategy.py: two wrong on purpose, one that reports what it saw."""
+"""Python strategies for tests/test_strategy.py: two wrong on purpose, two that report what they saw."""
 
 from __future__ import annotations
 
 import numpy as np
+from objslam.strategy import load_strategy_class
+
+ObjectDriven = load_strategy_class("experiments/strategies/object_driven.py:ObjectDriven")
 
 
 class NotAView:
@@ -32,3 +35,14 @@ class TableCells:
             )
         )
         step.stop_reason = f"unknown_{len(pts)}_unexplained_{int(np.sum(unexplained))}_on_table_{on_table}"
+
+
+class CountingObjectDriven(ObjectDriven):
+    """The example object_driven.py, counting (class-wide) the decisions the table gain drew."""
+
+    table_drawn_steps = 0
+
+    def next_view(self, step):
+        view = super().next_view(step)
+        type(self).table_drawn_steps += int(step.table_drawn)
+        return view

@@ -41,6 +41,31 @@ fn matrix_py<'py>(py: Python<'py>, t: &Se3) -> Bound<'py, PyArray2<f64>> {
     arr.to_pyarray(py)
 }
 
+/// Ask a Python reachability callback about `p`; its first error is kept in `error` (and every
+/// later view counts as unreachable) so that the caller raises it after the core returns.
+fn call_reachable(
+    py: Python<'_>,
+    reachable: &Bound<'_, PyAny>,
+    p: &Se3,
+    error: &std::cell::RefCell<Option<PyErr>>,
+) -> bool {
+    if error.borrow().is_some() {
+        return false;
+    }
+    match reachable.call1((matrix_py(py, p),)).and_then(|r| r.extract::<bool>()) {
+        Ok(ok) => ok,
+        Err(e) => {
+            *error.borrow_mut() = Some(e);
+            false
+        }
+    }
+}
+
+/// A list of 4x4 views; the error names the index.
+fn view_list(views: &[Bound<'_, PyAny>]) -> PyResult<Vec<Se3>> {
+    views.iter().enumerate().map(|(i, v)| pose(v, "views").map_err(|e| input_err(format!("views[{i}]: {e}")))).collect()
+}
+
 /// A candidate view and the map object it was sampled around.
 type TargetedView<'py> = (Bound<'py, PyArray2<f64>>, Option<u32>);
 
@@ -187,18 +212,7 @@ impl ActiveMapperPy {
         let cam = camera(intrinsics, width, height)?;
         let current = pose(world_from_camera, "world_from_camera")?;
         let callback_error: std::cell::RefCell<Option<PyErr>> = std::cell::RefCell::new(None);
-        let check = |p: &Se3| -> bool {
-            if callback_error.borrow().is_some() {
-                return false;
-            }
-            match reachable.call1((matrix_py(py, p),)).and_then(|r| r.extract::<bool>()) {
-                Ok(ok) => ok,
-                Err(e) => {
-                    *callback_error.borrow_mut() = Some(e);
-                    false
-                }
-            }
-        };
+        let check = |p: &Se3| -> bool { call_reachable(py, reachable, p, &callback_error) };
         let decision = self.session.next_view(&self.mapper.map(), &cam, &current, &check).map_err(explore_err)?;
         if let Some(e) = callback_error.into_inner() {
             return Err(e);
@@ -297,11 +311,7 @@ impl ActiveMapperPy {
                 )))
             }
         };
-        let poses: Vec<Se3> = views
-            .iter()
-            .enumerate()
-            .map(|(i, v)| pose(v, "views").map_err(|e| input_err(format!("views[{i}]: {e}"))))
-            .collect::<PyResult<_>>()?;
+        let poses = view_list(&views)?;
         let scores = self
             .session
             .score_views(&self.mapper.map(), &cam, &poses, strategy, &current, explore_every_object)
@@ -349,6 +359,84 @@ impl ActiveMapperPy {
     /// The view budget after Init (`explore.max_views`).
     fn max_views(&self) -> usize {
         self.session.max_views()
+    }
+
+    /// The discovery extension's candidate views at this step (table cells not known yet, the
+    /// unexplained ones first), as the built-in utility strategies sample them; not filtered by
+    /// reachability. A list of 4x4 `world_from_camera`.
+    fn table_candidate_views<'py>(&self, py: Python<'py>) -> PyResult<Vec<Bound<'py, PyArray2<f64>>>> {
+        let views = self.session.table_candidate_views(&self.mapper.map()).map_err(explore_err)?;
+        Ok(views.iter().map(|v| matrix_py(py, &v.world_from_camera)).collect())
+    }
+
+    /// What each view would show of the table not known yet: one dict per view {"cells" (weighted
+    /// count), "unexplained" (favoured unexplained cells among them), "bits" (the discovery gain)}.
+    #[pyo3(signature = (*, intrinsics, width, height, views))]
+    fn table_gain<'py>(
+        &self,
+        py: Python<'py>,
+        intrinsics: &Bound<'py, PyAny>,
+        width: u32,
+        height: u32,
+        views: Vec<Bound<'py, PyAny>>,
+    ) -> PyResult<Vec<Bound<'py, PyDict>>> {
+        let cam = camera(intrinsics, width, height)?;
+        let poses = view_list(&views)?;
+        self.session
+            .table_gain(&self.mapper.map(), &cam, &poses)
+            .iter()
+            .map(|g| {
+                let d = PyDict::new(py);
+                d.set_item("cells", g.cells)?;
+                d.set_item("unexplained", g.unexplained)?;
+                d.set_item("bits", g.bits)?;
+                Ok(d)
+            })
+            .collect()
+    }
+
+    /// The weighted count of table cells not known yet.
+    fn table_unknown_weight(&self) -> f64 {
+        self.session.table_unknown_weight(&self.mapper.map())
+    }
+
+    /// The budget reserve's count: discovery views a greedy cover takes (each reachable, each
+    /// revealing `discovery_min_new_cells` new weighted cells), at most `limit`. `reachable` is
+    /// called with a 4x4 `world_from_camera` and returns a bool.
+    #[pyo3(signature = (*, intrinsics, width, height, reachable, limit))]
+    fn table_views_needed<'py>(
+        &self,
+        py: Python<'py>,
+        intrinsics: &Bound<'py, PyAny>,
+        width: u32,
+        height: u32,
+        reachable: &Bound<'py, PyAny>,
+        limit: usize,
+    ) -> PyResult<usize> {
+        let cam = camera(intrinsics, width, height)?;
+        let callback_error: std::cell::RefCell<Option<PyErr>> = std::cell::RefCell::new(None);
+        let check = |p: &Se3| -> bool { call_reachable(py, reachable, p, &callback_error) };
+        let n = self.session.table_views_needed(&self.mapper.map(), &cam, &check, limit).map_err(explore_err)?;
+        match callback_error.into_inner() {
+            Some(e) => Err(e),
+            None => Ok(n),
+        }
+    }
+
+    /// A strategy outside the core chose this view (call once per decision, before the move): it
+    /// counts among the views spent on unexplained evidence when it would see such cells.
+    #[pyo3(signature = (*, intrinsics, width, height, world_from_camera))]
+    fn note_chosen_view(
+        &mut self,
+        intrinsics: &Bound<'_, PyAny>,
+        width: u32,
+        height: u32,
+        world_from_camera: &Bound<'_, PyAny>,
+    ) -> PyResult<()> {
+        let cam = camera(intrinsics, width, height)?;
+        let view = pose(world_from_camera, "world_from_camera")?;
+        self.session.note_chosen_view(&self.mapper.map(), &cam, &view);
+        Ok(())
     }
 
     /// The camera pose used for the last frame (4x4), or None before the first frame.

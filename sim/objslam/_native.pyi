@@ -122,6 +122,33 @@ class ActiveMapper:
         explore_every_object: bool = False,
     ) -> list[dict[str, Any]]: ...
     def paper_stop(self, *, intrinsics: npt.NDArray[np.float64], width: int, height: int) -> str | None: ...
+    def table_candidate_views(self) -> list[npt.NDArray[np.float64]]: ...
+    def table_gain(
+        self,
+        *,
+        intrinsics: npt.NDArray[np.float64],
+        width: int,
+        height: int,
+        views: Sequence[npt.NDArray[np.float64]],
+    ) -> list[dict[str, Any]]: ...
+    def table_unknown_weight(self) -> float: ...
+    def table_views_needed(
+        self,
+        *,
+        intrinsics: npt.NDArray[np.float64],
+        width: int,
+        height: int,
+        reachable: Callable[[npt.NDArray[np.float64]], bool],
+        limit: int,
+    ) -> int: ...
+    def note_chosen_view(
+        self,
+        *,
+        intrinsics: npt.NDArray[np.float64],
+        width: int,
+        height: int,
+        world_from_camera: npt.NDArray[np.float64],
+    ) -> None: ...
     def entropy_curve(self) -> list[float]: ...
     def table_known_curve(self) -> list[float]: ...
     def table_unknown_cells(self) -> tuple[npt.NDArray[np.float64], list[bool]]: ...

@@ -132,10 +132,17 @@ def _python_decision(
         rng=rng,
         table_center=(float(scene.table.center[0]), float(scene.table.center[1])),
         table_size=(float(scene.table.size[0]), float(scene.table.size[1])),
+        explore=to_dict(cfg.explore),
     )
     view = as_view(strategy.next_view(step), f"{cfg.python_strategy}.next_view")
     if view is None:
         return {"action": "stop", "reason": step.stop_reason or "strategy_done"}
+    if step.table_drawn:
+        # A view the table gain helped choose counts towards discovery_evidence_max_views when
+        # it sees unexplained cells, as the built-in strategies count theirs.
+        mapper.note_chosen_view(
+            intrinsics=world.intrinsics, width=cfg.camera.width, height=cfg.camera.height, world_from_camera=view
+        )
     decision: dict[str, Any] = {"action": "move", "world_from_camera": view, "utility": float("nan")}
     if step.logged is not None:
         views, scores = step.logged

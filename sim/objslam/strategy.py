@@ -22,9 +22,13 @@ Init) ends the episode whatever the strategy says. A step offers what the built-
 strategies see, from the same core code and step seed (``objslam_core::active``): the map objects,
 the paper's per-object features (H_obj, H̄_obj, R_o, R_IoU, V̄_obj, s), the paper's candidate views,
 both utilities with their per-object breakdown, the paper's stopping rule, the table-top cells not
-seen yet (the discovery extension's), the arm's reachability test (IK and collisions with the
-table and the mapped objects) and a random generator seeded by the run seed. The test that pins it: a Python argmax of the paper's utility through this interface
-chooses the same views as the built-in ``object-driven`` (``tests/test_strategy.py``).
+seen yet with the discovery extension's candidate views, gain and budget-reserve count, the run's
+``[explore]`` settings, the arm's reachability test (IK and collisions with the table and the
+mapped objects) and a random generator seeded by the run seed. The tests that pin it: a Python
+argmax of the paper's utility through this interface chooses the same views as the built-in
+``object-driven`` with the paper's stopping rule (``experiments/strategies/paper_argmax.py``), and
+the example ``object_driven.py`` the same views as the built-in with the default table discovery
+(``tests/test_strategy.py``).
 
 A strategy that returns anything but None or a finite rigid 4x4 transform ends the run with a
 :class:`StrategyError` naming what it returned; the run folder keeps the map as it was
@@ -138,6 +142,7 @@ class DecisionStep:
         rng: np.random.Generator,
         table_center: tuple[float, float],
         table_size: tuple[float, float],
+        explore: dict[str, Any] | None = None,
     ) -> None:
         self._mapper = mapper
         self._cam = {"intrinsics": intrinsics, "width": width, "height": height}
@@ -154,6 +159,13 @@ class DecisionStep:
         """Table top centre (x, y) in the world frame, metres (the top is z = 0)."""
         self.table_size = table_size
         """Table top size (x, y), metres."""
+        self.explore: dict[str, Any] = dict(explore or {})
+        """The run's ``[explore]`` settings (``ExploreConfig`` as a dict: ``max_views``,
+        ``discovery_min_new_cells``, ``discovery_weight``, ...), read-only."""
+        self.table_drawn: bool = False
+        """Set it when the table gain (:meth:`table_gain`) was part of the choice: the chosen view
+        then counts towards ``discovery_evidence_max_views`` if it sees unexplained cells, as the
+        built-in strategies count theirs."""
         self.stop_reason: str | None = None
         """Set it before returning None to say why the strategy stopped (metrics' ``stop_reason``)."""
         self.logged: tuple[list[npt.NDArray[np.float64]], list[float]] | None = None
@@ -235,6 +247,33 @@ class DecisionStep:
         extension's cells, ``explore.discovery_cell_m``): (N, 3) world centres and, per cell,
         whether it is unexplained (object evidence that no map object explains)."""
         return self._mapper.table_unknown_cells()
+
+    def table_candidates(self) -> list[npt.NDArray[np.float64]]:
+        """The discovery extension's candidate views (beyond the paper; core ``explore::discovery``):
+        sampled at targets among the table cells not known yet, the unexplained cells' first, as
+        the built-in utility strategies sample them at this step; not filtered by reachability."""
+        return self._mapper.table_candidate_views()
+
+    def table_gain(self, views: Sequence[npt.NDArray[np.float64]]) -> list[dict[str, Any]]:
+        """What each view would show of the table not known yet, one dict per view: ``cells``
+        (weighted count: an unexplained cell weighs ``discovery_evidence_weight`` until
+        ``discovery_evidence_max_views`` chosen views saw such cells), ``unexplained`` (such cells
+        among them), ``bits`` (the discovery gain the built-in strategies add to the utility, times
+        ``discovery_weight``, or alone on a table-only step)."""
+        if not len(views):
+            return []
+        return self._mapper.table_gain(**self._cam, views=list(views))
+
+    def table_unknown_weight(self) -> float:
+        """The weighted count of table cells not known yet (the built-in strategies look at the
+        table only while it is at least ``discovery_min_new_cells``)."""
+        return float(self._mapper.table_unknown_weight())
+
+    def table_views_needed(self, limit: int) -> int:
+        """The budget reserve's count: how many table candidates a greedy cover takes (each
+        reachable, each revealing ``discovery_min_new_cells`` new weighted cells), at most
+        ``limit``; the built-in strategies switch to the table once it reaches the views left."""
+        return int(self._mapper.table_views_needed(**self._cam, reachable=self.reachable, limit=int(limit)))
 
     def paper_stop(self) -> str | None:
         """The paper's stopping rule now: "all_explored", "max_views" or None."""
