@@ -23,6 +23,8 @@ Its config: ``experiments/configs/strategies/object-driven-py.toml``.
 from __future__ import annotations
 
 import numpy as np
+import numpy.typing as npt
+from objslam.strategy import DecisionStep
 
 
 class ObjectDriven:
@@ -31,7 +33,7 @@ class ObjectDriven:
     def __init__(self, utility: str = "object-driven") -> None:
         self.utility = utility
 
-    def next_view(self, step):
+    def next_view(self, step: DecisionStep) -> npt.NDArray[np.float64] | None:
         ex = step.explore
         min_new = float(ex["discovery_min_new_cells"])
         weight = float(ex["discovery_weight"])

@@ -12,6 +12,10 @@ seed gives the same metrics (``tests/test_strategy.py``). Its config:
 
 from __future__ import annotations
 
+import numpy as np
+import numpy.typing as npt
+from objslam.strategy import DecisionStep
+
 
 class PaperArgmax:
     """The paper's stopping rule, then the argmax of a utility over the reachable candidates."""
@@ -19,7 +23,7 @@ class PaperArgmax:
     def __init__(self, utility: str = "object-driven") -> None:
         self.utility = utility
 
-    def next_view(self, step):
+    def next_view(self, step: DecisionStep) -> npt.NDArray[np.float64] | None:
         reason = step.paper_stop()
         if reason is not None:
             step.stop_reason = reason

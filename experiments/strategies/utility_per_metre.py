@@ -17,6 +17,8 @@ Run it like a built-in strategy (its config is ``experiments/configs/strategies/
 from __future__ import annotations
 
 import numpy as np
+import numpy.typing as npt
+from objslam.strategy import DecisionStep
 
 
 class UtilityPerMetre:
@@ -28,7 +30,7 @@ class UtilityPerMetre:
         self.metres_per_halving = float(metres_per_halving)
         self.utility = utility
 
-    def next_view(self, step):
+    def next_view(self, step: DecisionStep) -> npt.NDArray[np.float64] | None:
         reason = step.paper_stop()
         if reason is not None:
             step.stop_reason = reason
