@@ -55,6 +55,12 @@ def test_the_python_object_driven_example_takes_the_built_in_views_table_discove
     # Its config file makes the name work like a built-in one.
     cfg = load_run_config(overlays=[ci_overlay], strategy="object-driven-py")
     assert cfg.python_strategy.endswith("object_driven.py:ObjectDriven")
+    # utility-per-metre on the built-in scores (discovery = true) with a discount that is 1 to the
+    # last bit is the built-in too.
+    sets_upm = ["python_strategy_params.discovery=true", "python_strategy_params.metres_per_halving=1e300", *sets]
+    upm = run_episode(_cfg(tmp_path, ci_overlay, "utility-per-metre", sets_upm), progress=False).metrics
+    for key in ("views", "frames", "path_length_m", "stop_reason", "table_known_curve", "mean"):
+        assert upm[key] == built_in[key], key
 
 
 def test_a_strategy_that_returns_no_view_fails_the_run_and_keeps_the_map(tmp_path, ci_overlay) -> None:

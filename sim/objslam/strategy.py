@@ -44,6 +44,7 @@ import json
 import re
 import sys
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -287,4 +288,83 @@ class DecisionStep:
         self.logged = ([np.asarray(v, dtype=np.float64) for v in views], [float(s) for s in scores])
 
 
-__all__ = ["DecisionStep", "StrategyError", "as_view", "load_strategy_class", "make_strategy"]
+@dataclass
+class BuiltInScores:
+    """The built-in utility strategies' candidates and scores at one step (:func:`built_in_scores`)."""
+
+    views: list[npt.NDArray[np.float64]] = field(default_factory=list)
+    """Candidate views (4x4 ``world_from_camera``), not yet filtered by reachability."""
+    scores: npt.NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
+    """Their scores; -inf for a view the built-in would never take (a table-only step's views
+    revealing fewer than ``discovery_min_new_cells`` cells)."""
+    stop: str | None = None
+    """The built-in's stop reason when it stops here ("all_explored", "max_views"); then no views."""
+    table_only: bool = False
+    """The step goes to the unseen table (before-stop discovery or the budget reserve)."""
+    table_drawn: bool = False
+    """The table gain is part of the scores (assign it to ``step.table_drawn`` when taking one)."""
+
+
+def built_in_scores(step: DecisionStep, utility: str = "object-driven") -> BuiltInScores:
+    """The built-in ``object-driven`` (or ``expected-gain``, ``utility``) decision up to the argmax,
+    through the strategy interface, with the run's ``[explore]`` settings (as the core's
+    ``ActiveSession::next_view``):
+
+    1. the paper's stopping rule; with ``stop_when_explored = false`` "all explored" keeps scoring
+       every object; with ``discovery_before_stop`` it looks at the unseen table first while the
+       weighted unseen cells are at least ``discovery_min_new_cells``;
+    2. the budget reserve (``discovery_reserve``): once the table views still worth taking are no
+       fewer than the views left, the rest goes to the table;
+    3. candidates: the paper's views around the objects still to explore, plus the table candidates
+       when ``discovery_weight`` > 0 (table candidates alone on a table-only step);
+    4. scores: the utility plus ``discovery_weight`` × the table gain in bits (the gain alone on a
+       table-only step, where only views revealing ``discovery_min_new_cells`` count).
+
+    The built-in takes the best reachable view (:meth:`DecisionStep.best_reachable`); a strategy
+    can re-rank the scores first (``experiments/strategies/utility_per_metre.py``)."""
+    ex = step.explore
+    min_new = float(ex["discovery_min_new_cells"])
+    weight = float(ex["discovery_weight"])
+    discovery = weight > 0.0 or ex["discovery_before_stop"] or ex["discovery_reserve"]
+    unknown = step.table_unknown_weight() if discovery else 0.0
+    if unknown < min_new and weight <= 0.0:
+        unknown = 0.0  # too little unseen table to be worth a view, and no mixed term
+    explore_all = table_only = False
+    reason = step.paper_stop()
+    if reason == "all_explored" and not ex["stop_when_explored"]:
+        explore_all = True
+    elif reason == "all_explored" and ex["discovery_before_stop"] and unknown >= min_new:
+        table_only = True
+    elif reason is not None:
+        return BuiltInScores(stop=reason)
+    if not table_only and ex["discovery_reserve"] and unknown >= min_new:
+        left = step.max_views - step.views_taken
+        table_only = step.table_views_needed(left) >= left
+    mixed = unknown > 0.0 and (table_only or weight > 0.0)
+    views: list[npt.NDArray[np.float64]] = []
+    if not table_only:
+        views = step.candidates([f["object_id"] for f in step.features() if f["explore"] or explore_all])
+    if mixed:
+        views += step.table_candidates()
+    out = BuiltInScores(views=views, table_only=table_only, table_drawn=mixed)
+    if not views:
+        return out
+    score = step.utilities(views, utility, explore_every_object=explore_all)
+    if mixed:
+        gains = step.table_gain(views)
+        score = score + (1.0 if table_only else weight) * np.array([g["bits"] for g in gains])
+        if table_only:
+            score[[g["cells"] < min_new for g in gains]] = -np.inf
+    out.scores = score
+    return out
+
+
+__all__ = [
+    "BuiltInScores",
+    "DecisionStep",
+    "StrategyError",
+    "as_view",
+    "built_in_scores",
+    "load_strategy_class",
+    "make_strategy",
+]
