@@ -4,7 +4,7 @@ it. Start here when a strategy should keep the discovery behaviour of the built-
 (``paper_argmax.py`` is the paper's rule alone, written out call by call).
 
 ``objslam.strategy.built_in_scores`` gives the built-in's candidates and scores at the step (its
-docs list the rules); the strategy takes the best reachable one, as the built-in does. With the
+docs list the rules); ``take_best`` takes the best reachable one, as the built-in does. With the
 same seed it chooses the same views as the built-in strategy (``tests/test_strategy.py``,
 ``reports/exploration_python_strategy/default_discovery/``). Its config:
 ``experiments/configs/strategies/object-driven-py.toml``.
@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 import numpy.typing as npt
-from objslam.strategy import DecisionStep, built_in_scores
+from objslam.strategy import DecisionStep, built_in_scores, take_best
 
 
 class ObjectDriven:
@@ -24,13 +24,4 @@ class ObjectDriven:
         self.utility = utility
 
     def next_view(self, step: DecisionStep) -> npt.NDArray[np.float64] | None:
-        s = built_in_scores(step, self.utility)
-        if s.stop is not None:
-            step.stop_reason = s.stop
-            return None
-        step.table_drawn = s.table_drawn
-        step.log_candidates(s.views, s.scores)
-        best = step.best_reachable(s.views, s.scores)
-        if best is None:
-            step.stop_reason = "all_explored" if s.table_only else "no_reachable_view"
-        return best
+        return take_best(step, built_in_scores(step, self.utility))

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 import numpy.typing as npt
-from objslam.strategy import DecisionStep
+from objslam.strategy import DecisionStep, paper_scores, take_best
 
 
 class PaperArgmax:
@@ -24,16 +24,7 @@ class PaperArgmax:
         self.utility = utility
 
     def next_view(self, step: DecisionStep) -> npt.NDArray[np.float64] | None:
-        reason = step.paper_stop()
-        if reason is not None:
-            step.stop_reason = reason
-            return None
-        around = [f["object_id"] for f in step.features() if f["explore"]]
-        views = step.candidates(around)
-        u = step.utilities(views, self.utility)
-        step.log_candidates(views, u)
-        # Reachability (IK and collisions) is asked in utility order, so it runs only for the best.
-        best = step.best_reachable(views, u)
-        if best is None:
-            step.stop_reason = "no_reachable_view"
-        return best
+        # objslam.strategy.paper_scores spells the rule out through the step's calls (paper_stop,
+        # features, candidates, utilities); take_best asks reachability (IK and collisions) in
+        # score order, so it runs only for the best.
+        return take_best(step, paper_scores(step, self.utility))

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 import numpy.typing as npt
-from objslam.strategy import DecisionStep, built_in_scores
+from objslam.strategy import DecisionStep, built_in_scores, paper_scores, take_best
 
 
 class UtilityPerMetre:
@@ -39,36 +39,5 @@ class UtilityPerMetre:
         return np.exp2(-dist / self.metres_per_halving)
 
     def next_view(self, step: DecisionStep) -> npt.NDArray[np.float64] | None:
-        if self.discovery:
-            return self._built_in_discounted(step)
-        reason = step.paper_stop()
-        if reason is not None:
-            step.stop_reason = reason
-            return None
-        around = [f["object_id"] for f in step.features() if f["explore"]]
-        views = step.candidates(around)
-        if not views:
-            step.stop_reason = "no_candidate"
-            return None
-        score = step.utilities(views, self.utility) * self._discount(step, views)
-        step.log_candidates(views, score)
-        best = step.best_reachable(views, score)
-        if best is None:
-            step.stop_reason = "no_reachable_view"
-        return best
-
-    def _built_in_discounted(self, step: DecisionStep) -> npt.NDArray[np.float64] | None:
-        s = built_in_scores(step, self.utility)
-        if s.stop is not None:
-            step.stop_reason = s.stop
-            return None
-        if not s.views:
-            step.stop_reason = "all_explored" if s.table_only else "no_candidate"
-            return None
-        score = s.scores * self._discount(step, s.views)
-        step.table_drawn = s.table_drawn
-        step.log_candidates(s.views, score)
-        best = step.best_reachable(s.views, score)
-        if best is None:
-            step.stop_reason = "all_explored" if s.table_only else "no_reachable_view"
-        return best
+        s = built_in_scores(step, self.utility) if self.discovery else paper_scores(step, self.utility)
+        return take_best(step, s, s.scores * self._discount(step, s.views) if s.views else None)

@@ -320,8 +320,8 @@ def built_in_scores(step: DecisionStep, utility: str = "object-driven") -> Built
     4. scores: the utility plus ``discovery_weight`` × the table gain in bits (the gain alone on a
        table-only step, where only views revealing ``discovery_min_new_cells`` count).
 
-    The built-in takes the best reachable view (:meth:`DecisionStep.best_reachable`); a strategy
-    can re-rank the scores first (``experiments/strategies/utility_per_metre.py``)."""
+    The built-in takes the best reachable view (:func:`take_best`); a strategy can re-rank the
+    scores first (``experiments/strategies/utility_per_metre.py``)."""
     ex = step.explore
     min_new = float(ex["discovery_min_new_cells"])
     weight = float(ex["discovery_weight"])
@@ -359,6 +359,36 @@ def built_in_scores(step: DecisionStep, utility: str = "object-driven") -> Built
     return out
 
 
+def paper_scores(step: DecisionStep, utility: str = "object-driven") -> BuiltInScores:
+    """The paper's decision up to its argmax: its stopping rule, its candidate views around the
+    objects still to explore, each scored with ``utility`` (the built-in ``object-driven`` with
+    ``explore.discovery_before_stop`` and ``explore.discovery_reserve`` off)."""
+    reason = step.paper_stop()
+    if reason is not None:
+        return BuiltInScores(stop=reason)
+    views = step.candidates([f["object_id"] for f in step.features() if f["explore"]])
+    return BuiltInScores(views=views, scores=step.utilities(views, utility))
+
+
+def take_best(
+    step: DecisionStep, s: BuiltInScores, scores: npt.NDArray[np.float64] | None = None
+) -> npt.NDArray[np.float64] | None:
+    """The built-in strategies' choice from :func:`built_in_scores` / :func:`paper_scores`, or from
+    ``scores`` re-ranking ``s.views``: stop when ``s`` stops, else record the candidates and return
+    the best reachable view (reachability asked in score order, so IK runs only for the best),
+    setting ``step.stop_reason`` when there is none and ``step.table_drawn`` as ``s`` says."""
+    if s.stop is not None:
+        step.stop_reason = s.stop
+        return None
+    score = s.scores if scores is None else np.asarray(scores, dtype=np.float64)
+    step.table_drawn = s.table_drawn
+    step.log_candidates(s.views, score)
+    best = step.best_reachable(s.views, score)
+    if best is None:
+        step.stop_reason = "all_explored" if s.table_only else "no_reachable_view"
+    return best
+
+
 __all__ = [
     "BuiltInScores",
     "DecisionStep",
@@ -367,4 +397,6 @@ __all__ = [
     "built_in_scores",
     "load_strategy_class",
     "make_strategy",
+    "paper_scores",
+    "take_best",
 ]
