@@ -11,7 +11,7 @@ GRASP_ARGS ?=
 PLACE_ARGS ?=
 ROBUSTNESS_ARGS ?=
 
-.PHONY: help setup run test test-rust test-py bench benchmark associate parameterize slam grasp grasp-robustness place match match-sim report view lint fmt clean
+.PHONY: help setup run test test-fast test-rust test-rust-unit test-py bench benchmark associate parameterize slam grasp grasp-robustness place match match-sim report view lint fmt clean
 
 help: ## List the targets
 	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*## "}; {printf "  \033[1m%-12s\033[0m %s\n", $$1, $$2}'
@@ -24,10 +24,16 @@ run: setup ## Run the main job: one episode on scene 1 (RUN_ARGS="--scene ... --
 
 test: setup test-rust test-py ## Run all tests (cargo tests in the release profile + pytest)
 
+test-fast: setup test-rust-unit ## Rust unit tests + the pytest tests that do not run the simulator
+	$(PY) -m pytest -q -m "not slow" tests
+
 # Without the rerun feature, so the heavy rerun tree is not rebuilt with the test profile's feature
 # set (the recorder is tested from Python, through the bindings built by `make setup`).
 test-rust: ## Rust tests only (release profile, shared with maturin's build)
 	cargo test --release -p objslam-core
+
+test-rust-unit: ## Rust unit tests only (the library's own tests, no integration tests)
+	cargo test --release -p objslam-core --lib
 
 test-py: ## Python tests only (needs `make setup`)
 	$(PY) -m pytest -q tests

@@ -31,9 +31,8 @@ import sys
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO / "experiments"))
 
-from sweep import Job, run_sweep, scene_files
+from objslam.sweep import Job, run_sweep, scene_files
 
 MODES = ("naive", "iou", "iou_np", "iou_t", "ensemble", "ensemble+")
 #: Mode → run-config overrides. The paper's modes run without our consolidation and keep every

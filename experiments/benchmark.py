@@ -38,9 +38,8 @@ from pathlib import Path
 from typing import Any
 
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO / "experiments"))
 
-from sweep import BACKENDS, Job, run_sweep, scene_files
+from objslam.sweep import BACKENDS, Job, run_sweep, scene_files
 
 STRATEGIES = ("object-driven", "random", "coverage", "init", "expected-gain")
 METRICS = ("iou3d", "iou2d", "cde_cm", "yae_deg")

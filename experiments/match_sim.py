@@ -36,11 +36,10 @@ from pathlib import Path
 from typing import Any
 
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import objslam
 from objslam.topo import similarity_matrix, transform_errors, transform_map_json
-from sweep import Job, run_job
+from objslam.sweep import Job, run_job
 
 PRIOR = {"strategy": "init", "seed": 0, "overrides": ()}
 QUERY = {

@@ -158,8 +158,7 @@ def test_object_evidence_maps_the_object_seen_only_at_the_border(tmp_path, ci_ov
     Init views of scene06 (seed 1) see an object only truncated at the image border; without object
     evidence its returns count as table and the budget goes elsewhere, so it is never mapped. With
     ``explore.discovery_evidence_height_m`` its cells stay unexplained and draw a view centred on
-    it: every object mapped. (Seed 6 was the scenario before the half-pixel fix of 2026-12-04; it
-    now maps the object without evidence too. Seeds 1 and 2 both show the effect.)"""
+    it: every object mapped (seeds 1 and 2 both show the effect)."""
     common = {
         "scene": '"scenes/scene06.toml"',
         "camera.fovy_deg": 35.0,

@@ -118,7 +118,6 @@ def test_benchmark_maps_are_used_only_for_their_own_scene_and_seed(tmp_path, cap
     import tomli_w
     from objslam.config import to_dict
 
-    sys.path.insert(0, str(SCENES[0].parents[1] / "experiments"))
     import grasp as grasp_cli
 
     run = tmp_path / "run_od"
@@ -206,7 +205,6 @@ def test_a_finger_landing_on_the_rim_moves_the_hand_over_and_the_grasp_succeeds(
 def test_centre_errors_are_seeded_and_of_the_stated_size() -> None:
     import sys
 
-    sys.path.insert(0, str(SCENES[0].parents[1] / "experiments"))
     import grasp as grasp_cli
 
     scene = load_scene(SCENES[2])
@@ -225,7 +223,6 @@ def test_centre_errors_are_seeded_and_of_the_stated_size() -> None:
 def test_robustness_report_counts_success_failures_and_touches_per_cell(tmp_path) -> None:
     import sys
 
-    sys.path.insert(0, str(SCENES[0].parents[1] / "experiments"))
     import grasp_robustness
 
     def row(err: float, retries: int, ok: bool, cause: str, touches: int = 0, cls: str = "cup") -> dict:

@@ -28,7 +28,6 @@ def test_the_letting_go_table_counts_how_each_item_was_let_go() -> None:
     import sys
     from pathlib import Path
 
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "experiments"))
     import place
 
     def td(how: str | None, depth: float | None, gap: float | None) -> dict:

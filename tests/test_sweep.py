@@ -3,15 +3,13 @@
 from __future__ import annotations
 
 import json
-import sys
 from pathlib import Path
 
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO / "experiments"))
 
-from sweep import Job, run_sweep
+from objslam.sweep import Job, run_sweep
 
 # Wall time and timings differ between runs; everything else must be equal.
 UNSTABLE = ("wall_s", "timings_ms_median", "run_dir")

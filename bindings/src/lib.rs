@@ -152,6 +152,12 @@ pub(crate) fn json_err(field: &str, e: serde_json::Error) -> PyErr {
     input_err(format!("{field}: {e}"))
 }
 
+/// A core value as Python dicts / lists / numbers, through its JSON form.
+pub(crate) fn to_py<'py>(py: Python<'py>, value: &impl serde::Serialize, field: &str) -> PyResult<Bound<'py, PyAny>> {
+    let s = serde_json::to_string(value).map_err(|e| json_err(field, e))?;
+    py.import("json")?.call_method1("loads", (s,))
+}
+
 /// The foundation's naive mapper (depth points in the box, box-IoU association, AABB extent).
 #[pyclass(module = "objslam._native", name = "NaiveMapper")]
 struct NaiveMapperPy {

@@ -20,7 +20,7 @@ use objslam_core::association::{AssociationConfig, Associator, Decision, LocalOb
 use objslam_core::frame::Detection;
 use objslam_core::geometry::{ObjectGeometry, PinholeCamera, Se3, Shape};
 use objslam_core::map::Label;
-use objslam_core::naive::project_geometry;
+use objslam_core::geometry::project_geometry;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 

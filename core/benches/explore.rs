@@ -83,7 +83,7 @@ fn bench(c: &mut Criterion) {
         })
     });
     let eye = Point3::new(0.5, 0.0, 0.5);
-    let pose = objslam_core::explore::look_at(&eye, &Point3::new(0.5, 0.0, 0.0)).unwrap_or_else(|e| panic!("{e}"));
+    let pose = objslam_core::geometry::look_at(&eye, &Point3::new(0.5, 0.0, 0.0)).unwrap_or_else(|e| panic!("{e}"));
     let table = TableRect { center_m: [0.5, 0.0], size_m: [0.8, 1.2], height_m: 0.0 };
     let coverage = TableCoverage::new(&table, &cfg.discovery).unwrap_or_else(|e| panic!("{e}"));
     c.bench_function("discovery_100x12", |b| {

@@ -14,7 +14,7 @@ use std::hint::black_box;
 use std::path::PathBuf;
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use nalgebra::{Isometry3, Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Point3, Vector3};
 use objslam_core::frame::GreyImage;
 use objslam_core::geometry::{Box2, PinholeCamera, Se3};
 use objslam_core::objects::iforest::{IForestConfig, IsolationForest};
@@ -80,11 +80,8 @@ fn bench_lsd(c: &mut Criterion) {
 }
 
 fn look_at(eye: Vector3<f64>, target: Vector3<f64>) -> Se3 {
-    let z = (target - eye).normalize();
-    let x = z.cross(&Vector3::z()).normalize();
-    let y = z.cross(&x);
-    let r = Rotation3::from_matrix_unchecked(Matrix3::from_columns(&[x, y, z]));
-    Isometry3::from_parts(Translation3::from(eye), UnitQuaternion::from_rotation_matrix(&r))
+    objslam_core::geometry::look_at_with_up(&eye.into(), &target.into(), &Vector3::z())
+        .unwrap_or_else(|e| panic!("{e}"))
 }
 
 /// One object (14 x 7 x 8 cm box, yaw 35°) seen in 5 frames: each projected edge longer than 15 px

@@ -1,10 +1,11 @@
-//! Replay a capture of `experiments/slam_capture.py` through the tracker (SLAM diagnosis).
+//! Replay the frames of a capture (`experiments/capture.py`, format in
+//! `objslam_core::system::capture`) through the tracker alone (SLAM diagnosis).
 //!
 //! `cargo run --release -p objslam-core --example slam_replay -- <capture dir> [tracker config JSON] [-v]`
 //!
-//! The tracker config is the capture's `tracker.json` (the episode's own, so the replay reproduces
-//! its poses) with the keys of the optional JSON argument merged over it (objects merged key by
-//! key), e.g. `'{"motion_gate_floor_m": 0, "motion_gate_floor_deg": 0}'`.
+//! The tracker config is the capture's own (from `system.json`, so a capture of every frame
+//! reproduces the episode's poses) with the keys of the optional JSON argument merged over it
+//! (objects merged key by key), e.g. `'{"motion_gate_floor_m": 0, "motion_gate_floor_deg": 0}'`.
 //!
 //! Prints the online ATE (each frame's pose as output when it was tracked), the final-trajectory
 //! ATE ([`Tracker::trajectory`]), the ATE after the best rigid alignment (consistency only), RPE,
@@ -15,18 +16,9 @@ use std::path::Path;
 
 use anyhow::{anyhow, Context, Result};
 use nalgebra::{Matrix3, Matrix4, Vector3};
-use objslam_core::frame::{DepthImage, GreyImage};
-use objslam_core::geometry::{se3_from_matrix, PinholeCamera, Se3};
+use objslam_core::geometry::{se3_from_matrix, Se3};
 use objslam_core::slam::{ate_rmse_m, rpe, TrackInput, Tracker, TrackerConfig};
-
-fn mat4(v: &serde_json::Value) -> Result<Matrix4<f64>> {
-    let a = v.as_array().ok_or_else(|| anyhow!("pose is not an array"))?;
-    let vals: Vec<f64> = a.iter().filter_map(serde_json::Value::as_f64).collect();
-    if vals.len() != 16 {
-        return Err(anyhow!("pose has {} values", vals.len()));
-    }
-    Ok(Matrix4::from_row_slice(&vals))
-}
+use objslam_core::system::capture::{Capture, CaptureEvent};
 
 /// ATE after the best rigid alignment (Horn / Umeyama without scale) of the estimate to the truth.
 fn aligned_ate(est: &[Se3], gt: &[Se3]) -> f64 {
@@ -70,48 +62,32 @@ fn main() -> Result<()> {
         Some(s) => serde_json::from_str(s).context("tracker config argument")?,
         None => serde_json::json!({}),
     };
-    let mut cfg_json: serde_json::Value = match std::fs::read_to_string(dir.join("tracker.json")) {
-        Ok(s) => serde_json::from_str(&s).context("tracker.json")?,
-        Err(_) => serde_json::json!({}),
-    };
+    let capture = Capture::open(dir)?;
+    let mut cfg_json = serde_json::to_value(capture.header.tracker_config.unwrap_or_default())?;
     merge(&mut cfg_json, &overrides);
     let config: TrackerConfig = serde_json::from_value(cfg_json).context("tracker config")?;
     let mut tracker = Tracker::new(config)?;
-    let lines = std::fs::read_to_string(dir.join("frames.jsonl")).context("frames.jsonl")?;
     let (mut online, mut gts) = (Vec::new(), Vec::new());
     let t0 = std::time::Instant::now();
-    for line in lines.lines() {
-        let rec: serde_json::Value = serde_json::from_str(line)?;
-        let i = rec["index"].as_u64().ok_or_else(|| anyhow!("index"))?;
-        let (w, h) = (rec["width"].as_u64().unwrap_or(0) as u32, rec["height"].as_u64().unwrap_or(0) as u32);
-        let k: Vec<f64> = rec["intrinsics"]
-            .as_array()
-            .map(|a| a.iter().filter_map(serde_json::Value::as_f64).collect())
-            .unwrap_or_default();
-        if k.len() != 9 {
-            return Err(anyhow!("frame {i}: intrinsics"));
-        }
-        let camera = PinholeCamera::new(w, h, k[0], k[4], k[2], k[5])?;
-        let grey = GreyImage::new(w, h, std::fs::read(dir.join(format!("grey_{i}.u8")))?)?;
-        let raw = std::fs::read(dir.join(format!("depth_{i}.f32")))?;
-        let depth =
-            DepthImage::new(w, h, raw.chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect())?;
-        let fk = se3_from_matrix(&mat4(&rec["world_from_camera_fk"])?, "fk")?;
-        let gt = se3_from_matrix(&mat4(&rec["world_from_camera_gt"])?, "gt")?;
-        let view = rec["view_index"].as_u64().unwrap_or(0);
+    for event in &capture.events {
+        let CaptureEvent::Frame(f) = event else { continue };
+        let (frame, grey) = capture.load_frame(f)?;
+        let gt = se3_from_matrix(&Matrix4::from_row_slice(&f.world_from_camera_gt), "gt")?;
         let out = tracker.track(&TrackInput {
             grey: &grey,
-            depth: &depth,
-            camera: &camera,
-            world_from_camera_fk: fk,
-            view_index: view,
+            depth: &frame.depth,
+            camera: &frame.camera,
+            world_from_camera_fk: frame.world_from_camera,
+            view_index: f.view_index,
             world_from_camera_gt: Some(gt),
         })?;
         if verbose {
             let err = (out.world_from_camera.translation.vector - gt.translation.vector).norm() * 1e3;
             let perr = (out.world_from_camera_prior.translation.vector - gt.translation.vector).norm() * 1e3;
             println!(
-                "frame {i:4} view {view:2} feat {:4} inl {:4} kf {} pts {:5} err {err:6.2} mm prior {perr:6.2} mm {:?}",
+                "frame {:4} view {:2} feat {:4} inl {:4} kf {} pts {:5} err {err:6.2} mm prior {perr:6.2} mm {:?}",
+                f.index,
+                f.view_index,
                 out.n_features,
                 out.n_inliers,
                 u8::from(out.keyframe_inserted),

@@ -23,6 +23,8 @@
 //! - [`topo`]: semantic topological map, random-walk descriptors, scene matching, relocalisation.
 //! - `record` (feature `rerun`): one Rerun recording per run.
 //! - [`slam`]: RGB-D visual tracking (ORB features, PnP + RANSAC, local BA), pose sources, ATE/RPE.
+//! - [`system`]: the per-frame loop (tracking → gauge → pipeline → grids) and the session's
+//!   decisions behind one type, [`system::System`].
 
 pub mod active;
 pub mod association;
@@ -38,4 +40,5 @@ pub mod plan;
 #[cfg(feature = "rerun")]
 pub mod record;
 pub mod slam;
+pub mod system;
 pub mod topo;

@@ -15,7 +15,7 @@ use objslam_core::association::{AssociationConfig, AssociationMode, Decision};
 use objslam_core::frame::{DepthImage, Detection, Frame};
 use objslam_core::geometry::{Box2, ObjectGeometry, PinholeCamera, Se3, Shape};
 use objslam_core::map::Label;
-use objslam_core::naive::project_geometry;
+use objslam_core::geometry::project_geometry;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 

@@ -2,7 +2,7 @@
 //! 30 % clutter, the stage chain raw → iforest → lines → refined, and the documented fallbacks.
 //! Seeds are fixed; envelopes are stated in each assertion.
 
-use nalgebra::{Isometry3, Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Point3, Vector3};
 use objslam_core::geometry::{iou3d, yaw_error_deg, Box2, ObjectGeometry, PinholeCamera, Se3, Shape};
 use objslam_core::map::EstimateStage;
 use objslam_core::objects::lsd::LineSegment;
@@ -13,11 +13,8 @@ use rand_chacha::ChaCha8Rng;
 
 /// A camera at `eye` looking at `target` (OpenCV axes; world z up).
 fn look_at(eye: Vector3<f64>, target: Vector3<f64>) -> Se3 {
-    let z = (target - eye).normalize();
-    let x = z.cross(&Vector3::z()).normalize();
-    let y = z.cross(&x);
-    let r = Rotation3::from_matrix_unchecked(Matrix3::from_columns(&[x, y, z]));
-    Isometry3::from_parts(Translation3::from(eye), UnitQuaternion::from_rotation_matrix(&r))
+    objslam_core::geometry::look_at_with_up(&eye.into(), &target.into(), &Vector3::z())
+        .unwrap_or_else(|e| panic!("{e}"))
 }
 
 fn camera() -> PinholeCamera {

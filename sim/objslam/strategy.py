@@ -180,7 +180,11 @@ class DecisionStep:
         ``entropy_bits`` (H_obj), ``normalized_entropy`` (H̄_obj), ``occupied_ratio`` (R_o),
         ``history_iou`` (R_IoU or None), ``normalized_volume`` (V̄_obj), ``volume_probability``,
         ``explore`` (s(x) = 1: still to explore), ``cells_occupied|free|unknown``."""
-        return self._mapper.object_features(**self._cam)
+        features = self._mapper.object_features(**self._cam)
+        for f in features:
+            grid = f.pop("grid")
+            f.update(cells_occupied=grid["occupied"], cells_free=grid["free"], cells_unknown=grid["unknown"])
+        return features
 
     def candidates(self, around: Sequence[int] | None = None) -> list[npt.NDArray[np.float64]]:
         """The paper's candidate views sampled around the objects ``around`` (map ids; None =

@@ -191,7 +191,7 @@ pub struct ScoredCandidate {
 
 /// What a view would show of the table top not known yet (the discovery extension, beyond the
 /// paper; `explore::discovery`).
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct TableGain {
     /// Weighted count of the cells it would see (unexplained cells weigh
     /// `discovery_evidence_weight` while favoured).

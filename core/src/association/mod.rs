@@ -558,7 +558,7 @@ impl GlobalObject {
     /// A raw [`MapObject`]: per-axis 2 %–98 % extent of the cloud, yaw 0, majority label,
     /// stage [`EstimateStage::Raw`]. Parameterization refines this.
     pub fn to_map_object_raw(&self) -> MapObject {
-        let (center, half) = match crate::naive::trimmed_extent(&self.points, 0.02) {
+        let (center, half) = match crate::geometry::trimmed_extent(&self.points, 0.02) {
             Some((lo, hi)) => ((lo + hi) / 2.0, (hi - lo) / 2.0),
             None => (self.mean_centroid().unwrap_or_else(Vector3::zeros), Vector3::zeros()),
         };

@@ -4,7 +4,7 @@
 
 use super::*;
 use crate::geometry::{ObjectGeometry, Shape};
-use crate::naive::project_geometry;
+use crate::geometry::project_geometry;
 use nalgebra::{Isometry3, Translation3, UnitQuaternion};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;

@@ -136,7 +136,7 @@ impl FaceGrid {
 }
 
 /// Counts and entropies of one object's grid (the paper's |O|, |F|, |U|, H_obj, H̄_obj, R_o).
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, serde::Serialize)]
 pub struct GridStats {
     /// Occupied cells |O|.
     pub occupied: usize,

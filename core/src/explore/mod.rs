@@ -33,8 +33,8 @@
 //!    `ctx.`[`score_all`](UtilityContext::score_all)`(views, strategy, Some(current_pose))` with
 //!    [`Strategy::ObjectDriven`] or [`Strategy::ExpectedGain`], then [`next_best_view`] (argmax).
 //! - Baselines: [`init_views`] (four table corners, top view), [`coverage_views`]
-//!   (Boustrophedon lanes), [`random_views`] (random reachable views). [`look_at`] builds a
-//!   `world_from_camera` (OpenCV axes, image up ≈ world +z).
+//!   (Boustrophedon lanes), [`random_views`] (random reachable views); views are built by
+//!   [`crate::geometry::look_at`].
 //! - Recording and tests: [`SurfaceGrid::cells_in_world`] (cells with state and probability),
 //!   [`ViewScore`] (per-object utility terms), [`Occluders::cast_ray`] (render synthetic depth
 //!   and segmentation from a map).
@@ -121,7 +121,7 @@ pub use utility::{
     ObjectFeatures, ObjectHistory, ObjectViewTerms, StopReason, UtilityContext, ViewScore,
 };
 pub use views::{
-    camera_position_free, coverage_views, init_views, look_at, look_at_with_up, random_views, sample_candidates,
+    camera_position_free, coverage_views, init_views, random_views, sample_candidates,
     sample_candidates_around, sample_candidates_at, AlwaysReachable, CandidateView, Reachability,
 };
 pub use visibility::{

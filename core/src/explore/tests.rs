@@ -3,7 +3,7 @@
 use nalgebra::{Point3, Vector3};
 
 use super::*;
-use crate::geometry::{se3_from_yaw, Box2, ObjectGeometry, Shape};
+use crate::geometry::{look_at, se3_from_yaw, Box2, ObjectGeometry, Shape};
 use crate::map::{EstimateStage, Label, MapObject};
 
 fn object(label: Label, center: [f64; 3], yaw: f64, half: [f64; 3]) -> MapObject {

@@ -10,7 +10,7 @@ use super::visibility::{check_pose, point_visibility, CellVisibility, Occluders,
 use super::{EntropyScope, ExplorationGrids, ExploreConfig, ExploreError, IouMode, Strategy};
 use crate::geometry::{iou3d, Box2, ObjectGeometry, PinholeCamera, Se3};
 use crate::map::ObjectMap;
-use crate::naive::project_geometry;
+use crate::geometry::project_geometry;
 
 /// The estimates one object had at past decision steps, oldest first (pipeline input).
 ///
@@ -85,7 +85,7 @@ impl HistoryBook {
 
 /// The paper's per-object feature vector x = (H_obj, H̄_obj, R_o, R_IoU, V̄_obj, s), plus the
 /// volume-convergence probability used by H_V and s.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct ObjectFeatures {
     /// Map object id.
     pub object_id: u32,
@@ -173,7 +173,7 @@ pub fn stop_reason(features: &[ObjectFeatures], views_taken: usize, config: &Exp
 }
 
 /// One object's contribution to a view's utility.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct ObjectViewTerms {
     /// Object id.
     pub object_id: u32,
@@ -195,7 +195,7 @@ pub struct ObjectViewTerms {
 }
 
 /// A candidate view's utility and its breakdown.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct ViewScore {
     /// The utility f (higher is better).
     pub utility: f64,

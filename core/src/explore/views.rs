@@ -1,13 +1,13 @@
-//! Camera poses: `look_at`, candidate views around the objects, and the baseline view generators
+//! Camera poses: candidate views around the objects, and the baseline view generators
 //! (Init: four table corners; Coverage: Boustrophedon scan; Random: random reachable views).
 
-use nalgebra::{Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Point3, Vector3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 use super::visibility::Occluders;
 use super::{CandidateConfig, ExploreError, GridConfig, TableRect};
-use crate::geometry::{PinholeCamera, Se3};
+use crate::geometry::{look_at, look_at_with_up, PinholeCamera, Se3};
 use crate::map::ObjectMap;
 
 /// Whether the arm can place the camera at a pose (the lead implements it with IK). Any
@@ -31,52 +31,6 @@ impl Reachability for AlwaysReachable {
     fn reachable(&self, _: &Se3) -> bool {
         true
     }
-}
-
-/// `world_from_camera` for a camera at `eye` looking at `target` (OpenCV axes: z towards the
-/// target). Image "up" (−y) is world +z projected onto the image plane; when the view is within
-/// ~8° of vertical it is instead the horizontal direction away from the robot base (world origin)
-/// through the eye (world +x when the eye is above the origin).
-pub fn look_at(eye: &Point3<f64>, target: &Point3<f64>) -> Result<Se3, ExploreError> {
-    let d = target - eye;
-    let radial = Vector3::new(eye.x, eye.y, 0.0);
-    let up = if d.norm() > 0.0 && (d.z.abs() / d.norm()) > NEAR_VERTICAL_COS {
-        if radial.norm() > 1e-6 {
-            radial / radial.norm()
-        } else {
-            Vector3::x()
-        }
-    } else {
-        Vector3::z()
-    };
-    look_at_with_up(eye, target, &up)
-}
-
-/// Viewing directions closer to vertical than this (|cos| of the angle to world z) use the
-/// horizontal "away from the robot" direction as image up in [`look_at`].
-const NEAR_VERTICAL_COS: f64 = 0.99;
-
-/// `world_from_camera` looking from `eye` at `target` with image up (−y) along `up_hint`
-/// projected onto the image plane. Errors when the eye and target coincide or `up_hint` is
-/// (nearly) parallel to the viewing direction.
-pub fn look_at_with_up(eye: &Point3<f64>, target: &Point3<f64>, up_hint: &Vector3<f64>) -> Result<Se3, ExploreError> {
-    if eye.coords.iter().chain(target.coords.iter()).chain(up_hint.iter()).any(|v| !v.is_finite()) {
-        return Err(ExploreError::NonFinite { field: "look_at eye/target/up" });
-    }
-    let d = target - eye;
-    let n = d.norm();
-    if n < 1e-9 {
-        return Err(ExploreError::Degenerate { what: "look_at: eye and target coincide".into() });
-    }
-    let z = d / n;
-    let up_perp = up_hint - z * up_hint.dot(&z);
-    if up_perp.norm() < 1e-6 {
-        return Err(ExploreError::Degenerate { what: "look_at: up direction parallel to the view".into() });
-    }
-    let y = -up_perp / up_perp.norm();
-    let x = y.cross(&z);
-    let r = Rotation3::from_matrix_unchecked(Matrix3::from_columns(&[x, y, z]));
-    Ok(Se3::from_parts(Translation3::from(eye.coords), UnitQuaternion::from_rotation_matrix(&r)))
 }
 
 /// A candidate view with where it came from.
@@ -207,7 +161,7 @@ pub fn init_views(table: &TableRect, config: &CandidateConfig) -> Result<Vec<Se3
             let offset =
                 if inward.norm() > 1e-9 { inward / inward.norm() * shift.min(inward.norm()) } else { Vector3::zeros() };
             let target = Point3::new(p[0], p[1], table.height_m) + offset;
-            look_at(&eye, &target)
+            look_at(&eye, &target).map_err(ExploreError::from)
         })
         .collect()
 }

@@ -58,6 +58,12 @@ pub enum GeometryError {
         /// What failed.
         reason: String,
     },
+    /// A construction has no unique answer (e.g. a view whose eye and target coincide).
+    #[error("{what}")]
+    Degenerate {
+        /// What is degenerate.
+        what: &'static str,
+    },
 }
 
 /// Build an [`Se3`] from a row-major 4x4 homogeneous matrix, checking it is rigid.
@@ -591,6 +597,81 @@ pub fn main_components(points: &[Point3<f64>], voxel_m: f64, reach: i64, keep_sh
     let largest = sizes.iter().copied().max().unwrap_or(0) as f64;
     let keep: Vec<bool> = sizes.iter().map(|&s| s as f64 >= keep_share * largest).collect();
     point_cell.iter().map(|k| k.is_some_and(|k| keep[component[k]])).collect()
+}
+
+/// `world_from_camera` for a camera at `eye` looking at `target` (OpenCV axes: z towards the
+/// target). Image "up" (−y) is world +z projected onto the image plane; when the view is within
+/// ~8° of vertical it is instead the horizontal direction away from the robot base (world origin)
+/// through the eye (world +x when the eye is above the origin).
+pub fn look_at(eye: &Point3<f64>, target: &Point3<f64>) -> Result<Se3, GeometryError> {
+    let d = target - eye;
+    let radial = Vector3::new(eye.x, eye.y, 0.0);
+    let up = if d.norm() > 0.0 && (d.z.abs() / d.norm()) > NEAR_VERTICAL_COS {
+        if radial.norm() > 1e-6 {
+            radial / radial.norm()
+        } else {
+            Vector3::x()
+        }
+    } else {
+        Vector3::z()
+    };
+    look_at_with_up(eye, target, &up)
+}
+
+/// Viewing directions closer to vertical than this (|cos| of the angle to world z) use the
+/// horizontal "away from the robot" direction as image up in [`look_at`].
+const NEAR_VERTICAL_COS: f64 = 0.99;
+
+/// `world_from_camera` looking from `eye` at `target` with image up (−y) along `up_hint`
+/// projected onto the image plane. Errors when the eye and target coincide or `up_hint` is
+/// (nearly) parallel to the viewing direction.
+pub fn look_at_with_up(eye: &Point3<f64>, target: &Point3<f64>, up_hint: &Vector3<f64>) -> Result<Se3, GeometryError> {
+    if eye.coords.iter().chain(target.coords.iter()).chain(up_hint.iter()).any(|v| !v.is_finite()) {
+        return Err(GeometryError::NonFinite { field: "look_at eye/target/up" });
+    }
+    let d = target - eye;
+    let n = d.norm();
+    if n < 1e-9 {
+        return Err(GeometryError::Degenerate { what: "look_at: eye and target coincide" });
+    }
+    let z = d / n;
+    let up_perp = up_hint - z * up_hint.dot(&z);
+    if up_perp.norm() < 1e-6 {
+        return Err(GeometryError::Degenerate { what: "look_at: up direction parallel to the view" });
+    }
+    let y = -up_perp / up_perp.norm();
+    let x = y.cross(&z);
+    let r = Rotation3::from_matrix_unchecked(Matrix3::from_columns(&[x, y, z]));
+    Ok(Se3::from_parts(Translation3::from(eye.coords), UnitQuaternion::from_rotation_matrix(&r)))
+}
+
+/// Per-axis quantile extent `[trim, 1 − trim]` of a point set (`None` if empty).
+pub fn trimmed_extent(points: &[Point3<f64>], trim: f64) -> Option<(Vector3<f64>, Vector3<f64>)> {
+    if points.is_empty() {
+        return None;
+    }
+    let mut lo = Vector3::zeros();
+    let mut hi = Vector3::zeros();
+    for axis in 0..3 {
+        let mut v: Vec<f64> = points.iter().map(|p| p[axis]).collect();
+        v.sort_by(f64::total_cmp);
+        let n = v.len();
+        let k = ((trim.clamp(0.0, 0.49)) * n as f64).floor() as usize;
+        lo[axis] = v[k];
+        hi[axis] = v[n - 1 - k];
+    }
+    Some((lo, hi))
+}
+
+/// The image box of an object's corners seen from a camera, clipped to the image; `None` when any
+/// corner is behind the camera or the box misses the image.
+pub fn project_geometry(g: &ObjectGeometry, camera: &PinholeCamera, world_from_camera: &Se3) -> Option<Box2> {
+    let camera_from_world = world_from_camera.inverse();
+    let mut uvs = Vec::with_capacity(8);
+    for c in g.corners() {
+        uvs.push(camera.project(&(camera_from_world * c))?);
+    }
+    Box2::from_points(uvs.iter())?.intersection(&camera.image_box())
 }
 
 #[cfg(test)]

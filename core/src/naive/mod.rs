@@ -18,7 +18,7 @@ use nalgebra::{Point3, Vector3};
 use serde::{Deserialize, Serialize};
 
 use crate::frame::{Frame, FrameError};
-use crate::geometry::{se3_from_yaw, Box2, ObjectGeometry, PinholeCamera, Se3};
+use crate::geometry::{project_geometry, se3_from_yaw, trimmed_extent, Box2};
 use crate::map::{EstimateStage, Label, MapObject, ObjectMap, Observation};
 
 /// Configuration of the naive estimator.
@@ -216,39 +216,11 @@ fn voxel_key(p: &Point3<f64>, voxel_m: f64) -> (i64, i64, i64) {
     ((p.x / s).floor() as i64, (p.y / s).floor() as i64, (p.z / s).floor() as i64)
 }
 
-/// Per-axis quantile extent `[trim, 1 − trim]` of a point set (`None` if empty).
-pub fn trimmed_extent(points: &[Point3<f64>], trim: f64) -> Option<(Vector3<f64>, Vector3<f64>)> {
-    if points.is_empty() {
-        return None;
-    }
-    let mut lo = Vector3::zeros();
-    let mut hi = Vector3::zeros();
-    for axis in 0..3 {
-        let mut v: Vec<f64> = points.iter().map(|p| p[axis]).collect();
-        v.sort_by(f64::total_cmp);
-        let n = v.len();
-        let k = ((trim.clamp(0.0, 0.49)) * n as f64).floor() as usize;
-        lo[axis] = v[k];
-        hi[axis] = v[n - 1 - k];
-    }
-    Some((lo, hi))
-}
-
-/// The image box of an object's corners seen from a camera, clipped to the image; `None` when any
-/// corner is behind the camera or the box misses the image.
-pub fn project_geometry(g: &ObjectGeometry, camera: &PinholeCamera, world_from_camera: &Se3) -> Option<Box2> {
-    let camera_from_world = world_from_camera.inverse();
-    let mut uvs = Vec::with_capacity(8);
-    for c in g.corners() {
-        uvs.push(camera.project(&(camera_from_world * c))?);
-    }
-    Box2::from_points(uvs.iter())?.intersection(&camera.image_box())
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::frame::{DepthImage, Detection};
+    use crate::geometry::{PinholeCamera, Se3};
     use nalgebra::{Isometry3, UnitQuaternion};
 
     /// Camera 0.5 m above the origin looking straight down (OpenCV axes: z forward = world −z).

@@ -226,17 +226,15 @@ impl Default for ParamConfig {
 /// Alg. 2 scores every frame by its share of aligned segments, `N_p / N_a`, so a frame with two
 /// segments votes as much as one with twenty. When an object's last frames see it small (far
 /// away, or at the edge of a pass), the paper's window of the latest frames fills with frames of
-/// 2-5 segments whose votes are noise: on the main benchmark of 2026-12-04 (expected-gain, scene03
-/// seed 6) a 4.3 × 4.0 cm block ended 43° off in yaw that way (`param_replay --yaw`), its earlier
-/// close frames already gone. Measured over the nine seeds of the main benchmark
-/// (`reports/exploration_window_keep_yaw/main_vs_before.md`, 315 paired episodes):
-/// - [`WindowKeep::MostSegmentsYaw`] (the default since 2026-12-04): that block ends 0.3° off;
-///   expected-gain's mean yaw error 0.45° → 0.27° (−0.18 ± 0.17: scene03 seed 6's episode, 11.0° → 0.4°, carries it), mean 3D IoU
-///   unchanged within its standard error for every strategy (−0.000 to +0.001), offset-removed
-///   +0.001 ± 0.001 for object-driven and expected-gain, views unchanged.
-/// - [`WindowKeep::MostSegments`] (both stages on the most-segment frames) fixes the block too but
-///   costs 3D IoU on seeds 0-2 (`reports/exploration_window_keep/`: −0.013 ± 0.008 object-driven):
-///   the refinement then reprojects into old frames with old poses.
+/// 2-5 segments whose votes are noise, and the yaw can end tens of degrees off although earlier
+/// close frames saw the object well.
+/// - [`WindowKeep::MostSegmentsYaw`] (the default): Alg. 2's yaw sampling uses the frames with the
+///   most segments, the refinement the latest ones.
+/// - [`WindowKeep::MostSegments`]: both stages on the most-segment frames; the refinement then
+///   reprojects into old frames with old poses, which costs 3D IoU.
+/// - [`WindowKeep::Latest`]: the paper's window.
+///
+/// The measurements behind the default: `studies/window_keep/README.md`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum WindowKeep {

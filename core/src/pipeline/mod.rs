@@ -545,7 +545,7 @@ impl ObjectPipeline {
                 merged.label = *label;
             }
             if let Some((lo, hi)) =
-                crate::naive::trimmed_extent(&merged.points_in_world, self.config.naive.trim_fraction)
+                crate::geometry::trimmed_extent(&merged.points_in_world, self.config.naive.trim_fraction)
             {
                 merged.world_from_object = se3_from_yaw((lo + hi) / 2.0, 0.0);
                 merged.half_extents = (hi - lo) / 2.0;

@@ -214,13 +214,9 @@ fn ray_box(origin: &Vector3<f64>, d: &Vector3<f64>, b: &SceneBox) -> Option<(f64
 }
 
 /// A camera pose looking at `target` from `eye` (OpenCV axes: z towards the target, y down as
-/// close to world −z as possible).
+/// close to world −z as possible; world +x is image up for a vertical view).
 pub fn look_at(eye: Point3<f64>, target: Point3<f64>) -> Se3 {
-    let z = (target - eye).normalize();
-    let up = if z.cross(&Vector3::z()).norm() < 1e-6 { Vector3::x() } else { Vector3::z() };
-    let x = z.cross(&up).normalize();
-    let y = z.cross(&x);
-    let m = nalgebra::Matrix3::from_columns(&[x, y, z]);
-    let rotation = nalgebra::UnitQuaternion::from_rotation_matrix(&nalgebra::Rotation3::from_matrix_unchecked(m));
-    Se3::from_parts(nalgebra::Translation3::from(eye.coords), rotation)
+    let z = target - eye;
+    let up = if z.cross(&Vector3::z()).norm() < 1e-6 * z.norm() { Vector3::x() } else { Vector3::z() };
+    crate::geometry::look_at_with_up(&eye, &target, &up).unwrap_or(Se3::identity())
 }

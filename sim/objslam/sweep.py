@@ -29,7 +29,7 @@ from typing import Any
 
 BACKENDS = ("pool", "ray")
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 
 
 @dataclass(frozen=True)
