@@ -33,6 +33,7 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "experiments"))
 
+from objslam.provenance import provenance, run_config
 from sweep import Job, run_sweep, scene_files
 
 MODES = ("naive", "iou", "iou_np", "iou_t", "ensemble", "ensemble+")
@@ -86,7 +87,8 @@ def associate(a: argparse.Namespace, command: str) -> int:
         )
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "association.json").write_text(json.dumps({"command": command, "rows": rows}, indent=2) + "\n")
+    prov = provenance(command, {**run_config(a.config, a.set), "modes": MODE_SETS, "seeds": a.seeds})
+    (out / "association.json").write_text(json.dumps({**prov, "rows": rows}, indent=2) + "\n")
     ok = [r for r in rows if "error" not in r]
     scenes = sorted({r["scene"] for r in ok})
     lines = [
@@ -159,7 +161,15 @@ def parameterize(a: argparse.Namespace, command: str) -> int:
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
     (out / "parameterization.json").write_text(
-        json.dumps({"command": command, "rows": rows, "final_stages": final_stages}, indent=2) + "\n"
+        json.dumps(
+            {
+                **provenance(command, {**run_config(a.config, a.set), "seeds": a.seeds}),
+                "rows": rows,
+                "final_stages": final_stages,
+            },
+            indent=2,
+        )
+        + "\n"
     )
     ok = [r for r in rows if "error" not in r]
 
@@ -258,7 +268,10 @@ def slam(a: argparse.Namespace, command: str) -> int:
         )
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "slam.json").write_text(json.dumps({"command": command, "rows": rows}, indent=2) + "\n")
+    config = {**run_config(a.config, a.set), "strategy": a.strategy, "pose_sources": POSE_SOURCES}
+    config["seeds"] = a.seeds
+    prov = provenance(command, config)
+    (out / "slam.json").write_text(json.dumps({**prov, "rows": rows}, indent=2) + "\n")
     from objslam.config import load_run_config
 
     n = load_run_config().pose_noise

@@ -15,6 +15,8 @@ import sys
 from datetime import datetime, timezone
 from pathlib import Path
 
+from objslam.provenance import provenance
+
 REPO = Path(__file__).resolve().parents[1]
 TARGET = Path(os.environ.get("CARGO_TARGET_DIR", REPO / "target"))
 
@@ -63,8 +65,8 @@ def reference_entries() -> dict[str, dict[str, float]]:
 def main() -> int:
     entries = {**criterion_entries(), **reference_entries()}
     report = {
+        **provenance("make bench", {"benches": sorted(p.stem for p in (REPO / "core/benches").glob("*.rs"))}),
         "machine": machine(),
-        "command": "make bench",
         "date": datetime.now(timezone.utc).strftime("%Y-%m-%d"),
         "entries": dict(sorted(entries.items())),
     }

@@ -25,6 +25,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "experiments"))
 
 import grasp as grasp_cli  # the session files' row builder
+from objslam.provenance import provenance
 
 
 def load_rows(manifests: list[str]) -> tuple[list[dict[str, Any]], list[str]]:
@@ -70,7 +71,9 @@ def write(rows: list[dict[str, Any]], out: Path, command: str) -> dict[str, Any]
     scenes = sorted({r["scene"] for r in rows})
     seeds = sorted({r["seed"] for r in rows})
     sources = sorted({r["map_source"] for r in rows})
-    report = {"command": command, "summary": summary, "rows": rows}
+    config = {"centre_error_mm": errors, "contact_retries": modes, "scenes": scenes, "seeds": seeds}
+    config["map_sources"] = sources
+    report = {**provenance(command, config), "summary": summary, "rows": rows}
     (out / "robustness.json").write_text(json.dumps(report, indent=2) + "\n")
 
     def cell(e: float, m: int, rs: list[dict[str, Any]] | None = None) -> str:

@@ -39,6 +39,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import objslam
+from objslam.provenance import provenance
 from objslam.topo import similarity_matrix, transform_errors, transform_map_json
 from sweep import Job, run_job
 
@@ -226,6 +227,7 @@ def main(argv: list[str] | None = None) -> int:
         "success": "rotation error < 5 deg and |t_est - t_true| / s_true < 5 cm",
     }
     report["sim_pairs_command"] = command
+    report["sim_pairs_provenance"] = provenance(command, report["sim_pairs_protocol"])
     json_path.write_text(json.dumps(report, indent=2) + "\n")
     md = md_path.read_text()
     section = markdown(pairs, command)

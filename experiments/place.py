@@ -13,6 +13,7 @@ per task over scenes × seeds, failure reasons), built from those files.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import shlex
 import statistics
@@ -29,6 +30,7 @@ def main(argv: list[str] | None = None) -> int:
     from objslam.config import load_run_config
     from objslam.grasp import GraspRunConfig
     from objslam.place import TASKS, PlaceConfig, run_place_task
+    from objslam.provenance import provenance, run_config
     from objslam.scene import load_scene
 
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -82,7 +84,19 @@ def main(argv: list[str] | None = None) -> int:
     out = REPO / a.out
     out.mkdir(parents=True, exist_ok=True)
     (out / "placement.json").write_text(
-        json.dumps({"command": command, "files": files, "rows": rows, "not_run": not_run}, indent=2) + "\n"
+        json.dumps(
+            {
+                **provenance(
+                    command,
+                    {**run_config(a.config, a.set), "place": dataclasses.asdict(cfg), "tasks": a.tasks},
+                ),
+                "files": files,
+                "rows": rows,
+                "not_run": not_run,
+            },
+            indent=2,
+        )
+        + "\n"
     )
     lines = [
         "# Placement tasks from the estimated map",

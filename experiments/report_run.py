@@ -11,11 +11,14 @@ import json
 import sys
 from pathlib import Path
 
+import tomllib
+
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "experiments"))
 
 from bench import machine
 from objslam.episode import format_table
+from objslam.provenance import provenance
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -32,7 +35,9 @@ def main(argv: list[str] | None = None) -> int:
     out = REPO / "reports"
     out.mkdir(exist_ok=True)
     rel = run.relative_to(REPO) if run.is_relative_to(REPO) else run
+    command = "python experiments/report_run.py " + str(rel)
     summary = {
+        **provenance(command, tomllib.loads((run / "config.toml").read_text())),
         "run": str(rel),
         "machine": machine(),
         "scene": metrics["scene"],
