@@ -356,8 +356,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--config", action="append", default=[])
     ap.add_argument("--set", action="append", default=[])
-    ap.add_argument("--out", default=str(REPO / "reports"))
+    ap.add_argument("--out", default=None, help="report folder (default reports/<association|parameterization|slam>)")
     a = ap.parse_args(argv)
+    folder = {"associate": "association", "parameterize": "parameterization", "slam": "slam"}[a.which]
+    a.out = a.out or str(REPO / "reports" / folder)
     command = "python experiments/ablations.py " + " ".join(argv if argv is not None else sys.argv[1:])
     return {"associate": associate, "parameterize": parameterize, "slam": slam}[a.which](a, command.strip())
 

@@ -70,8 +70,8 @@ def main() -> int:
         "date": datetime.now(timezone.utc).strftime("%Y-%m-%d"),
         "entries": dict(sorted(entries.items())),
     }
-    out = REPO / "reports"
-    out.mkdir(exist_ok=True)
+    out = REPO / "reports" / "bench"
+    out.mkdir(parents=True, exist_ok=True)
     (out / "bench.json").write_text(json.dumps(report, indent=2) + "\n")
     lines = [
         "# Benchmarks",

@@ -359,7 +359,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--address", default=None, help="Ray cluster address (backend ray); default: a local instance")
     ap.add_argument("--config", action="append", default=[])
     ap.add_argument("--set", action="append", default=[])
-    ap.add_argument("--out", default=str(REPO / "reports"))
+    ap.add_argument("--out", default=str(REPO / "reports" / "exploration"))
     ap.add_argument("--report-only", action="store_true", help="rebuild the reports from <out>/exploration.json")
     ap.add_argument(
         "--also", nargs="*", default=[], metavar="JSON",

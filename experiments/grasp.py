@@ -460,7 +460,7 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--sources", nargs="+", default=list(SOURCES), choices=SOURCES)
     ap.add_argument("--config", action="append", default=[], help="run-config overlay (repeatable)")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
-    ap.add_argument("--out", default="reports")
+    ap.add_argument("--out", default="reports/grasping")
     ap.add_argument(
         "--reobserve", nargs="*", default=[], choices=SOURCES,
         help=(

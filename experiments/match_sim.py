@@ -192,7 +192,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=2026, help="seed of the random similarities")
     ap.add_argument("--config-json", default=None, help="partial MatchConfig JSON (default: the defaults)")
     ap.add_argument("--reuse", action="store_true", help="reuse the run folders of the existing report")
-    ap.add_argument("--out", default="reports")
+    ap.add_argument("--out", default="reports/scene_matching")
     a = ap.parse_args(argv)
     scenes = a.scenes or [_rel(p) for p in sorted((REPO / "scenes").glob("scene*.toml"))]
     out = REPO / a.out if not Path(a.out).is_absolute() else Path(a.out)

@@ -45,7 +45,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--tag", default="", help="suffix of the task files (place_<task><tag>.json): variants beside the defaults")
     ap.add_argument("--config", action="append", default=[])
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
-    ap.add_argument("--out", default="reports")
+    ap.add_argument("--out", default="reports/placement")
     a = ap.parse_args(argv)
     command = ("python experiments/place.py " + " ".join(shlex.quote(x) for x in (argv if argv is not None else sys.argv[1:]))).strip()
     manifests = [json.loads(Path(m).read_text()) for m in a.maps_from]

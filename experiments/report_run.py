@@ -32,8 +32,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{run}: run is not complete ({status.get('status')})", file=sys.stderr)
         return 1
     metrics = json.loads((run / "metrics.json").read_text())
-    out = REPO / "reports"
-    out.mkdir(exist_ok=True)
+    out = REPO / "reports" / a.name
+    out.mkdir(parents=True, exist_ok=True)
     rel = run.relative_to(REPO) if run.is_relative_to(REPO) else run
     command = "python experiments/report_run.py " + str(rel)
     summary = {

@@ -581,7 +581,7 @@ fn run_plan(
 fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().collect();
     let mut scenes_dir = PathBuf::from("scenes");
-    let mut out_dir = PathBuf::from("reports");
+    let mut out_dir = PathBuf::from("reports/scene_matching");
     let mut trials = 500usize;
     let mut seed = 2026u64;
     let mut full_rotation = false;
