@@ -11,7 +11,7 @@ GRASP_ARGS ?=
 PLACE_ARGS ?=
 ROBUSTNESS_ARGS ?=
 
-.PHONY: help setup run test test-fast test-rust test-rust-unit test-py bench benchmark associate parameterize slam grasp grasp-robustness place match match-sim report view lint fmt clean
+.PHONY: help setup run test test-fast test-rust test-rust-unit test-py bench benchmark associate parameterize slam grasp grasp-robustness place match match-sim report reports-index view lint fmt clean
 
 help: ## List the targets
 	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*## "}; {printf "  \033[1m%-12s\033[0m %s\n", $$1, $$2}'
@@ -38,38 +38,41 @@ test-rust-unit: ## Rust unit tests only (the library's own tests, no integration
 test-py: ## Python tests only (needs `make setup`)
 	$(PY) -m pytest -q tests
 
-bench: setup ## Benchmarks (criterion + Python references in one run) → reports/bench.{md,json}
+bench: setup ## Benchmarks (criterion + Python references in one run) → reports/bench/
 	$(PY) experiments/bench.py
 
-benchmark: setup ## Exploration benchmark: 7 scenes × 5 strategies × seeds → reports/exploration.{md,json,png}
+benchmark: setup ## Exploration benchmark: 7 scenes × 5 strategies × seeds → reports/exploration/
 	$(PY) experiments/benchmark.py $(BENCHMARK_ARGS)
 
-associate: setup ## Association ablation (scenes × modes) → reports/association.{md,json}
+associate: setup ## Association ablation (scenes × modes) → reports/association/
 	$(PY) experiments/ablations.py associate $(ABLATION_ARGS)
 
-parameterize: setup ## Parameterization stages (raw → iForest → lines → refined) → reports/parameterization.{md,json}
+parameterize: setup ## Parameterization stages (raw → iForest → lines → refined) → reports/parameterization/
 	$(PY) experiments/ablations.py parameterize $(ABLATION_ARGS)
 
-slam: setup ## Pose accuracy: scenes × pose sources (slam, kinematics) → reports/slam.{md,json}
+slam: setup ## Pose accuracy: scenes × pose sources (slam, kinematics) → reports/slam/
 	$(PY) experiments/ablations.py slam $(ABLATION_ARGS)
 
-grasp: setup ## Grasp success: 7 scenes × seeds × map sources (estimated, ground_truth, init_only) → reports/grasping.{md,json}
+grasp: setup ## Grasp success: 7 scenes × seeds × map sources (estimated, ground_truth, init_only) → reports/grasping/
 	$(PY) experiments/grasp.py $(GRASP_ARGS)
 
-grasp-robustness: setup ## Grasp success vs an injected map centre error (0-9 mm), blind approach vs contact retries → reports/grasping_robustness/
-	$(PY) experiments/grasp_robustness.py --run $(ROBUSTNESS_ARGS)
+grasp-robustness: setup ## Grasp success vs an injected map centre error (0-9 mm), blind approach vs contact retries → runs/grasp_robustness/report/ (studies/grasp_robustness)
+	$(PY) experiments/grasp_robustness.py --run --out runs/grasp_robustness/report $(ROBUSTNESS_ARGS)
 
-place: setup ## Placement tasks on the maps of the last grasp sweep (runs/grasp_sweep.json) → reports/placement.{md,json}
+place: setup ## Placement tasks on the maps of the last grasp sweep (runs/grasp_sweep.json) → reports/placement/
 	$(PY) experiments/place.py $(PLACE_ARGS)
 
-match: ## Scene matching vs shared-object ratio (500 trials per row) → reports/scene_matching.{md,json}
-	cargo run --release -p objslam-core --example match_experiment -- --scenes scenes --out reports --other-seeds 1,2,3
+match: ## Scene matching vs shared-object ratio (500 trials per row) → reports/scene_matching/
+	cargo run --release -p objslam-core --example match_experiment -- --scenes scenes --out reports/scene_matching --other-seeds 1,2,3
 
-match-sim: setup ## Scene matching, part (b): maps of two simulator runs per scene (7 scenes × 2 Init episodes) → sim_pairs in reports/scene_matching.{md,json}
+match-sim: setup ## Scene matching, part (b): maps of two simulator runs per scene (7 scenes × 2 Init episodes) → sim_pairs in reports/scene_matching/
 	$(PY) experiments/match_sim.py $(MATCH_SIM_ARGS)
 
-report: ## Report of the latest run folder → reports/foundation_run.{md,json}
+report: ## Report of the latest run folder → reports/foundation_run/
 	$(PY) experiments/report_run.py
+
+reports-index: ## Regenerate reports/README.md (one line per report: question, headline figure, command)
+	python3 experiments/report_index.py
 
 view: ## Open the latest run's recording in the Rerun viewer
 	@test -e runs/latest/run.rrd || { echo "no runs/latest/run.rrd: run 'make run' first"; exit 1; }

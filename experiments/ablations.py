@@ -32,6 +32,7 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 
+from objslam.provenance import provenance, run_config
 from objslam.sweep import Job, run_sweep, scene_files
 
 MODES = ("naive", "iou", "iou_np", "iou_t", "ensemble", "ensemble+")
@@ -85,7 +86,8 @@ def associate(a: argparse.Namespace, command: str) -> int:
         )
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "association.json").write_text(json.dumps({"command": command, "rows": rows}, indent=2) + "\n")
+    prov = provenance(command, {**run_config(a.config, a.set), "modes": MODE_SETS, "seeds": a.seeds})
+    (out / "association.json").write_text(json.dumps({**prov, "rows": rows}, indent=2) + "\n")
     ok = [r for r in rows if "error" not in r]
     scenes = sorted({r["scene"] for r in ok})
     lines = [
@@ -158,7 +160,15 @@ def parameterize(a: argparse.Namespace, command: str) -> int:
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
     (out / "parameterization.json").write_text(
-        json.dumps({"command": command, "rows": rows, "final_stages": final_stages}, indent=2) + "\n"
+        json.dumps(
+            {
+                **provenance(command, {**run_config(a.config, a.set), "seeds": a.seeds}),
+                "rows": rows,
+                "final_stages": final_stages,
+            },
+            indent=2,
+        )
+        + "\n"
     )
     ok = [r for r in rows if "error" not in r]
 
@@ -257,7 +267,10 @@ def slam(a: argparse.Namespace, command: str) -> int:
         )
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "slam.json").write_text(json.dumps({"command": command, "rows": rows}, indent=2) + "\n")
+    config = {**run_config(a.config, a.set), "strategy": a.strategy, "pose_sources": POSE_SOURCES}
+    config["seeds"] = a.seeds
+    prov = provenance(command, config)
+    (out / "slam.json").write_text(json.dumps({**prov, "rows": rows}, indent=2) + "\n")
     from objslam.config import load_run_config
 
     n = load_run_config().pose_noise
@@ -342,8 +355,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--config", action="append", default=[])
     ap.add_argument("--set", action="append", default=[])
-    ap.add_argument("--out", default=str(REPO / "reports"))
+    ap.add_argument("--out", default=None, help="report folder (default reports/<association|parameterization|slam>)")
     a = ap.parse_args(argv)
+    folder = {"associate": "association", "parameterize": "parameterization", "slam": "slam"}[a.which]
+    a.out = a.out or str(REPO / "reports" / folder)
     command = "python experiments/ablations.py " + " ".join(argv if argv is not None else sys.argv[1:])
     return {"associate": associate, "parameterize": parameterize, "slam": slam}[a.which](a, command.strip())
 

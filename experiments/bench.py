@@ -15,6 +15,8 @@ import sys
 from datetime import datetime, timezone
 from pathlib import Path
 
+from objslam.provenance import provenance
+
 REPO = Path(__file__).resolve().parents[1]
 TARGET = Path(os.environ.get("CARGO_TARGET_DIR", REPO / "target"))
 
@@ -63,13 +65,13 @@ def reference_entries() -> dict[str, dict[str, float]]:
 def main() -> int:
     entries = {**criterion_entries(), **reference_entries()}
     report = {
+        **provenance("make bench", {"benches": sorted(p.stem for p in (REPO / "core/benches").glob("*.rs"))}),
         "machine": machine(),
-        "command": "make bench",
         "date": datetime.now(timezone.utc).strftime("%Y-%m-%d"),
         "entries": dict(sorted(entries.items())),
     }
-    out = REPO / "reports"
-    out.mkdir(exist_ok=True)
+    out = REPO / "reports" / "bench"
+    out.mkdir(parents=True, exist_ok=True)
     (out / "bench.json").write_text(json.dumps(report, indent=2) + "\n")
     lines = [
         "# Benchmarks",

@@ -39,6 +39,7 @@ from typing import Any
 
 REPO = Path(__file__).resolve().parents[1]
 
+from objslam.provenance import provenance, run_config
 from objslam.sweep import BACKENDS, Job, run_sweep, scene_files
 
 STRATEGIES = ("object-driven", "random", "coverage", "init", "expected-gain")
@@ -122,15 +123,17 @@ def _mean(values: list[float | None]) -> float | None:
     return statistics.mean(v) if v else None
 
 
-def write_reports(rows: list[dict[str, Any]], out: Path, command: str) -> None:
-    """Tables and plots from benchmark rows."""
+def write_reports(
+    rows: list[dict[str, Any]], out: Path, command: str, config: dict[str, Any] | None = None
+) -> None:
+    """Tables and plots from benchmark rows; ``config``: the resolved settings recorded in the JSON."""
     out.mkdir(parents=True, exist_ok=True)
     ok = [r for r in rows if "error" not in r]
     # The built-in strategies in report order, then Python strategies (objslam.strategy) as they come.
     strategies = [s for s in STRATEGIES if any(r["strategy"] == s for r in ok)]
     strategies += list(dict.fromkeys(r["strategy"] for r in ok if r["strategy"] not in STRATEGIES))
     scenes = sorted({r["scene"] for r in ok})
-    report = {"command": command, "rows": rows}
+    report = {**provenance(command, config), "rows": rows}
     (out / "exploration.json").write_text(json.dumps(report, indent=2) + "\n")
 
     lines = [
@@ -355,7 +358,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--address", default=None, help="Ray cluster address (backend ray); default: a local instance")
     ap.add_argument("--config", action="append", default=[])
     ap.add_argument("--set", action="append", default=[])
-    ap.add_argument("--out", default=str(REPO / "reports"))
+    ap.add_argument("--out", default=str(REPO / "reports" / "exploration"))
     ap.add_argument("--report-only", action="store_true", help="rebuild the reports from <out>/exploration.json")
     ap.add_argument(
         "--also", nargs="*", default=[], metavar="JSON",
@@ -372,7 +375,9 @@ def main(argv: list[str] | None = None) -> int:
         ]
         rows.sort(key=lambda r: (r["scene"], STRATEGIES.index(r["strategy"]) if r["strategy"] in STRATEGIES else 99, r["seed"]))
         command = " + ".join([old["command"], *(e["command"] for e in extra)])
-        write_reports(rows, Path(a.out), command)
+        also = {spec: e.get("config") for spec, e in zip(a.also, extra)}
+        config = {"sweep": old.get("config"), "also": also}
+        write_reports(rows, Path(a.out), command, config)
         print(f"{len(rows)} episodes → {a.out}/exploration.md")
         return 0
     jobs = [
@@ -382,7 +387,8 @@ def main(argv: list[str] | None = None) -> int:
     t0 = time.perf_counter()
     rows = [_row(m) for m in run_sweep(jobs, a.workers, backend=a.backend, address=a.address)]
     rows.sort(key=lambda r: (r["scene"], STRATEGIES.index(r["strategy"]) if r["strategy"] in STRATEGIES else 99, r["seed"]))
-    write_reports(rows, Path(a.out), command.strip())
+    config = {**run_config(a.config, a.set), "scenes": a.scenes, "strategies": a.strategies, "seeds": a.seeds}
+    write_reports(rows, Path(a.out), command.strip(), config)
     print(f"{len(rows)} episodes in {time.perf_counter() - t0:.0f} s → {a.out}/exploration.md")
     return 0 if all("error" not in r for r in rows) else 1
 

@@ -31,6 +31,8 @@ from collections import Counter
 from pathlib import Path
 from typing import Any
 
+from objslam.provenance import provenance
+
 REPO = Path(__file__).resolve().parents[1]
 SOURCES = ("estimated", "ground_truth", "init_only")
 CAUSES = ("no_ik", "no_path", "too_wide", "collided", "missed", "slipped", "wrong_object", "phantom", "not_found", "not_in_map")
@@ -302,7 +304,10 @@ def write_reports(
     rows = _rows(sessions)
     comp = _rows(comparison or [])
     out.mkdir(parents=True, exist_ok=True)
-    report = {"command": command, "sessions": sessions, "rows": rows}
+    session_configs = [json.loads(Path(s).read_text()).get("config") for s in sessions]
+    grasp_configs = {json.dumps(c, sort_keys=True) for c in session_configs}
+    prov = provenance(command, {"grasp": [json.loads(c) for c in sorted(grasp_configs)]})
+    report = {**prov, "sessions": sessions, "rows": rows}
     if comp:
         report.update(comparison_sessions=comparison, comparison_rows=comp, comparison_note=comparison_note)
     (out / "grasping.json").write_text(json.dumps(report, indent=2) + "\n")
@@ -455,7 +460,7 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--sources", nargs="+", default=list(SOURCES), choices=SOURCES)
     ap.add_argument("--config", action="append", default=[], help="run-config overlay (repeatable)")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
-    ap.add_argument("--out", default="reports")
+    ap.add_argument("--out", default="reports/grasping")
     ap.add_argument(
         "--reobserve", nargs="*", default=[], choices=SOURCES,
         help=(

@@ -24,6 +24,7 @@ from typing import Any
 REPO = Path(__file__).resolve().parents[1]
 
 import grasp as grasp_cli  # the session files' row builder
+from objslam.provenance import provenance
 
 
 def load_rows(manifests: list[str]) -> tuple[list[dict[str, Any]], list[str]]:
@@ -69,7 +70,9 @@ def write(rows: list[dict[str, Any]], out: Path, command: str) -> dict[str, Any]
     scenes = sorted({r["scene"] for r in rows})
     seeds = sorted({r["seed"] for r in rows})
     sources = sorted({r["map_source"] for r in rows})
-    report = {"command": command, "summary": summary, "rows": rows}
+    config = {"centre_error_mm": errors, "contact_retries": modes, "scenes": scenes, "seeds": seeds}
+    config["map_sources"] = sources
+    report = {**provenance(command, config), "summary": summary, "rows": rows}
     (out / "robustness.json").write_text(json.dumps(report, indent=2) + "\n")
 
     def cell(e: float, m: int, rs: list[dict[str, Any]] | None = None) -> str:
@@ -171,7 +174,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--errors", nargs="+", type=float, default=[0.0, 3.0, 6.0, 9.0], help="centre errors, mm (with --run)")
     ap.add_argument("--retries", nargs="+", type=int, default=[0, 2], help="contact retries (with --run)")
     ap.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2], help="seeds (with --run)")
-    ap.add_argument("--maps-from-benchmark", default="reports/exploration.json", help="exploration sweep whose scenes' worlds are used (with --run)")
+    ap.add_argument("--maps-from-benchmark", default="reports/exploration/exploration.json", help="exploration sweep whose scenes' worlds are used (with --run)")
     ap.add_argument("--out", default=str(REPO / "reports" / "grasping_robustness"))
     a = ap.parse_args(argv)
     if a.run:

@@ -38,6 +38,7 @@ from typing import Any
 REPO = Path(__file__).resolve().parents[1]
 
 import objslam
+from objslam.provenance import provenance
 from objslam.topo import similarity_matrix, transform_errors, transform_map_json
 from objslam.sweep import Job, run_job
 
@@ -190,7 +191,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=2026, help="seed of the random similarities")
     ap.add_argument("--config-json", default=None, help="partial MatchConfig JSON (default: the defaults)")
     ap.add_argument("--reuse", action="store_true", help="reuse the run folders of the existing report")
-    ap.add_argument("--out", default="reports")
+    ap.add_argument("--out", default="reports/scene_matching")
     a = ap.parse_args(argv)
     scenes = a.scenes or [_rel(p) for p in sorted((REPO / "scenes").glob("scene*.toml"))]
     out = REPO / a.out if not Path(a.out).is_absolute() else Path(a.out)
@@ -225,6 +226,7 @@ def main(argv: list[str] | None = None) -> int:
         "success": "rotation error < 5 deg and |t_est - t_true| / s_true < 5 cm",
     }
     report["sim_pairs_command"] = command
+    report["sim_pairs_provenance"] = provenance(command, report["sim_pairs_protocol"])
     json_path.write_text(json.dumps(report, indent=2) + "\n")
     md = md_path.read_text()
     section = markdown(pairs, command)

@@ -13,6 +13,7 @@ per task over scenes × seeds, failure reasons), built from those files.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import shlex
 import statistics
@@ -29,6 +30,7 @@ def main(argv: list[str] | None = None) -> int:
     from objslam.config import load_run_config
     from objslam.grasp import GraspRunConfig
     from objslam.place import TASKS, PlaceConfig, run_place_task
+    from objslam.provenance import provenance, run_config
     from objslam.scene import load_scene
 
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -43,7 +45,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--tag", default="", help="suffix of the task files (place_<task><tag>.json): variants beside the defaults")
     ap.add_argument("--config", action="append", default=[])
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
-    ap.add_argument("--out", default="reports")
+    ap.add_argument("--out", default="reports/placement")
     a = ap.parse_args(argv)
     command = ("python experiments/place.py " + " ".join(shlex.quote(x) for x in (argv if argv is not None else sys.argv[1:]))).strip()
     manifests = [json.loads(Path(m).read_text()) for m in a.maps_from]
@@ -82,7 +84,19 @@ def main(argv: list[str] | None = None) -> int:
     out = REPO / a.out
     out.mkdir(parents=True, exist_ok=True)
     (out / "placement.json").write_text(
-        json.dumps({"command": command, "files": files, "rows": rows, "not_run": not_run}, indent=2) + "\n"
+        json.dumps(
+            {
+                **provenance(
+                    command,
+                    {**run_config(a.config, a.set), "place": dataclasses.asdict(cfg), "tasks": a.tasks},
+                ),
+                "files": files,
+                "rows": rows,
+                "not_run": not_run,
+            },
+            indent=2,
+        )
+        + "\n"
     )
     lines = [
         "# Placement tasks from the estimated map",

@@ -11,10 +11,13 @@ import json
 import sys
 from pathlib import Path
 
+import tomllib
+
 REPO = Path(__file__).resolve().parents[1]
 
 from bench import machine
 from objslam.episode import format_table
+from objslam.provenance import provenance
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -28,10 +31,12 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{run}: run is not complete ({status.get('status')})", file=sys.stderr)
         return 1
     metrics = json.loads((run / "metrics.json").read_text())
-    out = REPO / "reports"
-    out.mkdir(exist_ok=True)
+    out = REPO / "reports" / a.name
+    out.mkdir(parents=True, exist_ok=True)
     rel = run.relative_to(REPO) if run.is_relative_to(REPO) else run
+    command = "python experiments/report_run.py " + str(rel)
     summary = {
+        **provenance(command, tomllib.loads((run / "config.toml").read_text())),
         "run": str(rel),
         "machine": machine(),
         "scene": metrics["scene"],

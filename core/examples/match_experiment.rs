@@ -374,7 +374,13 @@ struct Report {
     /// Part (b), written by `experiments/match_sim.py` and kept as found here.
     sim_pairs: serde_json::Value,
     protocol: serde_json::Value,
+    /// `git rev-parse HEAD`, `-dirty` when `git status --porcelain` lists anything.
+    commit: String,
     command: String,
+    /// Host name, CPU count and OS.
+    machine: String,
+    /// The protocol's settings and the `--config-json` matcher overrides.
+    config: serde_json::Value,
     /// Other `sim_pairs_*` keys of the existing report (part (b)'s protocol and command), kept.
     #[serde(flatten)]
     sim_extra: serde_json::Map<String, serde_json::Value>,
@@ -417,6 +423,30 @@ fn existing_sim_part(
         Some(md[a..b].to_string())
     });
     (sim_pairs, extra, section)
+}
+
+/// The commit the report is made from (`unknown` outside a git checkout).
+fn git_commit() -> String {
+    let git = |args: &[&str]| {
+        std::process::Command::new("git")
+            .args(args)
+            .output()
+            .ok()
+            .filter(|o| o.status.success())
+            .map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string())
+    };
+    match (git(&["rev-parse", "HEAD"]), git(&["status", "--porcelain"])) {
+        (Some(head), Some(status)) if !status.is_empty() => format!("{head}-dirty"),
+        (Some(head), _) => head,
+        _ => "unknown".to_string(),
+    }
+}
+
+/// Host name, CPU count and OS of this machine.
+fn machine() -> String {
+    let host = std::fs::read_to_string("/etc/hostname").map(|h| h.trim().to_string()).unwrap_or_default();
+    let cpus = std::thread::available_parallelism().map(|n| n.get()).unwrap_or(0);
+    format!("{host}: {cpus} cores, {} {}", std::env::consts::OS, std::env::consts::ARCH)
 }
 
 /// Mean of an iterator (NaN when empty).
@@ -551,7 +581,7 @@ fn run_plan(
 fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().collect();
     let mut scenes_dir = PathBuf::from("scenes");
-    let mut out_dir = PathBuf::from("reports");
+    let mut out_dir = PathBuf::from("reports/scene_matching");
     let mut trials = 500usize;
     let mut seed = 2026u64;
     let mut full_rotation = false;
@@ -652,8 +682,11 @@ fn main() -> Result<()> {
         rows_query_noise_only,
         rows_other_seeds,
         sim_pairs,
+        config: serde_json::json!({ "protocol": protocol.clone(), "config_json": config_json }),
         protocol,
+        commit: git_commit(),
         command: command.clone(),
+        machine: machine(),
         sim_extra,
     };
     std::fs::create_dir_all(&out_dir)?;
