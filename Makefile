@@ -38,37 +38,37 @@ test-rust-unit: ## Rust unit tests only (the library's own tests, no integration
 test-py: ## Python tests only (needs `make setup`)
 	$(PY) -m pytest -q tests
 
-bench: setup ## Benchmarks (criterion + Python references in one run) → reports/bench/
+bench: setup ## Benchmarks (criterion + Python references in one run) → reports/bench.json
 	$(PY) experiments/bench.py
 
-benchmark: setup ## Exploration benchmark: 7 scenes × 5 strategies × seeds → reports/exploration/
+benchmark: setup ## Exploration benchmark: 7 scenes × 5 strategies × seeds → reports/exploration.json
 	$(PY) experiments/benchmark.py $(BENCHMARK_ARGS)
 
-associate: setup ## Association ablation (scenes × modes) → reports/association/
+associate: setup ## Association ablation (scenes × modes) → reports/association.json
 	$(PY) experiments/ablations.py associate $(ABLATION_ARGS)
 
-parameterize: setup ## Parameterization stages (raw → iForest → lines → refined) → reports/parameterization/
+parameterize: setup ## Parameterization stages (raw → iForest → lines → refined) → reports/parameterization.json
 	$(PY) experiments/ablations.py parameterize $(ABLATION_ARGS)
 
-slam: setup ## Pose accuracy: scenes × pose sources (slam, kinematics) → reports/slam/
+slam: setup ## Pose accuracy: scenes × pose sources (slam, kinematics) → reports/slam.json
 	$(PY) experiments/ablations.py slam $(ABLATION_ARGS)
 
-grasp: setup ## Grasp success: 7 scenes × seeds × map sources (estimated, ground_truth, init_only) → reports/grasping/
+grasp: setup ## Grasp success: 7 scenes × seeds × map sources (estimated, ground_truth, init_only) → reports/grasping.json
 	$(PY) experiments/grasp.py $(GRASP_ARGS)
 
 grasp-robustness: setup ## Grasp success vs an injected map centre error (0-9 mm), blind approach vs contact retries → runs/grasp_robustness/report/ (studies/grasp_robustness)
 	$(PY) experiments/grasp_robustness.py --run --out runs/grasp_robustness/report $(ROBUSTNESS_ARGS)
 
-place: setup ## Placement tasks on the maps of the last grasp sweep (runs/grasp_sweep.json) → reports/placement/
+place: setup ## Placement tasks on the maps of the last grasp sweep (runs/grasp_sweep.json) → reports/placement.json
 	$(PY) experiments/place.py $(PLACE_ARGS)
 
-match: ## Scene matching vs shared-object ratio (500 trials per row) → reports/scene_matching/
-	cargo run --release -p objslam-core --example match_experiment -- --scenes scenes --out reports/scene_matching --other-seeds 1,2,3
+match: ## Scene matching vs shared-object ratio (500 trials per row) → reports/scene_matching.json
+	cargo run --release -p objslam-core --example match_experiment -- --scenes scenes --out reports --other-seeds 1,2,3
 
-match-sim: setup ## Scene matching, part (b): maps of two simulator runs per scene (7 scenes × 2 Init episodes) → sim_pairs in reports/scene_matching/
+match-sim: setup ## Scene matching, part (b): maps of two simulator runs per scene (7 scenes × 2 Init episodes) → sim_pairs in reports/scene_matching.json
 	$(PY) experiments/match_sim.py $(MATCH_SIM_ARGS)
 
-report: ## Report of the latest run folder → reports/foundation_run/
+report: ## Report of the latest run folder → reports/foundation_run.json
 	$(PY) experiments/report_run.py
 
 reports-index: ## Regenerate reports/README.md (one line per report: question, headline figure, command)

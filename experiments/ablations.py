@@ -32,7 +32,7 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 
-from objslam.provenance import provenance, run_config
+from objslam.provenance import provenance, report_files, run_config
 from objslam.sweep import Job, run_sweep, scene_files
 
 MODES = ("naive", "iou", "iou_np", "iou_t", "ensemble", "ensemble+")
@@ -87,7 +87,7 @@ def associate(a: argparse.Namespace, command: str) -> int:
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
     prov = provenance(command, {**run_config(a.config, a.set), "modes": MODE_SETS, "seeds": a.seeds})
-    (out / "association.json").write_text(json.dumps({**prov, "rows": rows}, indent=2) + "\n")
+    (report_files(out, "association")[0]).write_text(json.dumps({**prov, "rows": rows}, indent=2) + "\n")
     ok = [r for r in rows if "error" not in r]
     scenes = sorted({r["scene"] for r in ok})
     lines = [
@@ -133,8 +133,8 @@ def associate(a: argparse.Namespace, command: str) -> int:
     failed = [r for r in rows if "error" in r]
     if failed:
         lines += ["", "## Failed episodes", ""] + [f"- {r['mode']} {r['scene']} seed {r['seed']}: {r['error']}" for r in failed]
-    (out / "association.md").write_text("\n".join(lines) + "\n")
-    print(f"wrote {out / 'association.md'}")
+    (report_files(out, "association")[1]).write_text("\n".join(lines) + "\n")
+    print(f"wrote {report_files(out, "association")[1]}")
     return 0 if not failed else 1
 
 
@@ -159,7 +159,7 @@ def parameterize(a: argparse.Namespace, command: str) -> int:
             rows.append({"scene": r["scene"], "seed": r["seed"], "stage": stage, **{k: m[k] for k in ("iou3d", "iou2d", "cde_cm", "yae_deg")}, "run_dir": r["run_dir"]})
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "parameterization.json").write_text(
+    (report_files(out, "parameterization")[0]).write_text(
         json.dumps(
             {
                 **provenance(command, {**run_config(a.config, a.set), "seeds": a.seeds}),
@@ -224,8 +224,8 @@ def parameterize(a: argparse.Namespace, command: str) -> int:
     failed = [r for r in rows if "error" in r]
     if failed:
         lines += ["", "## Failed episodes", ""] + [f"- {r['scene']} seed {r['seed']}: {r['error']}" for r in failed]
-    (out / "parameterization.md").write_text("\n".join(lines) + "\n")
-    print(f"wrote {out / 'parameterization.md'}")
+    (report_files(out, "parameterization")[1]).write_text("\n".join(lines) + "\n")
+    print(f"wrote {report_files(out, "parameterization")[1]}")
     return 0 if not failed else 1
 
 
@@ -270,7 +270,7 @@ def slam(a: argparse.Namespace, command: str) -> int:
     config = {**run_config(a.config, a.set), "strategy": a.strategy, "pose_sources": POSE_SOURCES}
     config["seeds"] = a.seeds
     prov = provenance(command, config)
-    (out / "slam.json").write_text(json.dumps({**prov, "rows": rows}, indent=2) + "\n")
+    (report_files(out, "slam")[0]).write_text(json.dumps({**prov, "rows": rows}, indent=2) + "\n")
     from objslam.config import load_run_config
 
     n = load_run_config().pose_noise
@@ -340,8 +340,8 @@ def slam(a: argparse.Namespace, command: str) -> int:
                 reasons[k] = reasons.get(k, 0) + v
         why = ", ".join(f"{k} {v}" for k, v in sorted(reasons.items())) or "none"
         lines.append(f"- Never lost on {never} of {len(sl)} runs; lost frames by reason: {why}.")
-    (out / "slam.md").write_text("\n".join(lines) + "\n")
-    print(f"wrote {out / 'slam.md'}")
+    (report_files(out, "slam")[1]).write_text("\n".join(lines) + "\n")
+    print(f"wrote {report_files(out, "slam")[1]}")
     return 0 if all("error" not in r for r in rows) else 1
 
 
@@ -355,10 +355,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--config", action="append", default=[])
     ap.add_argument("--set", action="append", default=[])
-    ap.add_argument("--out", default=None, help="report folder (default reports/<association|parameterization|slam>)")
+    ap.add_argument("--out", default=str(REPO / "reports"), help="reports folder: <out>/<report>.json and <out>/pages/<report>.md (default: %(default)s)")
     a = ap.parse_args(argv)
-    folder = {"associate": "association", "parameterize": "parameterization", "slam": "slam"}[a.which]
-    a.out = a.out or str(REPO / "reports" / folder)
     command = "python experiments/ablations.py " + " ".join(argv if argv is not None else sys.argv[1:])
     return {"associate": associate, "parameterize": parameterize, "slam": slam}[a.which](a, command.strip())
 

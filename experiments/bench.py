@@ -15,7 +15,7 @@ import sys
 from datetime import datetime, timezone
 from pathlib import Path
 
-from objslam.provenance import provenance
+from objslam.provenance import provenance, report_files
 
 REPO = Path(__file__).resolve().parents[1]
 TARGET = Path(os.environ.get("CARGO_TARGET_DIR", REPO / "target"))
@@ -70,9 +70,8 @@ def main() -> int:
         "date": datetime.now(timezone.utc).strftime("%Y-%m-%d"),
         "entries": dict(sorted(entries.items())),
     }
-    out = REPO / "reports" / "bench"
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "bench.json").write_text(json.dumps(report, indent=2) + "\n")
+    json_path, md_path = report_files(REPO / "reports", "bench")
+    json_path.write_text(json.dumps(report, indent=2) + "\n")
     lines = [
         "# Benchmarks",
         "",
@@ -83,8 +82,8 @@ def main() -> int:
         "|---|---:|",
     ]
     lines += [f"| `{k}` | {v['median_ms']:.4f} |" for k, v in report["entries"].items()]
-    (out / "bench.md").write_text("\n".join(lines) + "\n")
-    print(f"wrote {out / 'bench.json'} ({len(entries)} entries)")
+    md_path.write_text("\n".join(lines) + "\n")
+    print(f"wrote {json_path} ({len(entries)} entries)")
     return 0
 
 

@@ -39,7 +39,7 @@ from typing import Any
 
 REPO = Path(__file__).resolve().parents[1]
 
-from objslam.provenance import provenance, run_config
+from objslam.provenance import provenance, report_files, run_config
 from objslam.sweep import BACKENDS, Job, run_sweep, scene_files
 
 STRATEGIES = ("object-driven", "random", "coverage", "init", "expected-gain")
@@ -134,7 +134,7 @@ def write_reports(
     strategies += list(dict.fromkeys(r["strategy"] for r in ok if r["strategy"] not in STRATEGIES))
     scenes = sorted({r["scene"] for r in ok})
     report = {**provenance(command, config), "rows": rows}
-    (out / "exploration.json").write_text(json.dumps(report, indent=2) + "\n")
+    (report_files(out, "exploration")[0]).write_text(json.dumps(report, indent=2) + "\n")
 
     lines = [
         "# Exploration benchmark",
@@ -181,7 +181,7 @@ def write_reports(
     lines += ["", "![metrics per strategy](exploration_metrics.png)", "", "![entropy vs views](exploration_entropy.png)"]
     if any(r.get("accuracy_curve") for r in ok):
         lines += ["", "![accuracy vs views](exploration_accuracy.png)"]
-    (out / "exploration.md").write_text("\n".join(lines) + "\n")
+    (report_files(out, "exploration")[1]).write_text("\n".join(lines) + "\n")
     _plots(ok, strategies, out, command)
 
 
@@ -297,7 +297,7 @@ def _plots(ok: list[dict[str, Any]], strategies: list[str], out: Path, command: 
         ax.set_title(title)
     fig.suptitle(f"mean over scenes and seeds — {command}", fontsize=9)
     fig.tight_layout()
-    fig.savefig(out / "exploration_metrics.png", dpi=110)
+    fig.savefig(out / "pages" / "exploration_metrics.png", dpi=110)
     plt.close(fig)
     fig, ax = plt.subplots(figsize=(6, 4))
     for s in strategies:
@@ -312,7 +312,7 @@ def _plots(ok: list[dict[str, Any]], strategies: list[str], out: Path, command: 
     ax.legend()
     ax.set_title(command, fontsize=8)
     fig.tight_layout()
-    fig.savefig(out / "exploration_entropy.png", dpi=110)
+    fig.savefig(out / "pages" / "exploration_entropy.png", dpi=110)
     plt.close(fig)
     with_curve, ks = _curves(ok)
     if not with_curve:
@@ -331,7 +331,7 @@ def _plots(ok: list[dict[str, Any]], strategies: list[str], out: Path, command: 
     axes[0].legend(fontsize=8)
     fig.suptitle(f"map accuracy after k views (stopped episodes keep their map) — {command}", fontsize=8)
     fig.tight_layout()
-    fig.savefig(out / "exploration_accuracy.png", dpi=110)
+    fig.savefig(out / "pages" / "exploration_accuracy.png", dpi=110)
     plt.close(fig)
 
 
@@ -358,7 +358,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--address", default=None, help="Ray cluster address (backend ray); default: a local instance")
     ap.add_argument("--config", action="append", default=[])
     ap.add_argument("--set", action="append", default=[])
-    ap.add_argument("--out", default=str(REPO / "reports" / "exploration"))
+    ap.add_argument("--out", default=str(REPO / "reports"), help="reports folder: <out>/exploration.json, <out>/pages/exploration.md (default: %(default)s)")
     ap.add_argument("--report-only", action="store_true", help="rebuild the reports from <out>/exploration.json")
     ap.add_argument(
         "--also", nargs="*", default=[], metavar="JSON",
@@ -378,7 +378,7 @@ def main(argv: list[str] | None = None) -> int:
         also = {spec: e.get("config") for spec, e in zip(a.also, extra)}
         config = {"sweep": old.get("config"), "also": also}
         write_reports(rows, Path(a.out), command, config)
-        print(f"{len(rows)} episodes → {a.out}/exploration.md")
+        print(f"{len(rows)} episodes → {a.out}/pages/exploration.md")
         return 0
     jobs = [
         Job(sc, st, sd, tuple(a.config), tuple(a.set)) for sc in a.scenes for st in a.strategies for sd in a.seeds
@@ -389,7 +389,7 @@ def main(argv: list[str] | None = None) -> int:
     rows.sort(key=lambda r: (r["scene"], STRATEGIES.index(r["strategy"]) if r["strategy"] in STRATEGIES else 99, r["seed"]))
     config = {**run_config(a.config, a.set), "scenes": a.scenes, "strategies": a.strategies, "seeds": a.seeds}
     write_reports(rows, Path(a.out), command.strip(), config)
-    print(f"{len(rows)} episodes in {time.perf_counter() - t0:.0f} s → {a.out}/exploration.md")
+    print(f"{len(rows)} episodes in {time.perf_counter() - t0:.0f} s → {a.out}/pages/exploration.md")
     return 0 if all("error" not in r for r in rows) else 1
 
 

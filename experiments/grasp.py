@@ -31,7 +31,7 @@ from collections import Counter
 from pathlib import Path
 from typing import Any
 
-from objslam.provenance import provenance
+from objslam.provenance import provenance, report_files
 
 REPO = Path(__file__).resolve().parents[1]
 SOURCES = ("estimated", "ground_truth", "init_only")
@@ -310,7 +310,7 @@ def write_reports(
     report = {**prov, "sessions": sessions, "rows": rows}
     if comp:
         report.update(comparison_sessions=comparison, comparison_rows=comp, comparison_note=comparison_note)
-    (out / "grasping.json").write_text(json.dumps(report, indent=2) + "\n")
+    (report_files(out, "grasping")[0]).write_text(json.dumps(report, indent=2) + "\n")
     def variant(r: dict[str, Any]) -> str:
         blind = " (blind approach)" if r["contact_retries"] == 0 else ""
         if r["centre_error_mm"]:
@@ -441,7 +441,7 @@ def write_reports(
             m = sorted(r["map_xy_err_mm"] for r in rs if r["grasped_xy_err_mm"] is not None)
             lines.append(f"| {name} | {len(g)} | {_median_p90(g)} | {_median_p90(m)} |")
         lines.append("")
-    (out / "grasping.md").write_text("\n".join(lines))
+    (report_files(out, "grasping")[1]).write_text("\n".join(lines))
     return report
 
 
@@ -460,7 +460,7 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--sources", nargs="+", default=list(SOURCES), choices=SOURCES)
     ap.add_argument("--config", action="append", default=[], help="run-config overlay (repeatable)")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
-    ap.add_argument("--out", default="reports/grasping")
+    ap.add_argument("--out", default="reports", help="reports folder: <out>/grasping.json, <out>/pages/grasping.md (default: %(default)s)")
     ap.add_argument(
         "--reobserve", nargs="*", default=[], choices=SOURCES,
         help=(
@@ -538,7 +538,7 @@ def main(argv: list[str] | None = None) -> int:
     else:
         sessions = run_sweep(a, command)
     report = write_reports(sessions, REPO / a.out, command, comparison, a.compare_note)
-    print(f"{len(report['rows'])} rows → {a.out}/grasping.md")
+    print(f"{len(report['rows'])} rows → {a.out}/pages/grasping.md")
     return 0
 
 

@@ -174,7 +174,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--errors", nargs="+", type=float, default=[0.0, 3.0, 6.0, 9.0], help="centre errors, mm (with --run)")
     ap.add_argument("--retries", nargs="+", type=int, default=[0, 2], help="contact retries (with --run)")
     ap.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2], help="seeds (with --run)")
-    ap.add_argument("--maps-from-benchmark", default="reports/exploration/exploration.json", help="exploration sweep whose scenes' worlds are used (with --run)")
+    ap.add_argument("--maps-from-benchmark", default="reports/exploration.json", help="exploration sweep whose scenes' worlds are used (with --run)")
     ap.add_argument("--out", default=str(REPO / "reports" / "grasping_robustness"))
     a = ap.parse_args(argv)
     if a.run:

@@ -38,7 +38,7 @@ from typing import Any
 REPO = Path(__file__).resolve().parents[1]
 
 import objslam
-from objslam.provenance import provenance
+from objslam.provenance import provenance, report_files
 from objslam.topo import similarity_matrix, transform_errors, transform_map_json
 from objslam.sweep import Job, run_job
 
@@ -191,11 +191,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=2026, help="seed of the random similarities")
     ap.add_argument("--config-json", default=None, help="partial MatchConfig JSON (default: the defaults)")
     ap.add_argument("--reuse", action="store_true", help="reuse the run folders of the existing report")
-    ap.add_argument("--out", default="reports/scene_matching")
+    ap.add_argument("--out", default="reports", help="reports folder: <out>/scene_matching.json, <out>/pages/scene_matching.md (default: %(default)s)")
     a = ap.parse_args(argv)
     scenes = a.scenes or [_rel(p) for p in sorted((REPO / "scenes").glob("scene*.toml"))]
     out = REPO / a.out if not Path(a.out).is_absolute() else Path(a.out)
-    json_path, md_path = out / "scene_matching.json", out / "scene_matching.md"
+    json_path, md_path = report_files(out, "scene_matching")
     if not json_path.exists() or not md_path.exists():
         print(f"{json_path} / {md_path} missing: run `make match` (part a) first", file=sys.stderr)
         return 2

@@ -30,7 +30,7 @@ def main(argv: list[str] | None = None) -> int:
     from objslam.config import load_run_config
     from objslam.grasp import GraspRunConfig
     from objslam.place import TASKS, PlaceConfig, run_place_task
-    from objslam.provenance import provenance, run_config
+    from objslam.provenance import provenance, report_files, run_config
     from objslam.scene import load_scene
 
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -45,7 +45,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--tag", default="", help="suffix of the task files (place_<task><tag>.json): variants beside the defaults")
     ap.add_argument("--config", action="append", default=[])
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
-    ap.add_argument("--out", default="reports/placement")
+    ap.add_argument("--out", default="reports", help="reports folder: <out>/placement.json, <out>/pages/placement.md (default: %(default)s)")
     a = ap.parse_args(argv)
     command = ("python experiments/place.py " + " ".join(shlex.quote(x) for x in (argv if argv is not None else sys.argv[1:]))).strip()
     manifests = [json.loads(Path(m).read_text()) for m in a.maps_from]
@@ -83,7 +83,7 @@ def main(argv: list[str] | None = None) -> int:
     rows = [json.loads(Path(f).read_text()) for f in files]
     out = REPO / a.out
     out.mkdir(parents=True, exist_ok=True)
-    (out / "placement.json").write_text(
+    (report_files(out, "placement")[0]).write_text(
         json.dumps(
             {
                 **provenance(
@@ -126,8 +126,8 @@ def main(argv: list[str] | None = None) -> int:
         lines += ["", "## Not run (infeasible for the gripper)", "", "| task | scene | seed | why |", "|---|---|---:|---|"]
         lines += [f"| {r['task']} | {r['scene']} | {r['seed']} | {r['detail']} |" for r in not_run]
     lines.append("")
-    (out / "placement.md").write_text("\n".join(lines))
-    print(f"{len(rows)} rows → {a.out}/placement.md")
+    (report_files(out, "placement")[1]).write_text("\n".join(lines))
+    print(f"{len(rows)} rows → {a.out}/pages/placement.md")
     return 0
 
 

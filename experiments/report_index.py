@@ -3,7 +3,7 @@ make target that makes it, the commit it was made from).
 
     python3 experiments/report_index.py [--reports reports]   (``make reports-index``; standard library only)
 
-Every ``reports/<name>/<name>.json`` (and any ``reports/*.json``) is read. The question and the headline
+Every ``reports/<name>.json`` is read (its page is ``reports/pages/<name>.md``). The question and the headline
 come from the JSON's own ``question`` / ``headline`` keys when it has them, else from this module's table
 for the built-in reports, else from the title of the report's Markdown file. The make target is the one
 whose ``make help`` line names the report's folder.
@@ -159,14 +159,13 @@ def _cell(text: str) -> str:
 def entry(path: Path, reports: Path, targets: dict[str, str]) -> str:
     data = json.loads(path.read_text())
     name = path.stem
-    md = path.with_suffix(".md")
+    md = reports / "pages" / f"{name}.md"
     question = data.get("question") or QUESTIONS.get(name) or _title(md) or name
     try:
         headline = data.get("headline") or (HEADLINES[name](data) if name in HEADLINES else "see the report")
     except (KeyError, TypeError, ValueError, ZeroDivisionError) as e:
         headline = f"see the report (no headline: {type(e).__name__} {e})"
-    folder = path.parent.name if path.parent != reports else name
-    target = targets.get(folder) or targets.get(name)
+    target = targets.get(name)
     command = f"`make {target}`" if target else f"`{data.get('command', '?')}`"
     commit = str(data.get("commit", "?"))
     commit = commit[:7] + ("-dirty" if commit.endswith("-dirty") else "")
@@ -182,7 +181,7 @@ def main(argv: list[str] | None = None) -> int:
     a = ap.parse_args(argv)
     reports = Path(a.reports)
     targets = make_targets(REPO / "Makefile")
-    files = sorted([*reports.glob("*.json"), *reports.glob("*/*.json")], key=lambda p: p.stem)
+    files = sorted(reports.glob("*.json"), key=lambda p: p.stem)
     lines = [
         "# Reports",
         "",

@@ -17,7 +17,7 @@ REPO = Path(__file__).resolve().parents[1]
 
 from bench import machine
 from objslam.episode import format_table
-from objslam.provenance import provenance
+from objslam.provenance import provenance, report_files
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -31,7 +31,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{run}: run is not complete ({status.get('status')})", file=sys.stderr)
         return 1
     metrics = json.loads((run / "metrics.json").read_text())
-    out = REPO / "reports" / a.name
+    out = REPO / "reports"
     out.mkdir(parents=True, exist_ok=True)
     rel = run.relative_to(REPO) if run.is_relative_to(REPO) else run
     command = "python experiments/report_run.py " + str(rel)
@@ -50,7 +50,7 @@ def main(argv: list[str] | None = None) -> int:
         "wall_s": metrics["wall_s"],
         "timings_ms_median": metrics["timings_ms_median"],
     }
-    (out / f"{a.name}.json").write_text(json.dumps(summary, indent=2) + "\n")
+    (report_files(out, a.name)[0]).write_text(json.dumps(summary, indent=2) + "\n")
     t = metrics["timings_ms_median"]
     md = [
         f"# Run report: {metrics['strategy']} on {metrics['scene']}, seed {metrics['seed']}",
@@ -70,8 +70,8 @@ def main(argv: list[str] | None = None) -> int:
         format_table(metrics),
         "```",
     ]
-    (out / f"{a.name}.md").write_text("\n".join(md) + "\n")
-    print(f"wrote {out / a.name}.md")
+    (report_files(out, a.name)[1]).write_text("\n".join(md) + "\n")
+    print(f"wrote {report_files(out, a.name)[1]}")
     return 0
 
 

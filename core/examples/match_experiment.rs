@@ -417,7 +417,7 @@ fn existing_sim_part(
             }
         }
     }
-    let section = std::fs::read_to_string(out_dir.join("scene_matching.md")).ok().and_then(|md| {
+    let section = std::fs::read_to_string(out_dir.join("pages").join("scene_matching.md")).ok().and_then(|md| {
         let a = md.find(SIM_BEGIN)?;
         let b = md[a..].find(SIM_END)? + a + SIM_END.len();
         Some(md[a..b].to_string())
@@ -581,7 +581,7 @@ fn run_plan(
 fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().collect();
     let mut scenes_dir = PathBuf::from("scenes");
-    let mut out_dir = PathBuf::from("reports/scene_matching");
+    let mut out_dir = PathBuf::from("reports");
     let mut trials = 500usize;
     let mut seed = 2026u64;
     let mut full_rotation = false;
@@ -689,7 +689,7 @@ fn main() -> Result<()> {
         machine: machine(),
         sim_extra,
     };
-    std::fs::create_dir_all(&out_dir)?;
+    std::fs::create_dir_all(out_dir.join("pages"))?;
     let json_path = out_dir.join("scene_matching.json");
     std::fs::write(&json_path, serde_json::to_string_pretty(&report)? + "\n")?;
 
@@ -747,7 +747,7 @@ fn main() -> Result<()> {
         )
     }));
     md.push('\n');
-    let md_path = out_dir.join("scene_matching.md");
+    let md_path = out_dir.join("pages").join("scene_matching.md");
     std::fs::write(&md_path, md)?;
     eprintln!("wrote {} and {}", json_path.display(), md_path.display());
     Ok(())

@@ -76,3 +76,11 @@ def run_config(
 
     resolved = to_dict(load_run_config(overlays=list(overlays), overrides=list(overrides)))
     return {"overlays": list(overlays), "overrides": list(overrides), "resolved": resolved}
+
+
+def report_files(out: Path | str, name: str) -> tuple[Path, Path]:
+    """Where report ``name`` goes under the reports folder ``out``: its JSON at ``out/<name>.json``
+    and its Markdown page (with its figures beside it) at ``out/pages/<name>.md``; makes the folders."""
+    out = Path(out)
+    (out / "pages").mkdir(parents=True, exist_ok=True)
+    return out / f"{name}.json", out / "pages" / f"{name}.md"
