@@ -242,7 +242,7 @@ pub fn coverage_views(
     };
     let n_lanes = |half: f64, step: f64| (2.0 * half / step).ceil().max(1.0) + 1.0;
     let n_views = n_lanes(hx, step_x) * n_lanes(hy, step_y);
-    if !(n_views <= MAX_COVERAGE_VIEWS as f64) {
+    if n_views.is_nan() || n_views > MAX_COVERAGE_VIEWS as f64 {
         return Err(ExploreError::InvalidConfig {
             field: "coverage_height_m",
             reason: format!("the coverage sweep would take {n_views} views (at most {MAX_COVERAGE_VIEWS})"),

@@ -385,7 +385,7 @@ impl PlannerConfig {
     /// field: `edge_resolution_rad` and `sample_dt_s` in [1e-4, 1], `rrt_step_rad` in [1e-3, π],
     /// `rrt_goal_bias` in [0, 1], margins in [0, 1] m, `linear_step_m` and `linear_step_rad` in
     /// [1e-4, 1], `linear_max_joint_step_rad` in (0, π], `linear_waypoint_every` ≥ 1,
-    /// `timeout_s` > 0, iteration counts at most 10⁷, finite positive motion limits.
+    /// `timeout_s` ≥ 0, iteration counts at most 10⁷, finite positive motion limits.
     pub fn validate(&self) -> Result<(), PlanError> {
         let range = |field: &'static str, v: f64, lo: f64, hi: f64, lo_open: bool| {
             let above = if lo_open { v > lo } else { v >= lo };
@@ -406,8 +406,10 @@ impl PlannerConfig {
         range("linear_step_m", self.linear_step_m, 1e-4, 1.0, false)?;
         range("linear_step_rad", self.linear_step_rad, 1e-4, 1.0, false)?;
         range("linear_max_joint_step_rad", self.linear_max_joint_step_rad, 0.0, pi, true)?;
-        if let Some(t) = self.timeout_s {
-            range("timeout_s", t, 0.0, f64::MAX, true)?;
+        if let Some(t) = self.timeout_s.filter(|t| !(t.is_finite() && *t >= 0.0)) {
+            return Err(PlanError::InvalidConfig {
+                field: "timeout_s", reason: format!("{t} must be finite and ≥ 0")
+            });
         }
         const MAX_ITERATIONS: usize = 10_000_000;
         for (field, n, min) in [
