@@ -162,9 +162,27 @@ def test_saved_maps_carry_a_hash_and_load(tmp_path: Path) -> None:
 def test_load_map_refuses_impossible_values(tmp_path: Path, edit, match) -> None:
     p, doc = _saved_map(tmp_path)
     edit(doc)
-    p.write_text(json.dumps(doc))
+    # Written with a matching content hash, so only the value checks can refuse it.
+    p.write_text(_with_hash(doc))
     with pytest.raises(_native.MapFileError, match=match):
         _native.load_map(str(p))
+
+
+def _with_hash(doc: dict) -> str:
+    """A map file's text with its content hash (FNV-1a 64 of the text, the hash written as
+    ``fnv1a64:0000000000000000``), as ``objslam_core::map`` writes it."""
+    placeholder = "fnv1a64:" + "0" * 16
+    text = json.dumps({**doc, "content_hash": placeholder})
+    h = 0xCBF29CE484222325
+    for b in text.encode():
+        h = ((h ^ b) * 0x100000001B3) & 0xFFFFFFFFFFFFFFFF
+    return text.replace(placeholder, f"fnv1a64:{h:016x}", 1)
+
+
+def test_the_hash_of_a_saved_map_is_reproducible(tmp_path: Path) -> None:
+    p, doc = _saved_map(tmp_path)
+    p.write_text(_with_hash(doc))
+    _native.load_map(str(p))
 
 
 def test_load_map_refuses_a_flipped_digit(tmp_path: Path) -> None:
