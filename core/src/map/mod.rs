@@ -12,7 +12,7 @@
 //! version is an error, never a guess.
 //!
 //! Every map read from outside is checked ([`ObjectMap::validate`]): finite numbers, unit
-//! quaternions, half-extents in (0, [`validate::MAX_HALF_EXTENT_M`]], unique ids, `next_id` above
+//! quaternions, half-extents in [0, [`validate::MAX_HALF_EXTENT_M`]], unique ids, `next_id` above
 //! every id. A file must also match its content hash ([`ObjectMap::load`]), so any changed byte
 //! (a flipped digit, an edit by hand) is refused; version-1 files, written before the hash, are
 //! refused with the way to re-save them. Map JSON passed in memory ([`ObjectMap::from_json`]) is
@@ -29,7 +29,8 @@ use crate::geometry::{yaw_of, Box2, ObjectGeometry, Se3, Shape};
 pub mod validate;
 
 use validate::{
-    check_finite, check_half_extents, check_position, check_unit_quaternion, content_hash, parse_json, InvalidValue,
+    check_estimated_half_extents, check_finite, check_position, check_unit_quaternion, content_hash, parse_json,
+    InvalidValue,
 };
 
 /// The `"format"` field of a saved map.
@@ -276,9 +277,9 @@ impl ObjectMap {
 
     /// Check the invariants of a map read from outside: unique ids below `next_id`; per object a
     /// finite position within ±[`validate::MAX_COORDINATE_M`], a unit quaternion (within
-    /// [`validate::UNIT_QUATERNION_TOLERANCE`]), half-extents in (0,
-    /// [`validate::MAX_HALF_EXTENT_M`]], finite observations with scores in [0, 1] and finite
-    /// points. The error names the field (`objects[2].half_extents[0]`).
+    /// [`validate::UNIT_QUATERNION_TOLERANCE`]), half-extents in [0,
+    /// [`validate::MAX_HALF_EXTENT_M`]] (an estimate may be flat), finite observations with
+    /// scores in [0, 1] and finite points. The error names the field (`objects[2].half_extents[0]`).
     pub fn validate(&self) -> Result<(), InvalidValue> {
         let mut ids = std::collections::BTreeSet::new();
         for (i, o) in self.objects.iter().enumerate() {
@@ -300,7 +301,7 @@ impl ObjectMap {
                 o.world_from_object.rotation.coords.as_slice(),
                 &format!("{f}.world_from_object.rotation"),
             )?;
-            check_half_extents(o.half_extents.as_slice(), &format!("{f}.half_extents"))?;
+            check_estimated_half_extents(o.half_extents.as_slice(), &format!("{f}.half_extents"))?;
             for (k, ob) in o.observations.iter().enumerate() {
                 let fo = format!("{f}.observations[{k}]");
                 check_finite(&[ob.bbox.min[0], ob.bbox.min[1], ob.bbox.max[0], ob.bbox.max[1]], &format!("{fo}.bbox"))?;

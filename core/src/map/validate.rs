@@ -74,13 +74,24 @@ pub fn check_position(p: &[f64], field: &str) -> Result<(), InvalidValue> {
     }
 }
 
-/// Half-extents: finite, positive, at most [`MAX_HALF_EXTENT_M`].
+/// Half-extents: finite, positive, at most [`MAX_HALF_EXTENT_M`] (ground truth: a real object).
 pub fn check_half_extents(h: &[f64], field: &str) -> Result<(), InvalidValue> {
+    check_extents(h, field, false)
+}
+
+/// Half-extents of an estimate: as [`check_half_extents`] but 0 is allowed (an estimate from
+/// points on one plane, e.g. the naive mapper's from a single depth layer, is flat).
+pub fn check_estimated_half_extents(h: &[f64], field: &str) -> Result<(), InvalidValue> {
+    check_extents(h, field, true)
+}
+
+fn check_extents(h: &[f64], field: &str, zero_ok: bool) -> Result<(), InvalidValue> {
     check_finite(h, field)?;
-    match h.iter().position(|v| !(*v > 0.0 && *v <= MAX_HALF_EXTENT_M)) {
+    let lo = if zero_ok { "[0" } else { "(0" };
+    match h.iter().position(|v| !((*v > 0.0 || (zero_ok && *v == 0.0)) && *v <= MAX_HALF_EXTENT_M)) {
         Some(i) => Err(InvalidValue::new(
             format!("{field}[{i}]"),
-            format!("half-extent must be in (0, {MAX_HALF_EXTENT_M}] m, got {}", h[i]),
+            format!("half-extent must be in {lo}, {MAX_HALF_EXTENT_M}] m, got {}", h[i]),
         )),
         None => Ok(()),
     }
@@ -155,5 +166,7 @@ mod tests {
             assert_eq!(e.field, "h[1]");
         }
         assert!(check_position(&[0.0, 1e4, 0.0], "p").is_err());
+        assert!(check_estimated_half_extents(&[0.1, 0.0, 0.1], "h").is_ok());
+        assert!(check_estimated_half_extents(&[0.1, -1e-9, 0.1], "h").is_err());
     }
 }
