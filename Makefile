@@ -10,8 +10,9 @@ MATCH_SIM_ARGS ?=
 GRASP_ARGS ?=
 PLACE_ARGS ?=
 ROBUSTNESS_ARGS ?=
+RUNS_ARGS ?=
 
-.PHONY: help setup run test test-fast test-rust test-rust-unit test-py bench benchmark associate parameterize slam grasp grasp-robustness place match match-sim report reports-index view lint fmt clean
+.PHONY: help setup run runs fuzz test test-fast test-rust test-rust-unit test-py bench benchmark associate parameterize slam grasp grasp-robustness place match match-sim report reports-index view lint fmt clean
 
 help: ## List the targets
 	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*## "}; {printf "  \033[1m%-12s\033[0m %s\n", $$1, $$2}'
@@ -21,6 +22,9 @@ setup: ## Install everything from a bare Debian 12 machine (idempotent; seconds 
 
 run: setup ## Run the main job: one episode on scene 1 (RUN_ARGS="--scene ... --seed ..." to change)
 	@$(PY) experiments/run.py $(RUN_ARGS)
+
+runs: ## List run folders by status (complete, failed, interrupted, terminated, running, dead)
+	@$(PY) -m objslam.runs $(RUNS_ARGS)
 
 test: setup test-rust test-py ## Run all tests (cargo tests in the release profile + pytest)
 
@@ -37,6 +41,11 @@ test-rust-unit: ## Rust unit tests only (the library's own tests, no integration
 
 test-py: ## Python tests only (needs `make setup`)
 	$(PY) -m pytest -q tests
+
+FUZZ_CASES ?= 20000
+fuzz: setup ## Fuzz the JSON readers and native entry points at length (FUZZ_CASES per property, default 20000)
+	PROPTEST_CASES=$(FUZZ_CASES) cargo test --release -p objslam-core --test fuzz_json
+	OBJSLAM_FUZZ_CASES=$(FUZZ_CASES) $(PY) -m pytest -q tests/test_fuzz.py
 
 bench: setup ## Benchmarks (criterion + Python references in one run) → reports/bench.json
 	$(PY) experiments/bench.py

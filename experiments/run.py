@@ -1,20 +1,35 @@
 """Run one episode: ``python experiments/run.py [--scene S] [--strategy X] [--seed N] [--set k=v ...]``.
 
 Writes ``runs/<date>/<time>_<strategy>_<scene>_<seed>/`` and prints a per-object table and the means.
-Exit status 0 on success, 1 on a failed run (its folder is kept and marked), 2 on a bad config.
+Exit status 0 on success, 1 on a failed run (its folder is kept and marked), 2 on a bad config,
+130 on Ctrl-C (SIGINT) and 143 on SIGTERM (the folder is kept, marked interrupted or terminated;
+one line says where it is).
 """
 
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
 
 from objslam.config import ConfigError, load_run_config
-from objslam.episode import format_table, run_episode
+from objslam.episode import RunStopped, format_table, run_episode
 from objslam.scene import SceneFileError
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run, and turn a signal into one line and the shell's exit status (no traceback)."""
+    try:
+        return _main(argv)
+    except RunStopped as e:
+        print(f"run {e.status}: its folder is kept, marked incomplete: {e.run_dir}", file=sys.stderr)
+        return e.exit_code
+    except KeyboardInterrupt:
+        print("interrupted before a run folder was made", file=sys.stderr)
+        return 128 + signal.SIGINT
+
+
+def _main(argv: list[str] | None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--scene", help="scene file (default from experiments/configs/default.toml)")
     ap.add_argument("--strategy", help="view-selection strategy (default: init)")
@@ -40,6 +55,9 @@ def main(argv: list[str] | None = None) -> int:
         result = run_episode(cfg, progress=not a.no_progress)
     except SceneFileError as e:
         print(f"scene error: {e}", file=sys.stderr)
+        return 2
+    except ConfigError as e:
+        print(f"config error: {e}", file=sys.stderr)
         return 2
     except Exception as e:  # noqa: BLE001 - the run folder already records the traceback
         print(f"run failed: {type(e).__name__}: {e}", file=sys.stderr)

@@ -54,6 +54,7 @@ def test_ids_are_the_maps_object_ids_not_indices(scene_map) -> None:
     doc = json.loads(transform_map_json(scene_map, YAW, T, S))
     for o in doc["objects"]:
         o["id"] += 100
+    doc["next_id"] = max(o["id"] for o in doc["objects"]) + 1
     doc["objects"].reverse()
     r = objslam.relocalise(scene_map, json.dumps(doc))
     assert r["matched"]

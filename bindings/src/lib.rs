@@ -1,13 +1,15 @@
 //! Thin pyo3 layer over `objslam-core`, built by maturin as the private module `objslam._native`.
 //!
-//! Rules: numpy arrays in, validated here (dtype, shape, finiteness) with errors that name the
-//! argument; every core error maps to a specific Python exception; no panic crosses into Python
-//! (core code has no unwrap, and these wrappers only return `PyResult`). Complex structured values
-//! (maps, evaluations, configs) cross as JSON strings, parsed by the Python wrapper.
+//! Rules: numpy arrays in, validated here (dtype, shape, finiteness, element count against
+//! [`MAX_ARRAY_ELEMENTS`] before anything is copied, so a broadcast view of a huge shape is refused
+//! instead of copied) with errors that name the argument; every core error maps to a specific
+//! Python exception; no panic crosses into Python (core code has no unwrap, and these wrappers
+//! only return `PyResult`). Complex structured values (maps, evaluations, configs) cross as JSON
+//! strings, read with [`parse_json`] so errors name the field's path.
 
 use nalgebra::{Matrix3, Matrix4, Point3};
 use numpy::{PyReadonlyArray2, PyReadonlyArray3};
-use objslam_core::eval::{estimates_from_map, evaluate, EvalConfig, GtObject};
+use objslam_core::eval::{config_from_json, estimates_from_map, evaluate, ground_truth_from_json, EvalConfig};
 use objslam_core::frame::{DepthImage, Detection, Frame, FrameError};
 use objslam_core::geometry::{se3_from_matrix, Box2, GeometryError, ObjectGeometry, PinholeCamera, Se3};
 use objslam_core::map::{Label, MapError, ObjectMap};
@@ -28,6 +30,25 @@ create_exception!(_native, RecordingError, ObjslamError, "The Rerun recording fa
 
 pub(crate) fn input_err(msg: impl std::fmt::Display) -> PyErr {
     InputError::new_err(msg.to_string())
+}
+
+/// Most elements of one numpy argument (2^26, e.g. an 8192 x 8192 depth image or 22 M points),
+/// checked before the array is copied.
+pub(crate) const MAX_ARRAY_ELEMENTS: usize = 1 << 26;
+
+/// Refuse an array of more than [`MAX_ARRAY_ELEMENTS`] elements (a broadcast view has a large
+/// shape and no memory of its own: copying it would allocate the full shape).
+pub(crate) fn check_elements(field: &str, shape: &[usize]) -> PyResult<()> {
+    let n = shape.iter().try_fold(1usize, |acc, d| acc.checked_mul(*d));
+    match n {
+        Some(n) if n <= MAX_ARRAY_ELEMENTS => Ok(()),
+        _ => Err(input_err(format!("{field}: shape {shape:?} has more than {MAX_ARRAY_ELEMENTS} elements"))),
+    }
+}
+
+/// Parse JSON `text` given as argument `field`; errors name the field's path inside it.
+pub(crate) fn parse_json<T: serde::de::DeserializeOwned>(field: &str, text: &str) -> PyResult<T> {
+    objslam_core::map::validate::parse_json(text).map_err(|e| input_err(format!("{field}: {e}")))
 }
 
 fn frame_err(e: FrameError) -> PyErr {
@@ -106,6 +127,7 @@ pub(crate) fn depth_image(obj: &Bound<'_, PyAny>) -> PyResult<DepthImage> {
         ))
     })?;
     let a = arr.as_array();
+    check_elements("depth", a.shape())?;
     let (h, w) = (a.shape()[0], a.shape()[1]);
     let data: Vec<f32> = a.iter().copied().collect();
     DepthImage::new(w as u32, h as u32, data).map_err(frame_err)
@@ -170,9 +192,10 @@ impl NaiveMapperPy {
     #[pyo3(signature = (config_json = None))]
     fn new(config_json: Option<&str>) -> PyResult<Self> {
         let config: NaiveConfig = match config_json {
-            Some(s) => serde_json::from_str(s).map_err(|e| json_err("config", e))?,
+            Some(s) => parse_json("config", s)?,
             None => NaiveConfig::default(),
         };
+        config.validate().map_err(|(field, reason)| input_err(format!("config.{field}: {reason}")))?;
         Ok(Self { inner: NaiveMapper::new(config) })
     }
 
@@ -233,17 +256,17 @@ fn map_objects_json(map_json: &str) -> PyResult<String> {
 #[pyfunction]
 #[pyo3(signature = (gt_json, map_json, config_json = None))]
 fn evaluate_map(gt_json: &str, map_json: &str, config_json: Option<&str>) -> PyResult<String> {
-    let gt: Vec<GtObject> = serde_json::from_str(gt_json).map_err(|e| json_err("gt", e))?;
+    let gt = ground_truth_from_json(gt_json).map_err(input_err)?;
     let map = ObjectMap::from_json(map_json, "map_json").map_err(map_err)?;
     let config: EvalConfig = match config_json {
-        Some(s) => serde_json::from_str(s).map_err(|e| json_err("config", e))?,
+        Some(s) => config_from_json(s).map_err(input_err)?,
         None => EvalConfig::default(),
     };
     let ev = evaluate(&gt, &estimates_from_map(&map), &config);
     serde_json::to_string(&ev).map_err(|e| json_err("evaluation", e))
 }
 
-/// Load a map file and return its JSON (validates format and version).
+/// Load a map file and return its JSON (checks format, version, content hash and values).
 #[pyfunction]
 fn load_map(path: &str) -> PyResult<String> {
     ObjectMap::load(std::path::Path::new(path)).map(|m| m.to_json()).map_err(map_err)
@@ -268,6 +291,7 @@ fn points3(obj: &Bound<'_, PyAny>, field: &str) -> PyResult<Vec<Point3<f64>>> {
     if a.shape()[1] != 3 {
         return Err(input_err(format!("{field}: expected shape (N, 3), got {:?}", a.shape())));
     }
+    check_elements(field, a.shape())?;
     let mut out = Vec::with_capacity(a.shape()[0]);
     for (i, row) in a.rows().into_iter().enumerate() {
         if !row.iter().all(|v| v.is_finite()) {
@@ -344,6 +368,7 @@ impl RecorderPy {
         if a.shape()[2] != 3 {
             return Err(input_err(format!("rgb: expected shape (H, W, 3), got {:?}", a.shape())));
         }
+        check_elements("rgb", a.shape())?;
         let data: Vec<u8> = a.iter().copied().collect();
         self.rec()?.log_rgb(a.shape()[1] as u32, a.shape()[0] as u32, &data).map_err(record_err)
     }
@@ -374,7 +399,7 @@ impl RecorderPy {
             label: String,
             geometry: ObjectGeometry,
         }
-        let v: Vec<In> = serde_json::from_str(objects_json).map_err(|e| json_err("objects_json", e))?;
+        let v: Vec<In> = parse_json("objects_json", objects_json)?;
         let objs: Vec<DrawnObject> =
             v.into_iter().map(|o| DrawnObject { id: o.id, label: o.label, geometry: o.geometry }).collect();
         self.rec()?.log_objects(root, &objs).map_err(record_err)

@@ -7,16 +7,30 @@ evaluation and to its own entity paths in the recording.
 
 Run folder: ``<runs_dir>/<YYYY-MM-DD>/<HHMMSS>_<strategy>_<scene>_<seed>/`` holding ``config.toml``
 (resolved), ``status.json``, ``map.json``, ``metrics.json`` and ``run.rrd``. While a run is going,
-and if it fails, the folder holds an ``INCOMPLETE`` marker and ``status.json`` says why; earlier
-run folders are never touched. ``<runs_dir>/latest`` is re-pointed at a run when it completes.
+and if it stops early, the folder holds an ``INCOMPLETE`` marker and ``status.json`` says why;
+earlier run folders are never touched, and no folder is made outside ``runs_dir`` (scene names and
+strategy labels are checked by :func:`objslam.scene.path_name_problem`). ``<runs_dir>/latest`` is
+re-pointed at a run when it completes.
+
+``status.json`` records ``pid``, ``host`` and ``started`` from the start, and at the end
+``status`` = ``complete``, ``failed`` (an error, e.g. a full disk), ``interrupted`` (SIGINT,
+Ctrl-C) or ``terminated`` (SIGTERM, as sent by ``timeout``, docker or Slurm) with ``finished``. A
+run killed outright (SIGKILL, power loss) stays ``running``: ``python -m objslam.runs`` tells it
+from a live run by its pid and host. Every file is written atomically (a temporary file, flushed,
+renamed), so a failed write never truncates what was already complete; the map so far is kept in
+``map.json.partial`` after every view.
 """
 
 from __future__ import annotations
 
+import gc
 import json
 import os
+import signal
+import socket
 import statistics
 import sys
+import threading
 import time
 import traceback
 from collections.abc import Callable
@@ -28,10 +42,10 @@ from typing import Any
 import numpy as np
 
 from . import _native
-from .config import REPO_ROOT, RunConfig, to_dict
+from .config import REPO_ROOT, ConfigError, RunConfig, to_dict
 from .detector import Detection, SimulatedDetector
 from .evaluation import offset_removed
-from .scene import SceneSpec, gt_objects, load_scene
+from .scene import SceneFileError, SceneSpec, gt_objects, load_scene, path_name_problem
 from .strategy import DecisionStep, as_view, make_strategy
 from .world import MotionError, SensorFrame, SimWorld, UnreachablePoseError
 
@@ -158,14 +172,54 @@ def _scene_path(cfg: RunConfig) -> Path:
     return p if p.is_absolute() else REPO_ROOT / p
 
 
+class RunStopped(BaseException):
+    """A run stopped by a signal (SIGINT or SIGTERM) after its folder was marked ``interrupted`` or
+    ``terminated``. Like :class:`KeyboardInterrupt` it is not an :class:`Exception`, so sweeps that
+    catch failed runs still stop."""
+
+    def __init__(self, signum: int, run_dir: Path) -> None:
+        super().__init__(f"run {_STOP_STATUS[signum]} by {signal.Signals(signum).name}: {run_dir}")
+        self.signum = signum
+        self.run_dir = run_dir
+
+    @property
+    def status(self) -> str:
+        """``interrupted`` (SIGINT) or ``terminated`` (SIGTERM)."""
+        return _STOP_STATUS[self.signum]
+
+    @property
+    def exit_code(self) -> int:
+        """The shell's exit status for the signal: 130 for SIGINT, 143 for SIGTERM."""
+        return 128 + self.signum
+
+
+_STOP_STATUS = {signal.SIGINT: "interrupted", signal.SIGTERM: "terminated"}
+
+
+class _Terminated(BaseException):
+    """Raised in the main thread by the SIGTERM handler of :func:`run_episode`."""
+
+
+def _on_sigterm(signum: int, frame: Any) -> None:
+    raise _Terminated()
+
+
 def _make_run_dir(cfg: RunConfig, scene: SceneSpec) -> Path:
     runs = Path(cfg.runs_dir)
     if not runs.is_absolute():
         runs = REPO_ROOT / runs
+    problem = path_name_problem(scene.name)
+    if problem is not None:
+        raise SceneFileError(scene.path or "<scene>", "scene.name", problem)
+    problem = path_name_problem(cfg.strategy)
+    if problem is not None:
+        raise ConfigError(f"strategy: {problem} (the label becomes part of the run folder's name)")
     now = datetime.now()
     base = (
         runs / now.strftime("%Y-%m-%d") / f"{now.strftime('%H%M%S')}_{cfg.strategy}_{scene.name}_{cfg.seed}"
     )
+    if not base.resolve().is_relative_to(runs.resolve()):
+        raise ConfigError(f"runs_dir: the run folder {base} would lie outside {runs}")
     base.parent.mkdir(parents=True, exist_ok=True)
     d, k = base, 1
     while True:  # never reuse (and so never overwrite) a folder, even when workers start together
@@ -177,10 +231,46 @@ def _make_run_dir(cfg: RunConfig, scene: SceneSpec) -> Path:
             d = base.with_name(f"{base.name}-{k}")
 
 
+def _write_atomic(path: Path, text: str) -> None:
+    """Write ``text`` to ``path`` atomically: a temporary file beside it, flushed to disk, renamed
+    over ``path``. On failure (a full disk) the temporary file is removed and ``path`` keeps its
+    previous content."""
+    tmp = path.with_name(path.name + ".tmp")
+    try:
+        with open(tmp, "w", encoding="utf-8") as f:
+            f.write(text)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
 def _write_json(path: Path, data: Any) -> None:
-    tmp = path.with_suffix(path.suffix + ".tmp")
-    tmp.write_text(json.dumps(data, indent=2, allow_nan=False))
-    os.replace(tmp, path)
+    _write_atomic(path, json.dumps(data, indent=2, allow_nan=False))
+
+
+def _status_start() -> dict[str, Any]:
+    """The fields of ``status.json`` that let a reader tell a live run from a dead one."""
+    return {
+        "pid": os.getpid(),
+        "host": socket.gethostname(),
+        "started": datetime.now().isoformat(timespec="seconds"),
+        "command": sys.argv,
+    }
+
+
+def _finish_status(run_dir: Path, start: dict[str, Any], status: str, **extra: Any) -> None:
+    """Write the final ``status.json``; when even that fails (a full disk), say so on stderr: the
+    ``INCOMPLETE`` marker and the recorded pid still tell a reader the run did not complete."""
+    try:
+        _write_json(
+            run_dir / "status.json",
+            {"status": status, **start, "finished": datetime.now().isoformat(timespec="seconds"), **extra},
+        )
+    except OSError as e:
+        print(f"run folder {run_dir}: could not write status.json ({status}): {e}", file=sys.stderr)
 
 
 def _update_latest(run_dir: Path) -> None:
@@ -293,17 +383,18 @@ def algorithm_seeds(run_seed: int, scene_seed: int) -> dict[str, int]:
 def run_episode(
     cfg: RunConfig, *, progress: bool = True, on_frame: Callable[[SensorFrame], None] | None = None
 ) -> EpisodeResult:
-    """Run one episode and write its run folder. Raises on failure after marking the folder."""
+    """Run one episode and write its run folder. Raises on failure after marking the folder;
+    SIGINT (Ctrl-C) and SIGTERM raise :class:`RunStopped` after marking it ``interrupted`` or
+    ``terminated``. Config values the core refuses raise before any folder is made."""
     cfg.validate()
     scene = load_scene(_scene_path(cfg))
+    try:
+        mapper = new_mapper(cfg, scene)
+    except _native.InputError as e:
+        raise ConfigError(_run_config_names(str(e))) from None
     run_dir = _make_run_dir(cfg, scene)
-    (run_dir / "INCOMPLETE").write_text("this run has not finished (or failed: see status.json)\n")
-    _write_json(run_dir / "status.json", {"status": "running", "started": datetime.now().isoformat()})
     import tomli_w
 
-    (run_dir / "config.toml").write_text(tomli_w.dumps(to_dict(cfg)))
-    rec = _Recorder(run_dir / "run.rrd" if cfg.record.enabled else None)
-    mapper = None
     t_start = time.perf_counter()
     times: dict[str, list[float]] = {s: [] for s in STAGES}
     events: list[str] = []
@@ -315,8 +406,17 @@ def run_episode(
     view_counter = [0]
     move_paths: dict[str, int] = {"cartesian": 0, "joint": 0}
     accuracy_curve: list[dict[str, Any]] = []
+    start = _status_start()
+    world: SimWorld | None = None
+    rec = _Recorder(None)
+    previous_sigterm = None
+    if threading.current_thread() is threading.main_thread():
+        previous_sigterm = signal.signal(signal.SIGTERM, _on_sigterm)
     try:
-        mapper = new_mapper(cfg, scene)
+        (run_dir / "INCOMPLETE").write_text("this run has not finished (or stopped early: see status.json)\n")
+        _write_json(run_dir / "status.json", {"status": "running", **start})
+        _write_atomic(run_dir / "config.toml", tomli_w.dumps(to_dict(cfg)))
+        rec = _Recorder(run_dir / "run.rrd" if cfg.record.enabled else None)
         rng_sensor = np.random.default_rng([cfg.seed, 1])
         rng_detector = np.random.default_rng([cfg.seed, 2])
         world = SimWorld(scene, cfg.camera, rng_sensor)
@@ -436,7 +536,7 @@ def run_episode(
             view_counter[0] += 1
             if bar is not None:
                 bar.update(1)
-            (run_dir / "map.json.partial").write_text(mapper.map_json())
+            _write_atomic(run_dir / "map.json.partial", mapper.map_json())
             return ok
 
         for vi, view in enumerate(init_views):
@@ -487,9 +587,7 @@ def run_episode(
         rec.log_objects("world/ground_truth", json.dumps(gt))
         if cfg.record.estimator_inputs:
             inputs = json.loads(mapper.estimator_inputs_json())
-            (run_dir / "estimator_inputs.json").write_text(
-                json.dumps({"objects": inputs, "ground_truth": gt})
-            )
+            _write_atomic(run_dir / "estimator_inputs.json", json.dumps({"objects": inputs, "ground_truth": gt}))
         evaluation = json.loads(_native.evaluate_map(json.dumps(gt), map_json, json.dumps(to_dict(cfg.eval))))
         stages = {}
         for stage in ("raw", "iforest", "lines", "refined"):
@@ -532,23 +630,91 @@ def run_episode(
         _write_json(run_dir / "metrics.json", metrics)
         rec.log_event(f"done: mean 3D IoU {metrics['mean']['iou3d']:.3f}")
         rec.close()
-        _write_json(run_dir / "status.json", {"status": "complete", "finished": datetime.now().isoformat()})
+        _write_json(
+            run_dir / "status.json",
+            {"status": "complete", **start, "finished": datetime.now().isoformat(timespec="seconds")},
+        )
         (run_dir / "INCOMPLETE").unlink()
         _update_latest(run_dir)
         return EpisodeResult(run_dir=run_dir, metrics=metrics, map_json=map_json, frame_times_ms=times)
     except BaseException as e:
-        # Keep everything written so far; mark the folder as failed and say why.
+        # Keep everything written so far; mark the folder and say why. A second signal while
+        # cleaning up must not leave the status at "running".
+        status = _stop_status(e)
+        if previous_sigterm is not None:
+            signal.signal(signal.SIGTERM, signal.SIG_IGN)
+            previous_sigint = signal.signal(signal.SIGINT, signal.SIG_IGN)
         try:
-            if mapper is not None:
-                (run_dir / "map.json.partial").write_text(mapper.map_json())
+            _write_atomic(run_dir / "map.json.partial", mapper.map_json())
             rec.close()
         except Exception as cleanup:  # noqa: BLE001 - best effort while already failing
             print(f"run folder {run_dir}: could not save the partial map: {cleanup}", file=sys.stderr)
-        _write_json(
-            run_dir / "status.json",
-            {"status": "failed", "error": f"{type(e).__name__}: {e}", "traceback": traceback.format_exc()},
-        )
-        raise
+        extra: dict[str, Any] = {"error": f"{type(e).__name__}: {e}"}
+        if status == "failed":
+            extra["traceback"] = traceback.format_exc()
+        _finish_status(run_dir, start, status, **extra)
+        # Shut the renderer down before the interpreter exits (it may otherwise still be rendering
+        # while Python tears down): drop the world and the frames (a signal's traceback is not
+        # shown) that hold it.
+        world = None
+        if status != "failed":
+            traceback.clear_frames(e.__traceback__)
+        gc.collect()
+        if previous_sigterm is not None:
+            signal.signal(signal.SIGINT, previous_sigint)
+        stopped = _stopped(e, run_dir)
+        if stopped is e:
+            raise
+        raise stopped from e
+    finally:
+        if previous_sigterm is not None:
+            signal.signal(signal.SIGTERM, previous_sigterm)
+
+
+#: Core config field names and the run config's names for them (``config.py``), so an error the
+#: core raises names the key the user wrote.
+_CORE_NAMES = (
+    ("param.iforest.passes", "param.iforest_passes"),
+    ("param.iforest.readmit_rings", "param.iforest_readmit_rings"),
+    ("param.iforest.readmit_gap_factor", "param.iforest_readmit_gap"),
+    ("param.cylinder.consensus_iterations", "param.cylinder_consensus_iterations"),
+    ("param.refine.prior_px_per_m", "param.refine_prior_px_per_m"),
+    ("config field cell_size_m", "explore.cell_m"),
+    ("config field discovery.", "explore.discovery_"),
+    ("config field lambda", "explore.utility_lambda"),
+    ("config field ", "explore."),
+    ("kinematic_noise", "pose_noise"),
+    ("motion_gate_floor_m", "slam_motion_gate_m"),
+    ("motion_gate_floor_deg", "slam_motion_gate_deg"),
+)
+
+
+def _run_config_names(message: str) -> str:
+    """A core config error re-worded with the run config's key names."""
+    for core, ours in _CORE_NAMES:
+        message = message.replace(core, ours)
+    return message
+
+
+def _stop_status(e: BaseException) -> str:
+    """The final status of a run that raised ``e``."""
+    if isinstance(e, KeyboardInterrupt):
+        return "interrupted"
+    if isinstance(e, _Terminated):
+        return "terminated"
+    if isinstance(e, RunStopped):
+        return e.status
+    return "failed"
+
+
+def _stopped(e: BaseException, run_dir: Path) -> BaseException:
+    """What :func:`run_episode` raises for ``e``: :class:`RunStopped` for a signal, ``e`` itself
+    otherwise."""
+    if isinstance(e, KeyboardInterrupt):
+        return RunStopped(signal.SIGINT, run_dir)
+    if isinstance(e, _Terminated):
+        return RunStopped(signal.SIGTERM, run_dir)
+    return e
 
 
 def format_table(metrics: dict[str, Any]) -> str:

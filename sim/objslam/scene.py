@@ -33,6 +33,7 @@ z up. Every error names the file, the field and the reason (:class:`SceneFileErr
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -52,6 +53,22 @@ MIN_SIZE_M = 0.01
 MAX_SIZE_M = 0.5
 #: The Panda's fingers open to 8 cm; an object is graspable if a horizontal side is under this.
 GRASPABLE_SIDE_M = 0.07
+#: Longest name that becomes part of a file or folder name (scene names, strategy labels).
+MAX_NAME_CHARS = 64
+_SAFE_NAME = re.compile(r"[A-Za-z0-9_-][A-Za-z0-9._-]*")
+
+
+def path_name_problem(name: object) -> str | None:
+    """Why ``name`` cannot be part of a file or folder name, or None when it can: a non-empty
+    string of ASCII letters, digits, ``.``, ``_`` and ``-``, not starting with ``.``, at most
+    :data:`MAX_NAME_CHARS` characters (so no ``/``, ``..``, spaces or control characters)."""
+    if not isinstance(name, str) or not name:
+        return "expected a non-empty string"
+    if len(name) > MAX_NAME_CHARS:
+        return f"{len(name)} characters, at most {MAX_NAME_CHARS}"
+    if not _SAFE_NAME.fullmatch(name):
+        return f"{name!r}: use only letters, digits, '.', '_' and '-', not starting with '.'"
+    return None
 
 
 class SceneFileError(ValueError):
@@ -217,8 +234,9 @@ def parse_scene(data: dict[str, Any], path: str | Path = "<memory>") -> SceneSpe
     if not isinstance(s, dict):
         raise SceneFileError(path, "scene", "missing [scene] section")
     name = s.get("name")
-    if not isinstance(name, str) or not name:
-        raise SceneFileError(path, "scene.name", "expected a non-empty string")
+    problem = path_name_problem(name)
+    if problem is not None:
+        raise SceneFileError(path, "scene.name", f"{problem} (the name becomes part of the run folder's name)")
     character = s.get("character", "")
     if not isinstance(character, str):
         raise SceneFileError(path, "scene.character", "expected a string")
@@ -244,9 +262,11 @@ def load_scene(path: str | Path) -> SceneSpec:
     """Load and validate a scene file."""
     path = Path(path)
     try:
-        text = path.read_text()
+        text = path.read_bytes().decode("utf-8")
     except OSError as e:
         raise SceneFileError(path, "<file>", f"cannot read: {e.strerror}") from e
+    except UnicodeDecodeError as e:
+        raise SceneFileError(path, "<file>", f"not UTF-8 text (byte {e.start}: {e.reason})") from e
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:

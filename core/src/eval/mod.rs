@@ -2,6 +2,7 @@
 //!
 //! Entry points: [`evaluate`] → [`Evaluation`] (per-GT-object rows and the means), driven by
 //! [`EvalConfig`].
+//! Inputs read from outside are checked by [`ground_truth_from_json`] and [`config_from_json`].
 //!
 //! Matching: estimates and GT objects are paired by the Hungarian algorithm on centre distance,
 //! only within the same class and only closer than [`EvalConfig::max_match_distance_m`]; every GT
@@ -17,6 +18,9 @@
 //! a mapping failure); CDE averages over matched objects, YAE over matched cuboids. Both choices are
 //! stated in [`Means`] so a reader of `metrics.json` knows what was averaged.
 
+mod input;
+
+pub use input::{config_from_json, ground_truth_from_json, EvalError, MAX_MATCH_DISTANCE_M};
 use pathfinding::prelude::{kuhn_munkres, Matrix};
 use serde::{Deserialize, Serialize};
 
@@ -28,9 +32,10 @@ use crate::map::{Label, ObjectMap};
 pub struct EvalConfig {
     /// Estimates farther than this from a GT centre are not matched to it (metres). Default 0.10:
     /// about the size of the smallest benchmark objects' footprint; the paper gives no value.
+    /// Must be in (0, [`MAX_MATCH_DISTANCE_M`] = 10] m.
     pub max_match_distance_m: f64,
     /// Relative difference of the GT horizontal sides under which a cuboid counts as square, so its
-    /// yaw is symmetric under 90° (default 0.05).
+    /// yaw is symmetric under 90° (default 0.05; in [0, 1]).
     pub square_tolerance: f64,
 }
 

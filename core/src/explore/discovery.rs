@@ -88,7 +88,7 @@ pub struct DiscoveryConfig {
     /// Do not stop on "every object done" while a view would still see `min_new_cells` unseen
     /// cells (false = the paper's stopping rule).
     pub before_stop: bool,
-    /// Table cell side, metres.
+    /// Table cell side, metres, in [1 mm, 1 m]; the table must give at most [`MAX_TABLE_CELLS`] cells.
     pub cell_m: f64,
     /// Keep exploring after every object is done while a candidate sees at least this many unseen
     /// cells.
@@ -207,6 +207,10 @@ pub struct TableCoverage {
     evidence: Vec<u32>,
 }
 
+/// Most cells of the table-coverage grid (4 M cells, 32 MB): a table of
+/// [`super::MAX_TABLE_SIDE_M`] needs `cell_m` ≥ 5 mm.
+pub const MAX_TABLE_CELLS: usize = 1 << 22;
+
 /// Below the table top by more than this, a return is not on the table (metres).
 const BELOW_TABLE_TOLERANCE_M: f64 = 0.02;
 /// Cell centres are tested this far above the table top (metres), clear of the plane itself.
@@ -223,6 +227,15 @@ impl TableCoverage {
         let cell_m = config.cell_m;
         let cols = ((table.size_m[0] / cell_m).ceil() as usize).max(1);
         let rows = ((table.size_m[1] / cell_m).ceil() as usize).max(1);
+        if cols.saturating_mul(rows) > MAX_TABLE_CELLS {
+            return Err(ExploreError::InvalidConfig {
+                field: "discovery_cell_m",
+                reason: format!(
+                    "{cell_m} m over a {:?} m table gives {cols} x {rows} cells, more than {MAX_TABLE_CELLS}",
+                    table.size_m
+                ),
+            });
+        }
         Ok(Self {
             table: *table,
             cell_m,

@@ -387,25 +387,44 @@ impl ExploreConfig {
     }
 }
 
+/// Largest table side, metres ([`TableRect::size_m`]): the grids over the table are sized from
+/// it, so it is capped before anything is allocated (the scene files allow at most 3 m).
+pub const MAX_TABLE_SIDE_M: f64 = 10.0;
+/// Largest absolute table-centre coordinate, metres.
+pub const MAX_TABLE_CENTER_M: f64 = 100.0;
+
 /// The table top: a rectangle in the plane z = `height_m` (scene files' `[table]`).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TableRect {
-    /// Centre (x, y), metres.
+    /// Centre (x, y), metres; within ±[`MAX_TABLE_CENTER_M`].
     pub center_m: [f64; 2],
-    /// Extent (x, y), metres.
+    /// Extent (x, y), metres; each side in (0, [`MAX_TABLE_SIDE_M`]].
     pub size_m: [f64; 2],
     /// Table-top height (world z), metres; 0 in the testbed.
     pub height_m: f64,
 }
 
 impl TableRect {
-    /// Check the values are finite and the size positive.
+    /// Check the values are finite, the sides in (0, [`MAX_TABLE_SIDE_M`]] and the centre and
+    /// height within ±[`MAX_TABLE_CENTER_M`].
     pub fn validate(&self) -> Result<(), ExploreError> {
         if self.center_m.iter().chain(self.size_m.iter()).any(|v| !v.is_finite()) || !self.height_m.is_finite() {
             return Err(ExploreError::NonFinite { field: "table" });
         }
-        if self.size_m.iter().any(|v| *v <= 0.0) {
-            return Err(ExploreError::Degenerate { what: format!("table size {:?}", self.size_m) });
+        if self.size_m.iter().any(|v| !(*v > 0.0 && *v <= MAX_TABLE_SIDE_M)) {
+            return Err(ExploreError::InvalidConfig {
+                field: "table.size",
+                reason: format!("{:?} m: each side must be in (0, {MAX_TABLE_SIDE_M}] m", self.size_m),
+            });
+        }
+        if self.center_m.iter().chain([&self.height_m]).any(|v| v.abs() > MAX_TABLE_CENTER_M) {
+            return Err(ExploreError::InvalidConfig {
+                field: "table.center",
+                reason: format!(
+                    "centre {:?}, height {} m: must be within ±{MAX_TABLE_CENTER_M} m",
+                    self.center_m, self.height_m
+                ),
+            });
         }
         Ok(())
     }

@@ -33,6 +33,9 @@ impl Reachability for AlwaysReachable {
     }
 }
 
+/// Most views of a coverage sweep (a lawn-mower pattern over the table is tens of views).
+pub const MAX_COVERAGE_VIEWS: usize = 10_000;
+
 /// A candidate view with where it came from.
 #[derive(Debug, Clone, PartialEq)]
 pub struct CandidateView {
@@ -192,6 +195,14 @@ pub fn coverage_views(
         let n = ((2.0 * half / step).ceil() as usize).max(1);
         (0..=n).map(|i| -half + 2.0 * half * i as f64 / n as f64).collect()
     };
+    let n_lanes = |half: f64, step: f64| (2.0 * half / step).ceil().max(1.0) + 1.0;
+    let n_views = n_lanes(hx, step_x) * n_lanes(hy, step_y);
+    if n_views.is_nan() || n_views > MAX_COVERAGE_VIEWS as f64 {
+        return Err(ExploreError::InvalidConfig {
+            field: "coverage_height_m",
+            reason: format!("the coverage sweep would take {n_views} views (at most {MAX_COVERAGE_VIEWS})"),
+        });
+    }
     let xs = lanes(hx, step_x);
     let ys = lanes(hy, step_y);
     let mut out = Vec::with_capacity(xs.len() * ys.len());

@@ -25,18 +25,42 @@ use crate::map::{EstimateStage, Label, MapObject, ObjectMap, Observation};
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct NaiveConfig {
-    /// Sample every n-th pixel in each direction inside a detection box (default 4).
+    /// Sample every n-th pixel in each direction inside a detection box (default 4; ≥ 1).
     pub pixel_stride: u32,
-    /// Minimum projected-box IoU to associate a detection with an object (default 0.3).
+    /// Minimum projected-box IoU to associate a detection with an object (default 0.3; in [0, 1]).
     pub iou_threshold: f64,
-    /// Voxel size for the stored point cloud, metres (default 0.005).
+    /// Voxel size for the stored point cloud, metres (default 0.005; in [1e-4, 1]).
     pub voxel_m: f64,
-    /// Fraction trimmed at each end of every axis before taking the extent (default 0.02).
+    /// Fraction trimmed at each end of every axis before taking the extent (default 0.02; in
+    /// [0, 0.5)).
     pub trim_fraction: f64,
     /// Detections yielding fewer valid depth points than this are skipped (default 20).
     pub min_points: usize,
-    /// Depth readings beyond this are ignored, metres (default 3.0).
+    /// Depth readings beyond this are ignored, metres (default 3.0; > 0).
     pub max_depth_m: f64,
+}
+
+impl NaiveConfig {
+    /// Check the ranges stated on each field; the error is `(field, reason)`.
+    pub fn validate(&self) -> Result<(), (&'static str, String)> {
+        let bad = |field: &'static str, v: f64, range: &str| Err((field, format!("{v} outside {range}")));
+        if self.pixel_stride == 0 {
+            return bad("pixel_stride", 0.0, "[1, ∞)");
+        }
+        if !(0.0..=1.0).contains(&self.iou_threshold) {
+            return bad("iou_threshold", self.iou_threshold, "[0, 1]");
+        }
+        if !(1e-4..=1.0).contains(&self.voxel_m) {
+            return bad("voxel_m", self.voxel_m, "[1e-4, 1] m");
+        }
+        if !(0.0..0.5).contains(&self.trim_fraction) {
+            return bad("trim_fraction", self.trim_fraction, "[0, 0.5)");
+        }
+        if !(self.max_depth_m.is_finite() && self.max_depth_m > 0.0) {
+            return bad("max_depth_m", self.max_depth_m, "(0, ∞) m");
+        }
+        Ok(())
+    }
 }
 
 impl Default for NaiveConfig {

@@ -54,6 +54,64 @@ pub enum PipelineError {
     /// Unknown association mode.
     #[error("association_mode: unknown {0:?} (naive, iou, iou_np, iou_t, ensemble)")]
     UnknownMode(String),
+    /// A config value out of its range ([`PipelineConfig::validate`]).
+    #[error("{field}: {reason}")]
+    InvalidConfig {
+        /// Path of the field in [`PipelineConfig`], e.g. `param.iforest.passes`.
+        field: String,
+        /// The value and its valid range.
+        reason: String,
+    },
+}
+
+/// Check `lo ≤ v ≤ hi` (finite); the error names `field`.
+fn check_range(field: &str, v: f64, lo: f64, hi: f64) -> Result<(), PipelineError> {
+    if v.is_finite() && v >= lo && v <= hi {
+        Ok(())
+    } else {
+        Err(PipelineError::InvalidConfig { field: field.into(), reason: format!("{v} outside [{lo}, {hi}]") })
+    }
+}
+
+/// Check `lo ≤ n ≤ hi`; the error names `field`.
+fn check_count(field: &str, n: usize, lo: usize, hi: usize) -> Result<(), PipelineError> {
+    if n >= lo && n <= hi {
+        Ok(())
+    } else {
+        Err(PipelineError::InvalidConfig { field: field.into(), reason: format!("{n} outside [{lo}, {hi}]") })
+    }
+}
+
+impl PipelineConfig {
+    /// Check the ranges a user sets (done by [`ObjectPipeline::new`]): `min_observations` ≥ 1,
+    /// ratios and shares in range, distances finite and non-negative, the naive mapper's settings
+    /// ([`NaiveConfig::validate`]) and the isolation forest's (`passes`, `n_trees` ≥ 1,
+    /// `subsample` ≥ 2, `score_threshold` in (0, 1]).
+    pub fn validate(&self) -> Result<(), PipelineError> {
+        self.naive
+            .validate()
+            .map_err(|(field, reason)| PipelineError::InvalidConfig { field: format!("naive.{field}"), reason })?;
+        check_count("min_observations", self.min_observations, 1, usize::MAX)?;
+        check_range("relabel_vote_ratio", self.relabel_vote_ratio, 0.0, f64::MAX)?;
+        check_range("relabel_containment", self.relabel_containment, 0.0, 1.0)?;
+        check_range("consolidate_iou", self.consolidate_iou, 0.0, 1.0)?;
+        check_range("consolidate_cloud_overlap", self.consolidate_cloud_overlap, 0.0, f64::MAX)?;
+        check_range("consolidate_distance_m", self.consolidate_distance_m, 0.0, 1.0)?;
+        check_range("consolidate_cloud_radius_m", self.consolidate_cloud_radius_m, 0.0, 1.0)?;
+        check_range("segment_box_margin_px", self.segment_box_margin_px, 0.0, 1e4)?;
+        let f = &self.param.iforest;
+        check_count("param.iforest.passes", f.passes, 1, 100)?;
+        check_count("param.iforest.n_trees", f.n_trees, 1, 10_000)?;
+        check_count("param.iforest.subsample", f.subsample, 2, 1 << 20)?;
+        check_count("param.iforest.readmit_rings", f.readmit_rings, 0, 1000)?;
+        check_range("param.iforest.score_threshold", f.score_threshold, f64::MIN_POSITIVE, 1.0)?;
+        check_range("param.iforest.readmit_gap_factor", f.readmit_gap_factor, f64::MIN_POSITIVE, 1e6)?;
+        check_range("param.support_snap_m", self.param.support_snap_m, 0.0, 1.0)?;
+        check_range("param.refine.prior_px_per_m", self.param.refine.prior_px_per_m, 0.0, f64::MAX)?;
+        check_count("param.window_frames", self.param.window_frames, 1, 10_000)?;
+        check_count("param.cylinder.consensus_iterations", self.param.cylinder.consensus_iterations, 0, 1_000_000)?;
+        Ok(())
+    }
 }
 
 /// Configuration of the pipeline.
@@ -251,6 +309,7 @@ pub struct ObjectPipeline {
 impl ObjectPipeline {
     /// A pipeline with an empty map.
     pub fn new(mut config: PipelineConfig) -> Result<Self, PipelineError> {
+        config.validate()?;
         let mapper = match config.association_mode.as_str() {
             "naive" => Mapper::Naive(NaiveMapper::new(config.naive)),
             m => {

@@ -102,6 +102,14 @@ pub enum PlanError {
         /// Found.
         actual: usize,
     },
+    /// A [`PlannerConfig`] value is out of its range ([`PlannerConfig::validate`]).
+    #[error("config.{field}: {reason}")]
+    InvalidConfig {
+        /// The [`PlannerConfig`] field.
+        field: &'static str,
+        /// The value and its valid range.
+        reason: String,
+    },
     /// A collision capsule or self-collision pair names a link not in the chain.
     #[error("unknown link {link}")]
     UnknownLink {
@@ -235,7 +243,8 @@ pub struct PlannerConfig {
     /// Links (except the base) must stay this far above the table top z = 0, metres. Default 0.005.
     pub table_margin_m: f64,
     /// Collision checks along a segment every this much of the largest joint motion, radians.
-    /// Default 0.01 (about 1 cm at the TCP at full reach).
+    /// Default 0.01 (about 1 cm at the TCP at full reach). In [1e-4, 1] (at most ~6e4 checks
+    /// per segment across the joint range).
     pub edge_resolution_rad: f64,
     /// RRT-Connect extension step (joint-space Euclidean), radians. Default 0.3.
     pub rrt_step_rad: f64,
@@ -251,7 +260,8 @@ pub struct PlannerConfig {
     /// Seed of the planner's RNG (ChaCha8). Default 1.
     pub rng_seed: u64,
     /// Trajectory sample period, seconds. Default 0.01 (100 Hz; the sim steps at 1/240 s and can
-    /// interpolate or hold).
+    /// interpolate or hold). In [1e-4, 1]; a trajectory has at most
+    /// [`trajectory::MAX_TRAJECTORY_SAMPLES`] samples.
     pub sample_dt_s: f64,
     /// Joint velocity / acceleration / jerk limits of the trajectories.
     pub limits: MotionLimits,
@@ -370,10 +380,64 @@ pub struct Planner {
     hand_from_tcp: Se3,
 }
 
+impl PlannerConfig {
+    /// Check every numeric field's range (before anything is sized from it); the error names the
+    /// field: `edge_resolution_rad` and `sample_dt_s` in [1e-4, 1], `rrt_step_rad` in [1e-3, π],
+    /// `rrt_goal_bias` in [0, 1], margins in [0, 1] m, `linear_step_m` and `linear_step_rad` in
+    /// [1e-4, 1], `linear_max_joint_step_rad` in (0, π], `linear_waypoint_every` ≥ 1,
+    /// `timeout_s` ≥ 0, iteration counts at most 10⁷, finite positive motion limits.
+    pub fn validate(&self) -> Result<(), PlanError> {
+        let range = |field: &'static str, v: f64, lo: f64, hi: f64, lo_open: bool| {
+            let above = if lo_open { v > lo } else { v >= lo };
+            if v.is_finite() && above && v <= hi {
+                Ok(())
+            } else {
+                let open = if lo_open { "(" } else { "[" };
+                Err(PlanError::InvalidConfig { field, reason: format!("{v} outside {open}{lo}, {hi}]") })
+            }
+        };
+        let pi = std::f64::consts::PI;
+        range("edge_resolution_rad", self.edge_resolution_rad, 1e-4, 1.0, false)?;
+        range("sample_dt_s", self.sample_dt_s, 1e-4, 1.0, false)?;
+        range("rrt_step_rad", self.rrt_step_rad, 1e-3, pi, false)?;
+        range("rrt_goal_bias", self.rrt_goal_bias, 0.0, 1.0, false)?;
+        range("object_margin_m", self.object_margin_m, 0.0, 1.0, false)?;
+        range("table_margin_m", self.table_margin_m, 0.0, 1.0, false)?;
+        range("linear_step_m", self.linear_step_m, 1e-4, 1.0, false)?;
+        range("linear_step_rad", self.linear_step_rad, 1e-4, 1.0, false)?;
+        range("linear_max_joint_step_rad", self.linear_max_joint_step_rad, 0.0, pi, true)?;
+        if let Some(t) = self.timeout_s.filter(|t| !(t.is_finite() && *t >= 0.0)) {
+            return Err(PlanError::InvalidConfig {
+                field: "timeout_s", reason: format!("{t} must be finite and ≥ 0")
+            });
+        }
+        const MAX_ITERATIONS: usize = 10_000_000;
+        for (field, n, min) in [
+            ("rrt_max_iterations", self.rrt_max_iterations, 0),
+            ("shortcut_iterations", self.shortcut_iterations, 0),
+            ("linear_waypoint_every", self.linear_waypoint_every, 1),
+            ("ik_random_restarts", self.ik.random_restarts, 0),
+            ("cylinder_yaw_count", self.grasp.cylinder_yaw_count, 0),
+        ] {
+            if n < min || n > MAX_ITERATIONS {
+                return Err(PlanError::InvalidConfig {
+                    field,
+                    reason: format!("{n} outside [{min}, {MAX_ITERATIONS}]"),
+                });
+            }
+        }
+        if !self.limits.valid() {
+            return Err(PlanError::InvalidConfig { field: "limits", reason: "must be finite and positive".into() });
+        }
+        Ok(())
+    }
+}
+
 impl Planner {
     /// Loads the URDF at `urdf_path` and builds the chain `root_link → tcp_link` and the collision
-    /// model.
+    /// model, after [`PlannerConfig::validate`].
     pub fn new(urdf_path: impl AsRef<Path>, config: PlannerConfig) -> Result<Self, PlanError> {
+        config.validate()?;
         let chain = ArmChain::from_urdf(urdf_path.as_ref(), &config.root_link, &config.tcp_link)?;
         let model = ArmCollisionModel::new(&chain, config.capsules.clone(), &config.self_collision_pairs)?;
         let hand_index = chain

@@ -40,7 +40,7 @@ impl MotionLimits {
         }
     }
 
-    fn valid(&self) -> bool {
+    pub(crate) fn valid(&self) -> bool {
         [self.max_velocity_rad_s, self.max_acceleration_rad_s2, self.max_jerk_rad_s3]
             .iter()
             .all(|l| l.iter().all(|v| v.is_finite() && *v > 0.0))
@@ -153,6 +153,24 @@ fn rest_to_rest(length: f64, limits: [f64; 3]) -> Result<(Trajectory, f64), Plan
     }
 }
 
+/// Most samples of one trajectory (10⁶: about 3 hours at the default 100 Hz), checked before the
+/// sample buffers are allocated.
+pub const MAX_TRAJECTORY_SAMPLES: usize = 1_000_000;
+
+/// The sample count of a trajectory of `duration_s` sampled every `dt_s`, within
+/// [`MAX_TRAJECTORY_SAMPLES`].
+fn sample_count(duration_s: f64, dt_s: f64) -> Result<usize, PlanError> {
+    let n = (duration_s / dt_s).ceil();
+    if !(n.is_finite() && n <= MAX_TRAJECTORY_SAMPLES as f64) {
+        return Err(PlanError::Trajectory {
+            reason: format!(
+                "{duration_s} s sampled every {dt_s} s is more than {MAX_TRAJECTORY_SAMPLES} samples (limits too low?)"
+            ),
+        });
+    }
+    Ok(n as usize)
+}
+
 /// The first waypoint, after checking the inputs every time parameterisation shares.
 fn check_inputs<'a>(
     waypoints: &'a [JointVector],
@@ -209,7 +227,7 @@ pub fn time_parameterize(
         }
     }
     let duration_s: f64 = segments.iter().map(|s| s.duration_s).sum();
-    let n = (duration_s / dt_s).ceil() as usize;
+    let n = sample_count(duration_s, dt_s)?;
     let mut times_s = Vec::with_capacity(n + 1);
     let mut positions = Vec::with_capacity(n + 1);
     let mut velocities = Vec::with_capacity(n + 1);
@@ -270,7 +288,7 @@ pub fn time_parameterize_path(
         length,
         [&limits.max_velocity_rad_s, &limits.max_acceleration_rad_s2, &limits.max_jerk_rad_s3].map(tightest),
     )?;
-    let n = (duration_s / dt_s).ceil() as usize;
+    let n = sample_count(duration_s, dt_s)?;
     let mut times_s = Vec::with_capacity(n + 1);
     let mut positions = Vec::with_capacity(n + 1);
     let mut velocities = Vec::with_capacity(n + 1);
