@@ -6,6 +6,7 @@
 //! The scene is `scenes/scene03.toml`'s layout written out (books, cans, bottle, cup, block on a
 //! 0.8 × 1.2 m table); the camera is the simulator's hand camera (58° vertical field of view)
 //! 0.45 m above the table looking down at 35° from vertical.
+//! `ar_stage/*` time the stages alone.
 //! Run: `cargo bench -p objslam-core --bench ar -- --warm-up-time 1 --measurement-time 3`.
 
 // `criterion_group!` generates an undocumented public function.
@@ -102,6 +103,32 @@ fn bench_ar(c: &mut Criterion) {
                     .unwrap_or_else(|e| panic!("{e}"));
                 physics.step_frame();
                 black_box((masks, physics.states()))
+            },
+            BatchSize::SmallInput,
+        )
+    });
+    // The frame's stages alone (the paper's table splits its AR time by stage too).
+    let registered = register(&scene, &models).unwrap_or_else(|e| panic!("{e}"));
+    let depth = render_scene_depth(&scene, &cam, &world_from_camera, &config.render).unwrap_or_else(|e| panic!("{e}"));
+    c.bench_function("ar_stage/registration", |b| b.iter(|| black_box(register(&scene, &models))));
+    c.bench_function("ar_stage/map_depth_640x480", |b| {
+        b.iter(|| black_box(render_scene_depth(&scene, &cam, &world_from_camera, &config.render)))
+    });
+    c.bench_function("ar_stage/masks_640x480", |b| {
+        b.iter(|| black_box(occlusion_masks(&registered, &cam, &world_from_camera, &depth, &config.render)))
+    });
+    c.bench_function("ar_stage/physics_frame", |b| {
+        b.iter_batched(
+            || {
+                let mut physics = ArPhysics::new(&scene, &config.physics).unwrap_or_else(|e| panic!("{e}"));
+                for m in &registered {
+                    physics.add(m, [0.0; 3]).unwrap_or_else(|e| panic!("{e}"));
+                }
+                physics
+            },
+            |mut physics| {
+                physics.step_frame();
+                black_box(physics.states())
             },
             BatchSize::SmallInput,
         )

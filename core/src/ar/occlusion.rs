@@ -3,6 +3,7 @@
 //! Every pixel's centre ray is intersected exactly with each solid whose projected bounding box
 //! covers the pixel (boxes by slabs, cylinders and spheres by their quadratics, meshes triangle by
 //! triangle), so the depth image is the primitives' true depth at pixel centres, not a tessellation.
+//! The table is drawn as its top face (a rectangle at `height_m`; its sides are not drawn).
 //! A virtual pixel is visible when its depth is smaller than the real depth there and it is the
 //! nearest virtual surface; "real depth" is any [`DepthImage`] with 0 / non-finite = nothing: the
 //! map's ([`render_scene_depth`]) or a sensor's.
@@ -11,7 +12,7 @@ use nalgebra::{Point3, Vector3};
 use serde::{Deserialize, Serialize};
 
 use super::solid::Solid;
-use super::{check_image, depth_or_inf, ArError, ArScene, RegisteredModel};
+use super::{check_image, depth_or_inf, ArError, ArScene, RegisteredModel, TableTop};
 use crate::frame::DepthImage;
 use crate::geometry::{PinholeCamera, Se3};
 
@@ -63,7 +64,33 @@ pub struct ModelMask {
     pub coverage: Vec<u8>,
 }
 
-/// Ray generator of one camera pose: local rays of a solid per pixel, its pixel rectangle.
+/// Pixel rectangle `[c0, c1) × [r0, r1)`.
+#[derive(Debug, Clone, Copy)]
+struct Rect {
+    c0: usize,
+    c1: usize,
+    r0: usize,
+    r1: usize,
+}
+
+/// A solid's depth over its pixel rectangle (+∞ where its surface is not hit).
+struct Patch {
+    rect: Rect,
+    depth: Vec<f32>,
+}
+
+impl Patch {
+    fn at(&self, c: usize, r: usize) -> f32 {
+        let Rect { c0, c1, r0, r1 } = self.rect;
+        if c < c0 || c >= c1 || r < r0 || r >= r1 {
+            f32::INFINITY
+        } else {
+            self.depth[(r - r0) * (c1 - c0) + (c - c0)]
+        }
+    }
+}
+
+/// Ray generator of one camera pose.
 struct View<'a> {
     camera: &'a PinholeCamera,
     camera_from_world: Se3,
@@ -72,26 +99,19 @@ struct View<'a> {
 }
 
 impl View<'_> {
-    /// Call `f(pixel index, depth)` for every pixel whose centre ray hits `solid` within range.
-    fn raster(&self, solid: &Solid, mut f: impl FnMut(usize, f32)) {
+    fn width(&self) -> usize {
+        self.camera.width as usize
+    }
+
+    /// The pixels that the projection of `corners` (camera frame) can cover: their projected
+    /// bounding box, or the whole image when a corner reaches the near plane.
+    fn rect_of(&self, corners: impl Iterator<Item = Point3<f64>>) -> Option<Rect> {
         let cam = self.camera;
         let (w, h) = (cam.width as usize, cam.height as usize);
-        let camera_from_local = self.camera_from_world * solid.world_from_local;
-        let local_from_camera = camera_from_local.inverse();
-        // Pixel rectangle: the projected local bounding box (the whole image if it reaches the near plane).
-        let (lo, hi) = solid.local_aabb();
         let (mut u0, mut u1, mut v0, mut v1) = (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY);
-        let mut clipped = false;
-        for k in 0..8 {
-            let c = Point3::new(
-                if k & 1 == 0 { lo.x } else { hi.x },
-                if k & 2 == 0 { lo.y } else { hi.y },
-                if k & 4 == 0 { lo.z } else { hi.z },
-            );
-            let p = camera_from_local * c;
+        for p in corners {
             if p.z <= self.near {
-                clipped = true;
-                break;
+                return Some(Rect { c0: 0, c1: w, r0: 0, r1: h });
             }
             let (u, v) = (cam.fx * p.x / p.z + cam.cx, cam.fy * p.y / p.z + cam.cy);
             u0 = u0.min(u);
@@ -99,34 +119,76 @@ impl View<'_> {
             v0 = v0.min(v);
             v1 = v1.max(v);
         }
-        let (c0, c1, r0, r1) = if clipped {
-            (0, w, 0, h)
-        } else {
-            let clamp = |x: f64, n: usize| x.clamp(0.0, n as f64) as usize;
-            (
-                clamp((u0 - 0.5).floor(), w),
-                clamp((u1 + 0.5).ceil(), w),
-                clamp((v0 - 0.5).floor(), h),
-                clamp((v1 + 0.5).ceil(), h),
-            )
+        let clamp = |x: f64, n: usize| x.clamp(0.0, n as f64) as usize;
+        let r = Rect {
+            c0: clamp((u0 - 0.5).floor(), w),
+            c1: clamp((u1 + 0.5).ceil(), w),
+            r0: clamp((v0 - 0.5).floor(), h),
+            r1: clamp((v1 + 0.5).ceil(), h),
         };
-        if c0 >= c1 || r0 >= r1 {
-            return;
-        }
+        (r.c0 < r.c1 && r.r0 < r.r1).then_some(r)
+    }
+
+    /// The depth of `solid` over the pixels its bounding box projects to.
+    fn patch(&self, solid: &Solid) -> Option<Patch> {
+        let cam = self.camera;
+        let camera_from_local = self.camera_from_world * solid.world_from_local;
+        let (lo, hi) = solid.local_aabb();
+        let corners = (0..8).map(|k| {
+            camera_from_local
+                * Point3::new(
+                    if k & 1 == 0 { lo.x } else { hi.x },
+                    if k & 2 == 0 { lo.y } else { hi.y },
+                    if k & 4 == 0 { lo.z } else { hi.z },
+                )
+        });
+        let rect = self.rect_of(corners)?;
         // Local ray direction of pixel (c, r): d0 + c·du + r·dv (camera ray has z = 1, so t = depth).
+        let local_from_camera = camera_from_local.inverse();
         let rot = local_from_camera.rotation;
         let origin = local_from_camera.translation.vector;
         let d0 = rot * Vector3::new((0.5 - cam.cx) / cam.fx, (0.5 - cam.cy) / cam.fy, 1.0);
         let du = rot * Vector3::new(1.0 / cam.fx, 0.0, 0.0);
         let dv = rot * Vector3::new(0.0, 1.0 / cam.fy, 0.0);
-        for r in r0..r1 {
+        let mut depth = Vec::with_capacity((rect.c1 - rect.c0) * (rect.r1 - rect.r0));
+        for r in rect.r0..rect.r1 {
             let row = d0 + dv * r as f64;
-            for c in c0..c1 {
+            for c in rect.c0..rect.c1 {
+                let t = solid.hit_local(&origin, &(row + du * c as f64), self.near).filter(|t| *t <= self.far);
+                depth.push(t.map_or(f32::INFINITY, |t| t as f32));
+            }
+        }
+        Some(Patch { rect, depth })
+    }
+
+    /// Write the table's top face into `depth` (min with what is there). The top face is a
+    /// horizontal rectangle: one ray–plane division per pixel.
+    fn table_into(&self, t: &TableTop, depth: &mut [f32]) {
+        let cam = self.camera;
+        let world_from_camera = self.camera_from_world.inverse();
+        let [cx, cy] = t.center_xy_m;
+        let [hx, hy] = [t.size_xy_m[0] / 2.0, t.size_xy_m[1] / 2.0];
+        let corners = [(-1.0, -1.0), (1.0, -1.0), (-1.0, 1.0), (1.0, 1.0)]
+            .map(|(sx, sy)| self.camera_from_world * Point3::new(cx + sx * hx, cy + sy * hy, t.height_m));
+        let Some(rect) = self.rect_of(corners.into_iter()) else { return };
+        let rot = world_from_camera.rotation;
+        let o = world_from_camera.translation.vector;
+        let d0 = rot * Vector3::new((0.5 - cam.cx) / cam.fx, (0.5 - cam.cy) / cam.fy, 1.0);
+        let du = rot * Vector3::new(1.0 / cam.fx, 0.0, 0.0);
+        let dv = rot * Vector3::new(0.0, 1.0 / cam.fy, 0.0);
+        let w = self.width();
+        for r in rect.r0..rect.r1 {
+            let row = d0 + dv * r as f64;
+            for c in rect.c0..rect.c1 {
                 let d = row + du * c as f64;
-                if let Some(t) = solid.hit_local(&origin, &d, self.near) {
-                    if t <= self.far {
-                        f(r * w + c, t as f32);
-                    }
+                let tt = (t.height_m - o.z) / d.z;
+                if !(tt > self.near && tt <= self.far) {
+                    continue;
+                }
+                let (x, y) = (o.x + tt * d.x - cx, o.y + tt * d.y - cy);
+                if x.abs() <= hx && y.abs() <= hy {
+                    let i = r * w + c;
+                    depth[i] = depth[i].min(tt as f32);
                 }
             }
         }
@@ -140,8 +202,8 @@ fn view<'a>(camera: &'a PinholeCamera, world_from_camera: &Se3, config: &RenderC
     Ok(View { camera, camera_from_world: world_from_camera.inverse(), near: config.near_m, far: config.far_m })
 }
 
-/// The depth image of the real scene (map objects and table) seen from `world_from_camera`:
-/// metres along the optical axis, 0 where no surface is within range.
+/// The depth image of the real scene (map objects and the table's top face) seen from
+/// `world_from_camera`: metres along the optical axis, 0 where no surface is within range.
 pub fn render_scene_depth(
     scene: &ArScene,
     camera: &PinholeCamera,
@@ -150,11 +212,21 @@ pub fn render_scene_depth(
 ) -> Result<DepthImage, ArError> {
     scene.validate()?;
     let v = view(camera, world_from_camera, config)?;
-    let n = camera.width as usize * camera.height as usize;
-    let mut depth = vec![f32::INFINITY; n];
-    let solids = scene.objects.iter().map(Solid::of_real).chain(scene.table.iter().map(Solid::of_table));
-    for s in solids {
-        v.raster(&s, |i, t| depth[i] = depth[i].min(t));
+    let w = v.width();
+    let mut depth = vec![f32::INFINITY; w * camera.height as usize];
+    if let Some(t) = &scene.table {
+        v.table_into(t, &mut depth);
+    }
+    for o in &scene.objects {
+        if let Some(p) = v.patch(&Solid::of_real(o)) {
+            let Rect { c0, c1, r0, r1 } = p.rect;
+            for r in r0..r1 {
+                let src = &p.depth[(r - r0) * (c1 - c0)..(r - r0 + 1) * (c1 - c0)];
+                for (d, s) in depth[r * w + c0..r * w + c1].iter_mut().zip(src) {
+                    *d = d.min(*s);
+                }
+            }
+        }
     }
     for d in &mut depth {
         if !d.is_finite() {
@@ -165,7 +237,8 @@ pub fn render_scene_depth(
 }
 
 /// Each model's silhouette and visible pixels against `real_depth` (same size as the camera).
-/// Models hide each other too: a pixel is visible for the nearest model only. No models → empty.
+/// Models hide each other too: a pixel is visible for the nearest model only (the first in
+/// request order on a tie). No models → empty.
 pub fn occlusion_masks(
     models: &[RegisteredModel],
     camera: &PinholeCamera,
@@ -175,29 +248,34 @@ pub fn occlusion_masks(
 ) -> Result<Vec<ModelMask>, ArError> {
     let v = view(camera, world_from_camera, config)?;
     check_image("real_depth", real_depth, camera.width, camera.height)?;
-    let n = camera.width as usize * camera.height as usize;
-    let mut model_depth = Vec::with_capacity(models.len());
-    let mut nearest = vec![f32::INFINITY; n];
-    for m in models {
-        let mut d = vec![f32::INFINITY; n];
-        v.raster(&Solid::of_model(m), |i, t| {
-            d[i] = d[i].min(t);
-            nearest[i] = nearest[i].min(t);
-        });
-        model_depth.push(d);
-    }
+    let w = v.width();
+    let n = w * camera.height as usize;
+    let patches: Vec<Option<Patch>> = models.iter().map(|m| v.patch(&Solid::of_model(m))).collect();
     let mut out = Vec::with_capacity(models.len());
-    for (m, d) in models.iter().zip(&model_depth) {
+    for (i, m) in models.iter().enumerate() {
         let mut coverage = vec![0u8; n];
         let (mut silhouette_px, mut visible_px) = (0, 0);
-        for i in 0..n {
-            if d[i].is_finite() {
-                silhouette_px += 1;
-                if d[i] < depth_or_inf(real_depth.data[i]) && d[i] <= nearest[i] {
-                    coverage[i] = COVER_VISIBLE;
-                    visible_px += 1;
-                } else {
-                    coverage[i] = COVER_HIDDEN;
+        if let Some(p) = &patches[i] {
+            let Rect { c0, c1, r0, r1 } = p.rect;
+            for r in r0..r1 {
+                for c in c0..c1 {
+                    let d = p.depth[(r - r0) * (c1 - c0) + (c - c0)];
+                    if !d.is_finite() {
+                        continue;
+                    }
+                    silhouette_px += 1;
+                    let nearest = patches.iter().enumerate().all(|(j, q)| match q {
+                        Some(q) if j < i => d < q.at(c, r),
+                        Some(q) if j > i => d <= q.at(c, r),
+                        _ => true,
+                    });
+                    let k = r * w + c;
+                    if nearest && d < depth_or_inf(real_depth.data[k]) {
+                        coverage[k] = COVER_VISIBLE;
+                        visible_px += 1;
+                    } else {
+                        coverage[k] = COVER_HIDDEN;
+                    }
                 }
             }
         }
