@@ -306,7 +306,7 @@ def _median(v: list[float]) -> float | None:
 
 
 def evaluate(cfg: Any, map_json: str, run_dir: str) -> dict[str, Any]:
-    scene = load_scene(cfg.scene)
+    scene = load_scene(REPO / cfg.scene if not Path(cfg.scene).is_absolute() else cfg.scene)
     truth = Truth(cfg, scene)
     table = {"center_xy_m": list(scene.table.center), "size_xy_m": list(scene.table.size), "height_m": 0.0}
     map_objects = json.loads(_native.map_objects_json(map_json))
@@ -435,7 +435,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument(
         "--scenes",
         nargs="+",
-        default=sorted(str(p) for p in (REPO / "scenes").glob("scene*.toml")),
+        default=sorted(str(p.relative_to(REPO)) for p in (REPO / "scenes").glob("scene*.toml")),
         help="scene files (default: scenes/scene*.toml)",
     )
     ap.add_argument("--seeds", nargs="+", type=int, default=[0, 1], help="episode seeds (default: 0 1)")

@@ -88,6 +88,7 @@ pub fn pick(
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used)] // tests may unwrap (STYLE.md, 18)
 mod tests {
     use nalgebra::{Translation3, UnitQuaternion};
 

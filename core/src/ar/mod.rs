@@ -440,6 +440,7 @@ fn check_image(field: &'static str, img: &DepthImage, w: u32, h: u32) -> Result<
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used)] // tests may unwrap (STYLE.md, 18)
 mod tests {
     use super::*;
     use crate::geometry::ObjectGeometry;

@@ -285,6 +285,7 @@ pub fn occlusion_masks(
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used)] // tests may unwrap (STYLE.md, 18)
 mod tests {
     use nalgebra::{Translation3, UnitQuaternion, Vector3};
 

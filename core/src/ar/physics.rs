@@ -325,6 +325,7 @@ pub fn position_of(state: &BodyState) -> Vector3<f64> {
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used)] // tests may unwrap (STYLE.md, 18)
 mod tests {
     use super::*;
     use crate::ar::{RealObject, TableTop, VirtualShape};

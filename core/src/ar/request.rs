@@ -149,6 +149,7 @@ pub fn run_request(req: &ArRequest, real_depth: Option<DepthImage>) -> Result<Ar
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used)] // tests may unwrap (STYLE.md, 18)
 mod tests {
     use super::*;
 

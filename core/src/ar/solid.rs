@@ -228,6 +228,7 @@ fn hit_triangle(
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used)] // tests may unwrap (STYLE.md, 18)
 mod tests {
     use super::*;
 
