@@ -106,7 +106,8 @@ class Truth:
         )
 
     def depth(self, world_from_camera: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """True depth (metres, 0 = nothing or robot) at a camera pose, and the pose SAPIEN used."""
+        """True depth (metres, 0 = nothing or robot) at a camera pose, and the pose SAPIEN used
+        (the colour image of that view is kept in :attr:`rgb`)."""
         r = world_from_camera[:3, :3] @ SAPIEN_FROM_CV.T
         q = _quat_wxyz(r)
         self.camera.entity.set_pose(sapien.Pose(world_from_camera[:3, 3], q))
@@ -116,6 +117,7 @@ class Truth:
         seg = self.camera.get_picture("Segmentation")[..., 1].astype(np.uint32)
         depth = np.where(pos[..., 3] < 1, -pos[..., 2], 0.0).astype(np.float32)
         depth[np.isin(seg, list(self.world.robot_actor_ids))] = 0.0
+        self.rgb = (np.clip(self.camera.get_picture("Color")[..., :3], 0, 1) * 255).astype(np.uint8)
         used = np.asarray(self.camera.get_model_matrix(), dtype=np.float64) @ np.diag([1.0, -1.0, -1.0, 1.0])
         return depth, used
 
@@ -153,10 +155,33 @@ def _iou(a: np.ndarray, b: np.ndarray) -> float | None:
     return None if union == 0 else int(np.count_nonzero(a & b)) / union
 
 
+def save_composite(
+    path: Path, rgb: np.ndarray, naive: np.ndarray, ours: np.ndarray, true: np.ndarray
+) -> None:
+    """Three AR composites side by side: the naive overlay, ours (occluded where the map says), and the
+    truth (occluded where the simulator's depth says); virtual pixels in orange."""
+    import cv2
+
+    panels = []
+    for mask, title in ((naive, "naive overlay"), (ours, "object map"), (true, "truth")):
+        img = rgb.copy()
+        img[mask] = (0.3 * img[mask] + 0.7 * np.array([255, 140, 0])).astype(np.uint8)
+        cv2.putText(img, title, (10, 30), cv2.FONT_HERSHEY_SIMPLEX, 0.9, (255, 255, 255), 2)
+        panels.append(img)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    cv2.imwrite(str(path), cv2.cvtColor(np.concatenate(panels, axis=1), cv2.COLOR_RGB2BGR))
+
+
 def occlusion_views(
-    map_objects: list[dict[str, Any]], map_json: str, table: dict[str, Any], truth: Truth, seed: int
+    map_objects: list[dict[str, Any]],
+    map_json: str,
+    table: dict[str, Any],
+    truth: Truth,
+    seed: int,
+    images: Path | None = None,
 ) -> list[dict[str, Any]]:
-    """Behind / in front / between placements per map object; one IoU pair per view."""
+    """Behind / in front / between placements per map object; one IoU pair per view. With
+    ``images``, the first view of each placement is saved there as composites."""
     rng = np.random.default_rng([seed, 39])
     out = []
     for i, o in enumerate(map_objects):
@@ -204,6 +229,8 @@ def occlusion_views(
             iou, iou_naive = _iou(ours[0] == 2, visible_true), _iou(ours[0] > 0, visible_true)
             if iou is None or iou_naive is None:
                 continue  # the model is out of view
+            if images is not None and not any(v["kind"] == kind for v in out):
+                save_composite(images / f"{kind}.png", truth.rgb, ours[0] > 0, ours[0] == 2, visible_true)
             out.append(
                 {
                     "kind": kind,
@@ -305,12 +332,13 @@ def _median(v: list[float]) -> float | None:
     return float(statistics.median(v)) if v else None
 
 
-def evaluate(cfg: Any, map_json: str, run_dir: str) -> dict[str, Any]:
+def evaluate(cfg: Any, map_json: str, run_dir: str, images: Path | None = None) -> dict[str, Any]:
     scene = load_scene(REPO / cfg.scene if not Path(cfg.scene).is_absolute() else cfg.scene)
     truth = Truth(cfg, scene)
     table = {"center_xy_m": list(scene.table.center), "size_xy_m": list(scene.table.size), "height_m": 0.0}
     map_objects = json.loads(_native.map_objects_json(map_json))
-    views = occlusion_views(map_objects, map_json, table, truth, cfg.seed)
+    images = images / f"{scene.name}_seed{cfg.seed}" if images is not None else None
+    views = occlusion_views(map_objects, map_json, table, truth, cfg.seed, images)
     drops = collision_drops(map_objects, map_json, table, truth, cfg.seed)
     row: dict[str, Any] = {
         "scene": scene.name,
@@ -450,6 +478,9 @@ def main(argv: list[str] | None = None) -> int:
         "--runs", nargs="+", help="reuse these run folders (their config.toml and map.json) instead"
     )
     ap.add_argument("--out", default=str(REPO / "reports"), help="report folder (default: reports)")
+    ap.add_argument(
+        "--images", type=int, default=1, help="save AR composites of the first N scene/seed rows (default 1)"
+    )
     a = ap.parse_args(argv)
     command = "python experiments/ar.py " + " ".join(
         shlex.quote(x) for x in (argv if argv is not None else sys.argv[1:])
@@ -472,7 +503,8 @@ def main(argv: list[str] | None = None) -> int:
             rd, map_json = str(result.run_dir), result.map_json
         else:
             map_json = (Path(rd) / "map.json").read_text()
-        row = evaluate(cfg, map_json, rd)
+        images = Path(a.out) / "ar_images" if len(rows) < a.images else None
+        row = evaluate(cfg, map_json, rd, images)
         rows.append(row)
         configs.append(to_dict(cfg))
         print(
