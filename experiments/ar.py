@@ -226,9 +226,12 @@ def occlusion_views(
             _, ours, _ = _native.ar_run(json.dumps({**req, "map": json.loads(map_json)}))
             _, true, _ = _native.ar_run(json.dumps({**req, "objects": truth.objects}), real_depth=depth)
             visible_true = true[0] == 2
-            iou, iou_naive = _iou(ours[0] == 2, visible_true), _iou(ours[0] > 0, visible_true)
-            if iou is None or iou_naive is None:
+            if not np.any(ours[0] > 0):
                 continue  # the model is out of view
+            # Both hiding the whole model is perfect agreement.
+            iou = _iou(ours[0] == 2, visible_true)
+            iou = 1.0 if iou is None else iou
+            iou_naive = _iou(ours[0] > 0, visible_true) or 0.0
             if images is not None and not any(v["kind"] == kind for v in out):
                 save_composite(images / f"{kind}.png", truth.rgb, ours[0] > 0, ours[0] == 2, visible_true)
             out.append(
@@ -458,6 +461,25 @@ def write_reports(
     return report
 
 
+def run_config(configs: list[dict[str, Any]]) -> dict[str, Any]:
+    """The resolved configuration recorded in the report."""
+    return {
+        "episodes": configs[0] if configs else {},
+        "scenes": sorted({c["scene"] for c in configs}),
+        "seeds": sorted({c["seed"] for c in configs}),
+        "ar": {
+            "view_distance_m": VIEW_DISTANCE_M,
+            "view_height_m": VIEW_HEIGHT_M,
+            "gap_m": GAP_M,
+            "models": {"box": BOX, "cylinder": CYLINDER, "onto_cube": ONTO_CUBE, "slider": SLIDER},
+            "drop_height_m": DROP_HEIGHT_M,
+            "slide_start_m": SLIDE_START_M,
+            "match_radius_m": MATCH_RADIUS_M,
+            "core": "objslam_core::ar::ArConfig defaults",
+        },
+    }
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument(
@@ -514,23 +536,10 @@ def main(argv: list[str] | None = None) -> int:
             f"({row['drops']} drops)",
             flush=True,
         )
-    config = {
-        "episodes": configs[0] if configs else {},
-        "scenes": sorted({c["scene"] for c in configs}),
-        "seeds": sorted({c["seed"] for c in configs}),
-        "ar": {
-            "view_distance_m": VIEW_DISTANCE_M,
-            "view_height_m": VIEW_HEIGHT_M,
-            "gap_m": GAP_M,
-            "models": {"box": BOX, "cylinder": CYLINDER, "onto_cube": ONTO_CUBE, "slider": SLIDER},
-            "drop_height_m": DROP_HEIGHT_M,
-            "slide_start_m": SLIDE_START_M,
-            "match_radius_m": MATCH_RADIUS_M,
-            "core": "objslam_core::ar::ArConfig defaults",
-        },
-    }
-    report = write_reports(rows, config, command, Path(a.out))
-    print(json.dumps(report["summary"], indent=2))
+        # The report is rewritten after every row, so an interrupted run keeps what it measured.
+        report = write_reports(rows, run_config(configs), command, Path(a.out))
+    if rows:
+        print(json.dumps(report["summary"], indent=2))
     return 0
 
 
