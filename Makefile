@@ -11,8 +11,9 @@ GRASP_ARGS ?=
 PLACE_ARGS ?=
 ROBUSTNESS_ARGS ?=
 RUNS_ARGS ?=
+AR_ARGS ?=
 
-.PHONY: help setup run runs fuzz test test-fast test-rust test-rust-unit test-py bench benchmark associate parameterize slam grasp grasp-robustness place match match-sim report reports-index view lint fmt clean
+.PHONY: help setup run runs test test-fast test-rust test-rust-unit test-py fuzz bench benchmark associate parameterize slam grasp grasp-robustness place match match-sim report ar reports-index view lint fmt clean
 
 help: ## List the targets
 	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*## "}; {printf "  \033[1m%-12s\033[0m %s\n", $$1, $$2}'
@@ -78,6 +79,10 @@ match-sim: setup ## Scene matching, part (b): maps of two simulator runs per sce
 	$(PY) experiments/match_sim.py $(MATCH_SIM_ARGS)
 
 report: ## Report of the latest run folder → reports/foundation_run.json
+ar: setup ## AR on exploration maps vs the simulator's truth: occlusion IoU, drop rest error → reports/ar.json
+	$(PY) experiments/ar.py $(AR_ARGS)
+
+report: ## Report of the latest run folder → reports/foundation_run.{md,json}
 	$(PY) experiments/report_run.py
 
 reports-index: ## Regenerate reports/README.md (one line per report: question, headline figure, command)

@@ -16,6 +16,7 @@ use objslam_core::map::{Label, MapError, ObjectMap};
 use objslam_core::naive::{NaiveConfig, NaiveMapper};
 use objslam_core::record::{DrawnObject, RecordError, Recorder};
 mod active;
+mod ar;
 mod plan;
 mod topo;
 
@@ -471,6 +472,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<active::ActiveMapperPy>()?;
     m.add("PlanningError", py.get_type::<plan::PlanningError>())?;
     m.add_class::<plan::PlannerPy>()?;
+    m.add_function(wrap_pyfunction!(ar::ar_run, m)?)?;
     m.add_function(wrap_pyfunction!(evaluate_map, m)?)?;
     m.add_function(wrap_pyfunction!(load_map, m)?)?;
     m.add_function(wrap_pyfunction!(save_map, m)?)?;

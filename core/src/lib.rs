@@ -7,6 +7,7 @@
 //!
 //! Modules, one concept each:
 //! - [`active`]: the exploration session: Init views, grid updates, next view per strategy.
+//! - [`ar`]: augmented reality on the object map: registration, occlusion, collision, picking.
 //! - [`association`]: ensemble object data association (M-IoU, Mann-Whitney, t-tests, P-IoU,
 //!   duplicate merge) and association metrics.
 //! - [`geometry`]: SE(3), pinhole camera, 2D boxes, yaw-oriented boxes and cylinders, IoUs.
@@ -27,6 +28,7 @@
 //!   decisions behind one type, [`system::System`].
 
 pub mod active;
+pub mod ar;
 pub mod association;
 pub mod eval;
 pub mod explore;

@@ -1,0 +1,139 @@
+//! Time per AR frame at 640x480 (paper Table "Time analysis of augmented reality"): registration
+//! of three virtual models on a seven-object map + the map's depth image (objects and table) +
+//! the three occlusion masks + one physics frame (1/30 s in 4 sub-steps) of a rapier world whose
+//! bodies are landing (2 mm above their supports, so contacts are computed in the timed step).
+//!
+//! The scene is `scenes/scene03.toml`'s layout written out (books, cans, bottle, cup, block on a
+//! 0.8 × 1.2 m table); the camera is the simulator's hand camera (58° vertical field of view)
+//! 0.45 m above the table looking down at 35° from vertical.
+//! `ar_stage/*` time the stages alone.
+//! Run: `cargo bench -p objslam-core --bench ar -- --warm-up-time 1 --measurement-time 3`.
+
+// `criterion_group!` generates an undocumented public function.
+#![allow(missing_docs)]
+
+use std::hint::black_box;
+
+use criterion::{criterion_group, criterion_main, BatchSize, Criterion};
+use nalgebra::{Matrix3, Point3, Translation3, UnitQuaternion, Vector3};
+use objslam_core::ar::{
+    occlusion_masks, register, render_scene_depth, ArConfig, ArPhysics, ArScene, Placement, RealObject, TableTop,
+    VirtualModel, VirtualShape,
+};
+use objslam_core::geometry::{ObjectGeometry, PinholeCamera, Se3, Shape};
+use objslam_core::map::Label;
+
+fn object(id: u32, label: Label, xy: [f64; 2], yaw: f64, half: [f64; 3]) -> RealObject {
+    RealObject {
+        id,
+        label,
+        geometry: ObjectGeometry {
+            shape: label.shape(),
+            center: Vector3::new(xy[0], xy[1], half[2]),
+            yaw_rad: if label.shape() == Shape::Cuboid { yaw } else { 0.0 },
+            half_extents: Vector3::from(half),
+        },
+    }
+}
+
+fn scene() -> ArScene {
+    let objects = vec![
+        object(0, Label::Book, [0.60, 0.20], -0.6, [0.074, 0.031, 0.017]),
+        object(1, Label::Bottle, [0.42, 0.18], 0.0, [0.028, 0.028, 0.109]),
+        object(2, Label::Book, [0.48, -0.09], 0.23, [0.077, 0.025, 0.019]),
+        object(3, Label::Can, [0.57, -0.28], 0.0, [0.033, 0.033, 0.052]),
+        object(4, Label::Cup, [0.35, -0.05], 0.0, [0.04, 0.04, 0.05]),
+        object(5, Label::Block, [0.70, -0.05], 0.4, [0.025, 0.025, 0.025]),
+        object(6, Label::Can, [0.30, 0.30], 0.0, [0.03, 0.03, 0.06]),
+    ];
+    let table = TableTop { center_xy_m: [0.5, 0.0], size_xy_m: [0.8, 1.2], height_m: 0.0, thickness_m: 0.05 };
+    ArScene { objects, table: Some(table) }
+}
+
+fn on_top(name: &str, label: Label, shape: VirtualShape, lift_m: f64) -> VirtualModel {
+    VirtualModel {
+        name: name.into(),
+        shape,
+        placement: Placement::Object {
+            label,
+            object_id: None,
+            on_top: true,
+            offset_m: [0.0, 0.0, lift_m],
+            yaw_rad: 0.3,
+        },
+    }
+}
+
+fn camera() -> (PinholeCamera, Se3) {
+    let cam = PinholeCamera::from_fovy(640, 480, 58f64.to_radians()).unwrap_or_else(|_| unreachable!());
+    // Look at the table centre from 0.45 m above it, tilted 35° towards the robot side.
+    let target = Point3::new(0.5, 0.0, 0.0);
+    let tilt = 35f64.to_radians();
+    let eye = Point3::new(0.5 - 0.45 * tilt.tan(), 0.0, 0.45);
+    let z = (target - eye).normalize();
+    let x = Vector3::new(0.0, -1.0, 0.0);
+    let y = z.cross(&x);
+    let rot = UnitQuaternion::from_matrix(&Matrix3::from_columns(&[x, y, z]));
+    (cam, Se3::from_parts(Translation3::from(eye.coords), rot))
+}
+
+fn bench_ar(c: &mut Criterion) {
+    let scene = scene();
+    let models = vec![
+        on_top("robot_toy", Label::Book, VirtualShape::Cuboid { half_extents_m: [0.03, 0.02, 0.04] }, 0.002),
+        on_top("lamp", Label::Can, VirtualShape::Cylinder { radius_m: 0.02, half_height_m: 0.06 }, 0.002),
+        on_top("marble", Label::Block, VirtualShape::Ball { radius_m: 0.015 }, 0.002),
+    ];
+    let config = ArConfig::default();
+    let (cam, world_from_camera) = camera();
+    c.bench_function("ar_frame_640x480", |b| {
+        b.iter_batched(
+            || {
+                let mut physics = ArPhysics::new(&scene, &config.physics).unwrap_or_else(|e| panic!("{e}"));
+                for m in register(&scene, &models).unwrap_or_else(|e| panic!("{e}")) {
+                    physics.add(&m, [0.0; 3]).unwrap_or_else(|e| panic!("{e}"));
+                }
+                physics
+            },
+            |mut physics| {
+                let registered = register(&scene, &models).unwrap_or_else(|e| panic!("{e}"));
+                let depth = render_scene_depth(&scene, &cam, &world_from_camera, &config.render)
+                    .unwrap_or_else(|e| panic!("{e}"));
+                let masks = occlusion_masks(&registered, &cam, &world_from_camera, &depth, &config.render)
+                    .unwrap_or_else(|e| panic!("{e}"));
+                physics.step_frame();
+                black_box((masks, physics.states()))
+            },
+            BatchSize::SmallInput,
+        )
+    });
+    // The frame's stages alone (the paper's table splits its AR time by stage too).
+    let registered = register(&scene, &models).unwrap_or_else(|e| panic!("{e}"));
+    let depth = render_scene_depth(&scene, &cam, &world_from_camera, &config.render).unwrap_or_else(|e| panic!("{e}"));
+    c.bench_function("ar_stage/registration", |b| b.iter(|| black_box(register(&scene, &models))));
+    c.bench_function("ar_stage/map_depth_640x480", |b| {
+        b.iter(|| black_box(render_scene_depth(&scene, &cam, &world_from_camera, &config.render)))
+    });
+    c.bench_function("ar_stage/masks_640x480", |b| {
+        b.iter(|| black_box(occlusion_masks(&registered, &cam, &world_from_camera, &depth, &config.render)))
+    });
+    c.bench_function("ar_stage/physics_frame", |b| {
+        b.iter_batched(
+            || {
+                let mut physics = ArPhysics::new(&scene, &config.physics).unwrap_or_else(|e| panic!("{e}"));
+                for m in &registered {
+                    physics.add(m, [0.0; 3]).unwrap_or_else(|e| panic!("{e}"));
+                }
+                physics
+            },
+            |mut physics| {
+                physics.step_frame();
+                black_box(physics.states())
+            },
+            BatchSize::SmallInput,
+        )
+    });
+}
+
+criterion_group!(benches, bench_ar);
+criterion_main!(benches);
