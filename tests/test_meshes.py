@@ -107,8 +107,8 @@ def test_validator_accepts_a_3_mm_gap_and_rejects_interpenetration() -> None:
     with pytest.raises(SceneFileError) as e:
         parse_scene(_butter_pair(-0.002))
     assert e.value.field == "objects[1].position"
-    assert "objects[1] (block, asset butter) interpenetrates objects[0] (block, asset butter)" in str(e.value)
-    depth_mm = float(str(e.value).split("overlap by ")[1].split(" mm")[0])
+    assert "objects[1] (block, asset butter) overlaps objects[0] (block, asset butter)" in str(e.value)
+    depth_mm = float(str(e.value).split("interpenetrate by ")[1].split(" mm")[0])
     assert 0.5 <= depth_mm <= 2.1
 
 

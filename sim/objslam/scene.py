@@ -308,7 +308,7 @@ def _check_no_interpenetration(path: Path, objects: tuple[ObjectSpec, ...]) -> N
                 raise SceneFileError(
                     path,
                     f"objects[{b.id}].position",
-                    f"{_describe(b)} interpenetrates {_describe(a)}: their footprints overlap by "
+                    f"{_describe(b)} overlaps {_describe(a)}: their footprints interpenetrate by "
                     f"{depth * 1000:.1f} mm (objects may touch, not overlap)",
                 )
 
