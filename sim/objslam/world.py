@@ -35,7 +35,8 @@ import sapien
 
 from . import _native
 from .camera import SAPIEN_FROM_CV, CameraConfig
-from .scene import SceneSpec
+from .meshes import get_asset
+from .scene import ObjectSpec, SceneSpec
 from .textures import object_texture, table_texture
 
 #: Physics rate, Hz.
@@ -233,6 +234,9 @@ class SimWorld:
 
     def _build_objects(self) -> None:
         for o in self.spec.objects:
+            if o.mesh is not None:
+                self.object_actors[o.id] = self._build_mesh_object(o)
+                continue
             mat = sapien.render.RenderMaterial()
             mat.base_color_texture = sapien.render.RenderTexture2D(
                 object_texture(self.spec.seed, o.id), "R8G8B8A8Unorm"
@@ -254,6 +258,30 @@ class SimWorld:
             q = [math.cos(o.yaw_rad / 2), 0.0, 0.0, math.sin(o.yaw_rad / 2)]
             actor.set_pose(sapien.Pose([o.position[0], o.position[1], cz], q))
             self.object_actors[o.id] = actor
+
+    def _build_mesh_object(self, o: ObjectSpec) -> sapien.Entity:
+        """A scanned mesh: its textured visual OBJs and its wheel collision OBJ (one convex shape
+        per group), placed in the object's ground-truth frame (:mod:`objslam.meshes`), with the
+        asset's mass (inertia of a solid box of the ground-truth size) and friction."""
+        assert o.mesh is not None
+        asset = get_asset(o.mesh.asset)
+        t = o.mesh.object_from_mesh
+        local = sapien.Pose(t[:3, 3].tolist(), _quat_from_matrix(t[:3, :3]).tolist())
+        k = [asset.unit_m * o.mesh.scale] * 3
+        b = self.scene.create_actor_builder()
+        phys = self.scene.create_physical_material(asset.friction, asset.friction, 0.0)
+        b.add_multiple_convex_collisions_from_file(str(asset.path(asset.collision)), pose=local, scale=k, material=phys)
+        for f in asset.visual:
+            b.add_visual_from_file(str(asset.path(f)), pose=local, scale=k)
+        ext = 2 * np.asarray(o.half_extents)
+        inertia = asset.mass_kg / 12 * np.array(
+            [ext[1] ** 2 + ext[2] ** 2, ext[0] ** 2 + ext[2] ** 2, ext[0] ** 2 + ext[1] ** 2]
+        )
+        b.set_mass_and_inertia(asset.mass_kg, sapien.Pose(), inertia.tolist())
+        actor = b.build(name=f"obj{o.id}_{o.cls}_{asset.name}")
+        q = [math.cos(o.yaw_rad / 2), 0.0, 0.0, math.sin(o.yaw_rad / 2)]
+        actor.set_pose(sapien.Pose([o.position[0], o.position[1], o.half_extents[2] + 1e-4], q))
+        return actor
 
     def _build_robot(self) -> None:
         loader = self.scene.create_urdf_loader()
