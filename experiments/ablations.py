@@ -134,7 +134,7 @@ def associate(a: argparse.Namespace, command: str) -> int:
     if failed:
         lines += ["", "## Failed episodes", ""] + [f"- {r['mode']} {r['scene']} seed {r['seed']}: {r['error']}" for r in failed]
     (report_files(out, "association")[1]).write_text("\n".join(lines) + "\n")
-    print(f"wrote {report_files(out, "association")[1]}")
+    print(f"wrote {report_files(out, 'association')[1]}")
     return 0 if not failed else 1
 
 
@@ -225,7 +225,7 @@ def parameterize(a: argparse.Namespace, command: str) -> int:
     if failed:
         lines += ["", "## Failed episodes", ""] + [f"- {r['scene']} seed {r['seed']}: {r['error']}" for r in failed]
     (report_files(out, "parameterization")[1]).write_text("\n".join(lines) + "\n")
-    print(f"wrote {report_files(out, "parameterization")[1]}")
+    print(f"wrote {report_files(out, 'parameterization')[1]}")
     return 0 if not failed else 1
 
 
@@ -341,7 +341,7 @@ def slam(a: argparse.Namespace, command: str) -> int:
         why = ", ".join(f"{k} {v}" for k, v in sorted(reasons.items())) or "none"
         lines.append(f"- Never lost on {never} of {len(sl)} runs; lost frames by reason: {why}.")
     (report_files(out, "slam")[1]).write_text("\n".join(lines) + "\n")
-    print(f"wrote {report_files(out, "slam")[1]}")
+    print(f"wrote {report_files(out, 'slam')[1]}")
     return 0 if all("error" not in r for r in rows) else 1
 
 

@@ -39,8 +39,8 @@ REPO = Path(__file__).resolve().parents[1]
 
 import objslam
 from objslam.provenance import provenance, report_files
-from objslam.topo import similarity_matrix, transform_errors, transform_map_json
 from objslam.sweep import Job, run_job
+from objslam.topo import similarity_matrix, transform_errors, transform_map_json
 
 PRIOR = {"strategy": "init", "seed": 0, "overrides": ()}
 QUERY = {

@@ -113,12 +113,10 @@ def test_benchmark_maps_are_used_only_for_their_own_scene_and_seed(tmp_path, cap
     """--maps-from-benchmark grasps on an exploration sweep's run folders; a row whose folder's
     config is another seed, or whose folder has no map, makes no session (nothing is grasped
     in the wrong world) and says why."""
-    import sys
-
-    import tomli_w
-    from objslam.config import to_dict
 
     import grasp as grasp_cli
+    import tomli_w
+    from objslam.config import to_dict
 
     run = tmp_path / "run_od"
     run.mkdir()
@@ -203,7 +201,6 @@ def test_a_finger_landing_on_the_rim_moves_the_hand_over_and_the_grasp_succeeds(
 
 
 def test_centre_errors_are_seeded_and_of_the_stated_size() -> None:
-    import sys
 
     import grasp as grasp_cli
 
@@ -221,7 +218,6 @@ def test_centre_errors_are_seeded_and_of_the_stated_size() -> None:
 
 
 def test_robustness_report_counts_success_failures_and_touches_per_cell(tmp_path) -> None:
-    import sys
 
     import grasp_robustness
 

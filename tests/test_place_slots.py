@@ -25,8 +25,6 @@ def test_slots_are_spaced_as_asked_and_clear_the_map() -> None:
 
 
 def test_the_letting_go_table_counts_how_each_item_was_let_go() -> None:
-    import sys
-    from pathlib import Path
 
     import place
 
