@@ -4,6 +4,7 @@ SHELL := /bin/bash
 PY := .venv/bin/python
 CARGO_FEATURES := --features rerun
 RUN_ARGS ?=
+WEB ?=
 BENCHMARK_ARGS ?=
 ABLATION_ARGS ?=
 MATCH_SIM_ARGS ?=
@@ -65,9 +66,15 @@ match-sim: setup ## Scene matching, part (b): maps of two simulator runs per sce
 report: ## Report of the latest run folder → reports/foundation_run.{md,json}
 	$(PY) experiments/report_run.py
 
-view: ## Open the latest run's recording in the Rerun viewer
+view: ## Open the latest run's recording in the Rerun viewer (no display, or WEB=1: serve a web viewer and print its address)
 	@test -e runs/latest/run.rrd || { echo "no runs/latest/run.rrd: run 'make run' first"; exit 1; }
-	.venv/bin/rerun runs/latest/run.rrd
+	@if [ -z "$(WEB)" ] && { [ -n "$$DISPLAY" ] || [ -n "$$WAYLAND_DISPLAY" ] || [ "$$(uname)" = Darwin ]; }; then \
+		.venv/bin/rerun runs/latest/run.rrd; \
+	else \
+		echo "serving a web viewer: open http://127.0.0.1:9090/?url=rerun%2Bhttp%3A%2F%2F127.0.0.1%3A9876%2Fproxy"; \
+		echo "  (remote machine: ssh -L 9090:localhost:9090 -L 9876:localhost:9876 <host>, then open the same address; Ctrl-C stops)"; \
+		.venv/bin/rerun --serve-web --port 9876 --web-viewer-port 9090 runs/latest/run.rrd; \
+	fi
 
 lint: ## rustfmt + clippy -D warnings + ruff
 	cargo fmt --all --check
