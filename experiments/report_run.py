@@ -15,13 +15,14 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "experiments"))
 
 from bench import machine
+from objslam.cli import HelpFormatter
 from objslam.episode import format_table
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("run_dir", nargs="?", default=str(REPO / "runs" / "latest"))
-    ap.add_argument("--name", default="foundation_run")
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=HelpFormatter)
+    ap.add_argument("run_dir", nargs="?", default=str(REPO / "runs" / "latest"), help="run folder (default: runs/latest)")
+    ap.add_argument("--name", default="foundation_run", help="report name: reports/<name>.{md,json}")
     a = ap.parse_args(argv)
     run = Path(a.run_dir).resolve()
     status = json.loads((run / "status.json").read_text())

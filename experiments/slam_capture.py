@@ -19,7 +19,8 @@ from pathlib import Path
 
 import numpy as np
 from objslam import episode
-from objslam.config import load_run_config
+from objslam.cli import HelpFormatter
+from objslam.config import STRATEGIES, load_run_config
 
 
 class _Capturing:
@@ -54,12 +55,12 @@ class _Capturing:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--scene", required=True)
-    ap.add_argument("--strategy", default="object-driven")
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--out", required=True, type=Path)
-    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=HelpFormatter)
+    ap.add_argument("--scene", required=True, help="scene file")
+    ap.add_argument("--strategy", default="object-driven", choices=STRATEGIES, help="view-selection strategy")
+    ap.add_argument("--seed", type=int, default=0, help="run seed")
+    ap.add_argument("--out", required=True, type=Path, help="folder of the captured frames")
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a config key (repeatable)")
     a = ap.parse_args(argv)
     a.out.mkdir(parents=True, exist_ok=True)
     cfg = load_run_config(
