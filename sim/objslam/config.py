@@ -256,9 +256,9 @@ class RecordConfig:
     """Log the SLAM map points (``world/map/points``, world frame) every ``every_n_frames`` frames
     (pose sources other than ``fk``, which has no tracker)."""
     jpeg_quality: int = 85
-    """JPEG quality (1-100) of the colour frames in ``run.rrd``; 0 stores them raw (0.9 MB per
-    640×480 frame instead of about 40 kB). Depth frames are stored as lossless 16-bit PNG in
-    millimetres (the simulated depth is quantised to 1 mm)."""
+    """JPEG quality (1-100) of the colour frames in ``run.rrd``; depth frames are then lossless
+    16-bit PNG in millimetres (the simulated depth is quantised to 1 mm). 0 stores both raw (RGB24
+    and float32 metres: 2.1 MB per 640×480 frame)."""
     robot: bool = True
     """Draw the Panda (``world/robot``): its URDF collision meshes (0.15 MB, logged once) moved to
     the simulated links' poses every frame."""

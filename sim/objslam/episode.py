@@ -211,6 +211,7 @@ def recording_options(cfg: RunConfig, scene: SceneSpec) -> dict[str, Any]:
     live viewer, the table to draw and frame the 3D view on, the arm's URDF."""
     return {
         "jpeg_quality": cfg.record.jpeg_quality,
+        "depth_png": cfg.record.jpeg_quality > 0,
         "live_url": cfg.record.live_url or None,
         "table": {"center": list(scene.table.center), "size": list(scene.table.size)},
         "robot_urdf": str(panda_urdf_path()) if cfg.record.robot else None,

@@ -63,9 +63,7 @@ impl Node {
                 log(
                     bp,
                     &path,
-                    &ViewBlueprint::new(ViewClass((*class).into()))
-                        .with_display_name(*name)
-                        .with_space_origin(*origin),
+                    &ViewBlueprint::new(ViewClass((*class).into())).with_display_name(*name).with_space_origin(*origin),
                 )?;
                 Ok(())
             }
@@ -129,7 +127,7 @@ pub fn blueprint_messages(application_id: &str, table: Option<&TableTop>) -> Res
     let err = |e: &dyn std::fmt::Display| RecordError::Log { entity: "blueprint".into(), reason: e.to_string() };
     let app = rerun::ApplicationId::try_from(application_id.to_string()).map_err(|e| err(&e))?;
     let (bp, storage) = RecordingStreamBuilder::new(app)
-        .recording_id(rerun::RecordingId::random())
+        .recording_id(rerun::external::re_log_types::RecordingId::random())
         .blueprint()
         .memory()
         .map_err(|e| err(&e))?;
@@ -175,7 +173,8 @@ pub fn blueprint_messages(application_id: &str, table: Option<&TableTop>) -> Res
     };
     let timings =
         Node::View { id: id(5), class: "TimeSeries", name: "Timings", origin: "timings", contents: vec!["$origin/**"] };
-    let events = Node::View { id: id(6), class: "TextLog", name: "Events", origin: "log", contents: vec!["$origin/**"] };
+    let events =
+        Node::View { id: id(6), class: "TextLog", name: "Events", origin: "log", contents: vec!["$origin/**"] };
     let root_id = id(13);
     let root = Node::Container {
         id: root_id,
@@ -221,7 +220,11 @@ pub fn send(stream: &RecordingStream, application_id: &str, table: Option<&Table
         .ok_or_else(|| RecordError::Log { entity: "blueprint".into(), reason: "no store info".into() })?;
     stream.send_blueprint(
         msgs,
-        rerun::log::BlueprintActivationCommand { blueprint_id, make_active: true, make_default: true },
+        rerun::external::re_log_types::BlueprintActivationCommand {
+            blueprint_id,
+            make_active: true,
+            make_default: true,
+        },
     );
     Ok(())
 }

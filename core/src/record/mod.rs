@@ -223,7 +223,8 @@ impl Recorder {
         let stream = match &options.live_url {
             None => builder.save(path).map_err(|e| create_err(e.to_string()))?,
             Some(url) => {
-                let uri = url.parse().map_err(|e| RecordError::Option { field: "live_url", reason: format!("{e}") })?;
+                let uri: rerun::external::re_uri::ProxyUri =
+                    url.parse().map_err(|e| RecordError::Option { field: "live_url", reason: format!("{e}") })?;
                 let file = rerun::sink::FileSink::new(path).map_err(|e| create_err(e.to_string()))?;
                 builder.set_sinks((file, rerun::sink::GrpcSink::new(uri))).map_err(|e| create_err(e.to_string()))?
             }
@@ -300,7 +301,7 @@ impl Recorder {
         image::codecs::jpeg::JpegEncoder::new_with_quality(&mut jpeg, self.options.jpeg_quality)
             .encode(rgb, width, height, image::ExtendedColorType::Rgb8)
             .map_err(|e| RecordError::Encode { field: "rgb", reason: e.to_string() })?;
-        self.log(ENTITY, &rerun::EncodedImage::from_file_contents(jpeg).with_media_type(rerun::MediaType::JPEG))
+        self.log(ENTITY, &rerun::EncodedImage::from_file_contents(jpeg).with_media_type(rerun::MediaType::jpeg()))
     }
 
     /// A depth image in metres (row-major f32): a 16-bit millimetre PNG with
@@ -316,7 +317,7 @@ impl Recorder {
             let png = depth_png_mm(width, height, depth_m)?;
             return self.log(
                 ENTITY,
-                &rerun::EncodedDepthImage::from_file_contents(png).with_media_type(rerun::MediaType::PNG),
+                &rerun::EncodedDepthImage::from_file_contents(png).with_media_type(rerun::MediaType::png()),
             );
         }
         let bytes: Vec<u8> = depth_m.iter().flat_map(|d| d.to_le_bytes()).collect();
@@ -523,8 +524,9 @@ mod tests {
         let path = dir.join("t.rrd");
         {
             let table = TableTop { center: [0.5, 0.0], size: [0.8, 1.0] };
-            let rec = Recorder::create(&path, "objslam-test", RecordOptions { table: Some(table), ..Default::default() })
-                .unwrap_or_else(|e| panic!("{e}"));
+            let rec =
+                Recorder::create(&path, "objslam-test", RecordOptions { table: Some(table), ..Default::default() })
+                    .unwrap_or_else(|e| panic!("{e}"));
             let cam = PinholeCamera::from_fovy(8, 6, 1.0).unwrap_or_else(|e| panic!("{e}"));
             rec.set_frame(0, 0.0);
             rec.log_camera(&Se3::identity(), &cam).unwrap_or_else(|e| panic!("{e}"));
@@ -560,8 +562,10 @@ mod tests {
     #[test]
     fn encoded_frames_are_smaller_than_raw_ones() {
         let dir = temp_dir("size");
-        let raw =
-            record_frames(&dir.join("raw.rrd"), RecordOptions { jpeg_quality: 0, depth_png: false, ..Default::default() });
+        let raw = record_frames(
+            &dir.join("raw.rrd"),
+            RecordOptions { jpeg_quality: 0, depth_png: false, ..Default::default() },
+        );
         let encoded = record_frames(&dir.join("enc.rrd"), RecordOptions::default());
         // 20 frames of 64×48: 184 kB of raw colour and 246 kB of raw depth.
         assert!(raw > 20 * 64 * 48 * 3, "raw recording has {raw} bytes");
@@ -581,7 +585,11 @@ mod tests {
     #[test]
     fn bad_jpeg_quality_is_a_named_error() {
         let dir = temp_dir("quality");
-        let r = Recorder::create(&dir.join("q.rrd"), "objslam-test", RecordOptions { jpeg_quality: 101, ..Default::default() });
+        let r = Recorder::create(
+            &dir.join("q.rrd"),
+            "objslam-test",
+            RecordOptions { jpeg_quality: 101, ..Default::default() },
+        );
         assert!(matches!(r, Err(RecordError::Option { field: "jpeg_quality", .. })));
         let _ = std::fs::remove_dir_all(&dir);
     }
