@@ -4,6 +4,7 @@ SHELL := /bin/bash
 PY := .venv/bin/python
 CARGO_FEATURES := --features rerun
 RUN_ARGS ?=
+WEB ?=
 BENCHMARK_ARGS ?=
 ABLATION_ARGS ?=
 MATCH_SIM_ARGS ?=
@@ -78,19 +79,24 @@ match: ## Scene matching vs shared-object ratio (500 trials per row) → reports
 match-sim: setup ## Scene matching, part (b): maps of two simulator runs per scene (7 scenes × 2 Init episodes) → sim_pairs in reports/scene_matching.json
 	$(PY) experiments/match_sim.py $(MATCH_SIM_ARGS)
 
-report: ## Report of the latest run folder → reports/foundation_run.json
 ar: setup ## AR on exploration maps vs the simulator's truth: occlusion IoU, drop rest error → reports/ar.json
 	$(PY) experiments/ar.py $(AR_ARGS)
 
-report: ## Report of the latest run folder → reports/foundation_run.{md,json}
+report: ## Report of the latest run folder → reports/foundation_run.json
 	$(PY) experiments/report_run.py
 
 reports-index: ## Regenerate reports/README.md (one line per report: question, headline figure, command)
 	python3 experiments/report_index.py
 
-view: ## Open the latest run's recording in the Rerun viewer
+view: ## Open the latest run's recording in the Rerun viewer (no display, or WEB=1: serve a web viewer and print its address)
 	@test -e runs/latest/run.rrd || { echo "no runs/latest/run.rrd: run 'make run' first"; exit 1; }
-	.venv/bin/rerun runs/latest/run.rrd
+	@if [ -z "$(WEB)" ] && { [ -n "$$DISPLAY" ] || [ -n "$$WAYLAND_DISPLAY" ] || [ "$$(uname)" = Darwin ]; }; then \
+		.venv/bin/rerun runs/latest/run.rrd; \
+	else \
+		echo "serving a web viewer: open http://127.0.0.1:9090/?url=rerun%2Bhttp%3A%2F%2F127.0.0.1%3A9876%2Fproxy"; \
+		echo "  (remote machine: ssh -L 9090:localhost:9090 -L 9876:localhost:9876 <host>, then open the same address; Ctrl-C stops)"; \
+		.venv/bin/rerun --serve-web --port 9876 --web-viewer-port 9090 runs/latest/run.rrd; \
+	fi
 
 lint: ## rustfmt + clippy -D warnings + ruff
 	cargo fmt --all --check

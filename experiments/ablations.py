@@ -32,6 +32,8 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 
+from objslam.cli import HelpFormatter
+from objslam.config import STRATEGIES
 from objslam.provenance import provenance, report_files, run_config
 from objslam.sweep import Job, run_sweep, scene_files
 
@@ -346,16 +348,23 @@ def slam(a: argparse.Namespace, command: str) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("which", choices=("associate", "parameterize", "slam"))
-    ap.add_argument("--seeds", nargs="*", type=int, default=[0])
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=HelpFormatter)
     ap.add_argument(
-        "--strategy", default="object-driven", help="view strategy of the slam sweep (associate/parameterize use init)"
+        "which",
+        choices=("associate", "parameterize", "slam"),
+        help="the ablation: association modes, parameterization stages, or pose sources",
     )
-    ap.add_argument("--workers", type=int, default=2)
-    ap.add_argument("--config", action="append", default=[])
-    ap.add_argument("--set", action="append", default=[])
-    ap.add_argument("--out", default=str(REPO / "reports"), help="reports folder: <out>/<report>.json and <out>/pages/<report>.md (default: %(default)s)")
+    ap.add_argument("--seeds", nargs="*", type=int, default=[0], help="run seeds of every episode")
+    ap.add_argument(
+        "--strategy",
+        default="object-driven",
+        choices=STRATEGIES,
+        help="view strategy of the slam sweep (associate and parameterize use init)",
+    )
+    ap.add_argument("--workers", type=int, default=2, help="episodes run in parallel (worker processes)")
+    ap.add_argument("--config", action="append", default=[], help="run-config TOML overlay (repeatable)")
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a config key (repeatable)")
+    ap.add_argument("--out", default=str(REPO / "reports"), help="report folder")
     a = ap.parse_args(argv)
     command = "python experiments/ablations.py " + " ".join(argv if argv is not None else sys.argv[1:])
     return {"associate": associate, "parameterize": parameterize, "slam": slam}[a.which](a, command.strip())

@@ -39,6 +39,8 @@ from typing import Any
 
 REPO = Path(__file__).resolve().parents[1]
 
+import figures
+from objslam.cli import HelpFormatter
 from objslam.provenance import provenance, report_files, run_config
 from objslam.sweep import BACKENDS, Job, run_sweep, scene_files
 
@@ -178,11 +180,38 @@ def write_reports(
     failed = [r for r in rows if "error" in r]
     if failed:
         lines += ["## Failed episodes", ""] + [f"- {r['strategy']} {r['scene']} seed {r['seed']}: {r['error']}" for r in failed]
-    lines += ["", "![metrics per strategy](exploration_metrics.png)", "", "![entropy vs views](exploration_entropy.png)"]
-    if any(r.get("accuracy_curve") for r in ok):
-        lines += ["", "![accuracy vs views](exploration_accuracy.png)"]
+    lines += ["", "## Figures", ""] + figure_captions(ok, command)
     (report_files(out, "exploration")[1]).write_text("\n".join(lines) + "\n")
-    _plots(ok, strategies, out, command)
+    figures.exploration_figures(ok, strategies, out / "pages")
+
+
+FIGURE_CAPTIONS = {
+    "exploration_metrics": "Final map accuracy per view-selection strategy",
+    "exploration_entropy": "Mean normalised entropy of the map after k views",
+    "exploration_accuracy": (
+        "3D IoU after k views, world frame and with the map's global offset removed "
+        "(an episode that stopped earlier keeps its last map)"
+    ),
+}
+
+
+def figure_captions(ok: list[dict[str, Any]], command: str) -> list[str]:
+    """The report's figure lines: image, caption with the interval and the command that made it."""
+    n = len(ok)
+    lines = []
+    for stem, text in FIGURE_CAPTIONS.items():
+        if stem == "exploration_accuracy" and not any(r.get("accuracy_curve") for r in ok):
+            continue
+        lines += [
+            f"![{text}]({stem}.png)",
+            "",
+            (
+                f"*{text}: mean and Student-t 95 % confidence interval over {n} episodes (scenes × seeds "
+                f"pooled). Vector version: [{stem}.pdf]({stem}.pdf). Made by `{command}`.*"
+            ),
+            "",
+        ]
+    return lines
 
 
 def curve_value(curve: list[dict[str, Any]], k: int, metric: str) -> float | None:
@@ -280,61 +309,6 @@ def _accuracy_tables(ok: list[dict[str, Any]], strategies: list[str]) -> list[st
     return lines
 
 
-def _plots(ok: list[dict[str, Any]], strategies: list[str], out: Path, command: str) -> None:
-    try:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-    except ImportError:
-        print("matplotlib missing: no plots", file=sys.stderr)
-        return
-    fig, axes = plt.subplots(1, 4, figsize=(16, 3.6))
-    for ax, (metric, title) in zip(axes, (("iou3d", "3D IoU"), ("iou2d", "2D IoU"), ("cde_cm", "CDE (cm)"), ("yae_deg", "YAE (deg)"))):
-        means = [_mean([r[metric] for r in ok if r["strategy"] == s]) or 0.0 for s in strategies]
-        ax.bar(range(len(strategies)), means, color=[f"C{i % 10}" for i in range(len(strategies))])
-        ax.set_xticks(range(len(strategies)), strategies, rotation=30, ha="right", fontsize=8)
-        ax.set_title(title)
-    fig.suptitle(f"mean over scenes and seeds — {command}", fontsize=9)
-    fig.tight_layout()
-    fig.savefig(out / "pages" / "exploration_metrics.png", dpi=110)
-    plt.close(fig)
-    fig, ax = plt.subplots(figsize=(6, 4))
-    for s in strategies:
-        curves = [r["entropy_curve"] for r in ok if r["strategy"] == s and r["entropy_curve"]]
-        if not curves:
-            continue
-        n = max(len(c) for c in curves)
-        mean_curve = [_mean([c[i] if i < len(c) else c[-1] for c in curves]) for i in range(n)]
-        ax.plot(range(n), mean_curve, marker="o", label=s)
-    ax.set_xlabel("views after Init")
-    ax.set_ylabel("mean normalised entropy H̄")
-    ax.legend()
-    ax.set_title(command, fontsize=8)
-    fig.tight_layout()
-    fig.savefig(out / "pages" / "exploration_entropy.png", dpi=110)
-    plt.close(fig)
-    with_curve, ks = _curves(ok)
-    if not with_curve:
-        return
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4))
-    for ax, (metric, label) in zip(axes, (("iou3d", "3D IoU"), ("iou3d_aligned", "3D IoU, global offset removed"))):
-        for s in strategies:
-            runs = [r for r in with_curve if r["strategy"] == s]
-            ys = [_mean_after(runs, k, metric) for k in ks]
-            pts = [(k, y) for k, y in zip(ks, ys) if y is not None]
-            if pts:
-                ax.plot([p[0] for p in pts], [p[1] for p in pts], marker="o", ms=3, label=s)
-        ax.set_xlabel("views (Init + NBV)")
-        ax.set_ylabel(label)
-        ax.grid(alpha=0.3)
-    axes[0].legend(fontsize=8)
-    fig.suptitle(f"map accuracy after k views (stopped episodes keep their map) — {command}", fontsize=8)
-    fig.tight_layout()
-    fig.savefig(out / "pages" / "exploration_accuracy.png", dpi=110)
-    plt.close(fig)
-
-
 def _other_sweep(spec: str) -> dict[str, Any]:
     """``--also FILE`` or ``FILE:strategy,strategy``: another sweep's rows (only those strategies)."""
     path, _, only = spec.partition(":")
@@ -349,23 +323,42 @@ def _other_sweep(spec: str) -> dict[str, Any]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--scenes", nargs="*", default=scene_files())
-    ap.add_argument("--strategies", nargs="*", default=list(STRATEGIES))
-    ap.add_argument("--seeds", nargs="*", type=int, default=[0, 1, 2])
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=HelpFormatter)
+    ap.add_argument("--scenes", nargs="*", default=scene_files(), metavar="SCENE", help="scene files")
+    ap.add_argument(
+        "--strategies",
+        nargs="*",
+        default=list(STRATEGIES),
+        metavar="STRATEGY",
+        help=f"view-selection strategies: any of {', '.join(STRATEGIES)}, or labels of Python strategies "
+        "set by --config overlays",
+    )
+    ap.add_argument("--seeds", nargs="*", type=int, default=[0, 1, 2], help="run seeds")
     ap.add_argument("--workers", type=int, default=2, help="pool processes, or CPUs of a local Ray instance")
-    ap.add_argument("--backend", choices=BACKENDS, default="pool", help="pool (default) or ray: one Ray task per episode")
-    ap.add_argument("--address", default=None, help="Ray cluster address (backend ray); default: a local instance")
-    ap.add_argument("--config", action="append", default=[])
-    ap.add_argument("--set", action="append", default=[])
-    ap.add_argument("--out", default=str(REPO / "reports"), help="reports folder: <out>/exploration.json, <out>/pages/exploration.md (default: %(default)s)")
-    ap.add_argument("--report-only", action="store_true", help="rebuild the reports from <out>/exploration.json")
+    ap.add_argument("--backend", choices=BACKENDS, default="pool", help="pool: local processes; ray: one Ray task per episode")
+    ap.add_argument("--address", default=None, help="Ray cluster address (backend ray; default: a local instance)")
+    ap.add_argument("--config", action="append", default=[], help="run-config TOML overlay (repeatable)")
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a config key (repeatable)")
+    ap.add_argument("--out", default=str(REPO / "reports"), help="report folder")
+    ap.add_argument("--report-only", action="store_true", help="rebuild the reports from <out>/exploration.json and its run folders")
+    ap.add_argument(
+        "--figures-only",
+        action="store_true",
+        help="redraw only the figures from <out>/exploration.json (no run folders needed)",
+    )
     ap.add_argument(
         "--also", nargs="*", default=[], metavar="JSON",
         help="with --report-only: rows of other sweeps' exploration.json (e.g. more seeds) join the tables; "
         "FILE:s1,s2 takes only those strategies' rows",
     )
     a = ap.parse_args(argv)
+    if a.figures_only:
+        rows = [r for r in json.loads((Path(a.out) / "exploration.json").read_text())["rows"] if "error" not in r]
+        strategies = [s for s in STRATEGIES if any(r["strategy"] == s for r in rows)]
+        strategies += list(dict.fromkeys(r["strategy"] for r in rows if r["strategy"] not in STRATEGIES))
+        for paths in figures.exploration_figures(rows, strategies, Path(a.out) / "pages").values():
+            print(" ".join(str(p) for p in paths))
+        return 0
     if a.report_only:
         old = json.loads((Path(a.out) / "exploration.json").read_text())
         extra = [_other_sweep(spec) for spec in a.also]

@@ -18,6 +18,8 @@ import json
 import statistics
 from pathlib import Path
 
+from objslam.cli import HelpFormatter
+
 METRICS = (
     ("iou3d", ".3f"),
     ("cde_cm", ".2f"),
@@ -114,9 +116,9 @@ def _fmt(value: float | None, spec: str) -> str:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("changed", type=Path)
-    ap.add_argument("baseline", type=Path)
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=HelpFormatter)
+    ap.add_argument("changed", type=Path, help="exploration.json of the sweep with the change")
+    ap.add_argument("baseline", type=Path, help="exploration.json of the baseline sweep")
     ap.add_argument("--out", type=Path, default=None, help="write the markdown here (default: print)")
     ap.add_argument(
         "--pair",

@@ -455,34 +455,39 @@ def _select(spec: str) -> tuple[list[str], dict[str, Any]]:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--scenes", nargs="+", default=[f"scenes/scene0{i}.toml" for i in range(1, 8)])
-    ap.add_argument("--seeds", nargs="+", type=int, default=[0, 1])
-    ap.add_argument("--sources", nargs="+", default=list(SOURCES), choices=SOURCES)
+    from objslam.cli import HelpFormatter
+
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=HelpFormatter)
+    ap.add_argument(
+        "--scenes", nargs="+", default=[f"scenes/scene0{i}.toml" for i in range(1, 8)], help="scene files"
+    )
+    ap.add_argument("--seeds", nargs="+", type=int, default=[0, 1], help="run seeds")
+    ap.add_argument(
+        "--sources", nargs="+", default=list(SOURCES), choices=SOURCES, help="maps the grasps are planned on"
+    )
     ap.add_argument("--config", action="append", default=[], help="run-config overlay (repeatable)")
-    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
-    ap.add_argument("--out", default="reports", help="reports folder: <out>/grasping.json, <out>/pages/grasping.md (default: %(default)s)")
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a config key (repeatable)")
+    ap.add_argument("--out", default="reports", help="report folder")
     ap.add_argument(
         "--reobserve", nargs="*", default=[], choices=SOURCES,
         help=(
-            "map sources whose grasps re-observe the target first (default: none; on the estimated "
-            "maps of the main benchmark of 2026-12-04, 9 seeds, re-observation gave 460/470 against "
-            "466/468 without, both with the blind approach; 465/470 against 468/468 with contact retries: reports/grasping_reobserve/)"
+            "map sources whose grasps re-observe the target from close views first (default: none; "
+            "reports/grasping_reobserve/ compares the two)"
         ),
     )
     ap.add_argument(
         "--reobserve-unregistered", action="store_true",
-        help="use the re-observation's local map as it is, not registered to the map (GraspRunConfig.reobserve_register = false; before 2026-12-03)",
+        help="use the re-observation's local map as it is, not registered to the map (GraspRunConfig.reobserve_register = false)",
     )
-    # Registration is the default since 2026-12-03; the flag of older commands is still accepted.
+    # Registration is the default; the flag of older commands is still accepted.
     ap.add_argument("--reobserve-register", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument(
         "--reobserve-from-view", action="store_true",
-        help="plan the grasp from the last close view instead of the ready posture (GraspRunConfig.reobserve_return_ready = false; before 2026-12-03)",
+        help="plan the grasp from the last close view instead of the ready posture (GraspRunConfig.reobserve_return_ready = false)",
     )
     ap.add_argument(
         "--contact-retries", type=int, default=None, metavar="N",
-        help="descents after a finger lands on something (GraspRunConfig.contact_retries; default 2; 0 = blind approach, before stop 30 (2026-12-04))",
+        help="descents after a finger lands on something (GraspRunConfig.contact_retries; default: 2; 0 = blind approach)",
     )
     ap.add_argument(
         "--centre-error-mm", type=float, default=0.0, metavar="D",
@@ -500,7 +505,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--compare", action="append", default=[], metavar="MANIFEST[=SRC,SRC]",
         help="with --report-only: sessions of another variant, reported apart (comparison_rows)",
     )
-    ap.add_argument("--compare-note", default="", help="title of the comparison table")
+    ap.add_argument("--compare-note", default="", help="title of the comparison table (default: none)")
     ap.add_argument(
         "--reuse-maps", action="store_true",
         help="grasp again on the maps of the sweep in runs/grasp_sweep.json instead of mapping anew",

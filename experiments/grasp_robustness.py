@@ -7,7 +7,7 @@
 error is the one injected) with ``experiments/grasp.py --sources ground_truth --centre-error-mm D
 --contact-retries N`` for every D and N (two processes, the scenes split between them; manifests
 under ``runs/grasp_robustness/``), then reports. Otherwise it reads the sessions of the given
-manifests. Writes ``robustness.md`` / ``.json`` and ``robustness.png``: success per centre error and
+manifests. Writes ``robustness.md`` / ``.json`` and ``robustness.png`` / ``.pdf``: success per centre error and
 approach, and per class.
 """
 
@@ -23,7 +23,9 @@ from typing import Any
 
 REPO = Path(__file__).resolve().parents[1]
 
+import figures
 import grasp as grasp_cli  # the session files' row builder
+from objslam.cli import HelpFormatter
 from objslam.provenance import provenance
 
 
@@ -119,22 +121,7 @@ def write(rows: list[dict[str, Any]], out: Path, command: str) -> dict[str, Any]
     lines.append("")
     (out / "robustness.md").write_text("\n".join(lines))
 
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(5.5, 3.5))
-    for m in modes:
-        pts = [(s["centre_error_mm"], 100.0 * s["success_rate"]) for s in summary if s["contact_retries"] == m]
-        ax.plot([p[0] for p in pts], [p[1] for p in pts], marker="o", label=approach(m))
-    ax.set_xlabel("map centre error, mm")
-    ax.set_ylabel("grasp success, %")
-    ax.grid(alpha=0.3)
-    ax.legend()
-    fig.tight_layout()
-    fig.savefig(out / "robustness.png", dpi=120)
-    plt.close(fig)
+    figures.robustness_figure(summary, "contact_retries", approach, out)
     return report
 
 
@@ -168,15 +155,22 @@ def run_sweeps(a: argparse.Namespace) -> list[str]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=HelpFormatter)
     ap.add_argument("--manifest", action="append", default=[], help="grasp sweep manifest (repeatable)")
     ap.add_argument("--run", action="store_true", help="run the grasp sessions first (see the module docs)")
     ap.add_argument("--errors", nargs="+", type=float, default=[0.0, 3.0, 6.0, 9.0], help="centre errors, mm (with --run)")
     ap.add_argument("--retries", nargs="+", type=int, default=[0, 2], help="contact retries (with --run)")
     ap.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2], help="seeds (with --run)")
     ap.add_argument("--maps-from-benchmark", default="reports/exploration.json", help="exploration sweep whose scenes' worlds are used (with --run)")
-    ap.add_argument("--out", default=str(REPO / "reports" / "grasping_robustness"))
+    ap.add_argument("--out", default=str(REPO / "reports" / "grasping_robustness"), help="report folder")
+    ap.add_argument(
+        "--figures-only", action="store_true", help="redraw only the figure from <out>/robustness.json"
+    )
     a = ap.parse_args(argv)
+    if a.figures_only:
+        summary = json.loads((Path(a.out) / "robustness.json").read_text())["summary"]
+        print(" ".join(str(p) for p in figures.robustness_figure(summary, "contact_retries", approach, Path(a.out))))
+        return 0
     if a.run:
         a.manifest += run_sweeps(a)
     if not a.manifest:

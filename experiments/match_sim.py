@@ -38,6 +38,7 @@ from typing import Any
 REPO = Path(__file__).resolve().parents[1]
 
 import objslam
+from objslam.cli import HelpFormatter
 from objslam.provenance import provenance, report_files
 from objslam.sweep import Job, run_job
 from objslam.topo import similarity_matrix, transform_errors, transform_map_json
@@ -186,12 +187,12 @@ def markdown(pairs: list[dict[str, Any]], command: str) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=HelpFormatter)
     ap.add_argument("--scenes", nargs="*", default=None, help="scene files (default: scenes/scene*.toml)")
     ap.add_argument("--seed", type=int, default=2026, help="seed of the random similarities")
     ap.add_argument("--config-json", default=None, help="partial MatchConfig JSON (default: the defaults)")
     ap.add_argument("--reuse", action="store_true", help="reuse the run folders of the existing report")
-    ap.add_argument("--out", default="reports", help="reports folder: <out>/scene_matching.json, <out>/pages/scene_matching.md (default: %(default)s)")
+    ap.add_argument("--out", default="reports", help="report folder")
     a = ap.parse_args(argv)
     scenes = a.scenes or [_rel(p) for p in sorted((REPO / "scenes").glob("scene*.toml"))]
     out = REPO / a.out if not Path(a.out).is_absolute() else Path(a.out)

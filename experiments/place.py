@@ -27,25 +27,26 @@ REPO = Path(__file__).resolve().parents[1]
 
 def main(argv: list[str] | None = None) -> int:
     from objslam import _native
+    from objslam.cli import HelpFormatter
     from objslam.config import load_run_config
     from objslam.grasp import GraspRunConfig
     from objslam.place import TASKS, PlaceConfig, run_place_task
     from objslam.provenance import provenance, report_files, run_config
     from objslam.scene import load_scene, scene_file
 
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=HelpFormatter)
     ap.add_argument("--maps-from", nargs="+", default=[str(REPO / "runs" / "grasp_sweep.json")], help="grasp sweep manifests")
-    ap.add_argument("--tasks", nargs="+", default=list(TASKS), choices=TASKS)
+    ap.add_argument("--tasks", nargs="+", default=list(TASKS), choices=TASKS, help="placement tasks")
     ap.add_argument("--scenes", nargs="*", default=None, help="scene names (default: all in the manifest)")
-    ap.add_argument("--seeds", nargs="*", type=int, default=None)
+    ap.add_argument("--seeds", nargs="*", type=int, default=None, help="run seeds (default: all in the manifest)")
     ap.add_argument("--reobserve", action="store_true", help="look at each target from close views before grasping it")
     ap.add_argument("--no-reobserve", action="store_true", help=argparse.SUPPRESS)  # the default; kept for old commands
     ap.add_argument("--no-feel-support", action="store_true",
-                    help="let go at the release gap without feeling for the support (before stop 31)")
+                    help="let go at the release gap without feeling for the support")
     ap.add_argument("--tag", default="", help="suffix of the task files (place_<task><tag>.json): variants beside the defaults")
-    ap.add_argument("--config", action="append", default=[])
-    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
-    ap.add_argument("--out", default="reports", help="reports folder: <out>/placement.json, <out>/pages/placement.md (default: %(default)s)")
+    ap.add_argument("--config", action="append", default=[], help="run-config TOML overlay (repeatable)")
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a config key (repeatable)")
+    ap.add_argument("--out", default="reports", help="report folder")
     a = ap.parse_args(argv)
     command = ("python experiments/place.py " + " ".join(shlex.quote(x) for x in (argv if argv is not None else sys.argv[1:]))).strip()
     manifests = [json.loads(Path(m).read_text()) for m in a.maps_from]

@@ -16,14 +16,15 @@ import tomllib
 REPO = Path(__file__).resolve().parents[1]
 
 from bench import machine
+from objslam.cli import HelpFormatter
 from objslam.episode import format_table
 from objslam.provenance import provenance, report_files
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("run_dir", nargs="?", default=str(REPO / "runs" / "latest"))
-    ap.add_argument("--name", default="foundation_run")
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=HelpFormatter)
+    ap.add_argument("run_dir", nargs="?", default=str(REPO / "runs" / "latest"), help="run folder (default: runs/latest)")
+    ap.add_argument("--name", default="foundation_run", help="report name: reports/<name>.{md,json}")
     a = ap.parse_args(argv)
     run = Path(a.run_dir).resolve()
     status = json.loads((run / "status.json").read_text())

@@ -1,44 +1,52 @@
 """Run one episode: ``python experiments/run.py [--scene S] [--strategy X] [--seed N] [--set k=v ...]``.
 
 Writes ``runs/<date>/<time>_<strategy>_<scene>_<seed>/`` and prints a per-object table and the means.
-Exit status 0 on success, 1 on a failed run (its folder is kept and marked), 2 on a bad config,
-130 on Ctrl-C (SIGINT) and 143 on SIGTERM (the folder is kept, marked interrupted or terminated;
-one line says where it is).
+Its ``run.rrd`` opens in the Rerun viewer with ``make view``; ``--spawn`` / ``--serve`` show the
+run live while it goes.
+Exit status 0 on success, 1 on a failed run (its folder is kept and marked), 2 on a bad config.
 """
 
 from __future__ import annotations
 
 import argparse
-import signal
 import sys
 
-from objslam.config import ConfigError, load_run_config
-from objslam.episode import RunStopped, format_table, run_episode
+from objslam.cli import HelpFormatter, has_display, start_viewer
+from objslam.config import STRATEGIES, ConfigError, RunConfig, load_run_config
+from objslam.episode import format_table, run_episode
 from objslam.scene import SceneFileError
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run, and turn a signal into one line and the shell's exit status (no traceback)."""
-    try:
-        return _main(argv)
-    except RunStopped as e:
-        print(f"run {e.status}: its folder is kept, marked incomplete: {e.run_dir}", file=sys.stderr)
-        return e.exit_code
-    except KeyboardInterrupt:
-        print("interrupted before a run folder was made", file=sys.stderr)
-        return 128 + signal.SIGINT
-
-
-def _main(argv: list[str] | None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--scene", help="scene file (default from experiments/configs/default.toml)")
-    ap.add_argument("--strategy", help="view-selection strategy (default: init)")
-    ap.add_argument("--seed", type=int, help="run seed")
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=HelpFormatter)
+    try:  # the true defaults: experiments/configs/default.toml over the dataclass defaults
+        base = load_run_config()
+    except (ConfigError, SceneFileError):
+        base = RunConfig()
+    ap.add_argument("--scene", help=f"scene file (default: {base.scene}, from experiments/configs/default.toml)")
+    ap.add_argument(
+        "--strategy",
+        metavar="{" + ",".join(STRATEGIES) + "}",
+        help=f"view-selection strategy, or the label of a python_strategy (default: {base.strategy}; "
+        "experiments/strategies/<name>.toml holds each one's settings)",
+    )
+    ap.add_argument("--seed", type=int, help=f"run seed (default: {base.seed})")
     ap.add_argument("--config", action="append", default=[], help="extra TOML overlay (repeatable)")
-    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a config key")
+    ap.add_argument(
+        "--set", action="append", default=[], metavar="KEY=VALUE", help="override a config key, e.g. record.jpeg_quality=0"
+    )
     ap.add_argument("--no-progress", action="store_true", help="no progress bar")
     ap.add_argument(
         "--no-compare", action="store_true", help="do not also run the Init-only episode for comparison"
+    )
+    live = ap.add_mutually_exclusive_group()
+    live.add_argument(
+        "--spawn", action="store_true", help="show the run live in a native Rerun viewer window as it goes"
+    )
+    live.add_argument(
+        "--serve",
+        action="store_true",
+        help="show the run live in a web viewer served over HTTP (no display needed; prints the address)",
     )
     a = ap.parse_args(argv)
     overrides = list(a.set)
@@ -46,6 +54,10 @@ def _main(argv: list[str] | None) -> int:
         overrides.append(f'scene="{a.scene}"')
     if a.seed is not None:
         overrides.append(f"seed={a.seed}")
+    if a.spawn or a.serve:
+        if a.spawn and not has_display():
+            print("no display: serving a web viewer instead of opening a window", file=sys.stderr)
+        overrides.append(f'record.live_url="{start_viewer(web=a.serve or not has_display())}"')
     try:
         cfg = load_run_config(overlays=a.config, overrides=overrides, strategy=a.strategy)
     except (ConfigError, SceneFileError) as e:

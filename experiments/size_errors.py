@@ -17,6 +17,7 @@ import json
 import statistics
 from pathlib import Path
 
+from objslam.cli import HelpFormatter
 from objslam.scene import gt_objects, load_scene
 
 REPO = Path(__file__).resolve().parents[1]
@@ -86,7 +87,7 @@ def table(acc: dict[tuple[str, str], dict[str, list[float]]], commands: list[str
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=HelpFormatter)
     ap.add_argument("sweeps", nargs="+", type=Path, help="exploration.json files")
     ap.add_argument("--out", type=Path, default=None, help="write the markdown table here (default: print)")
     a = ap.parse_args()

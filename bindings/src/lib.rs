@@ -14,7 +14,7 @@ use objslam_core::frame::{DepthImage, Detection, Frame, FrameError};
 use objslam_core::geometry::{se3_from_matrix, Box2, GeometryError, ObjectGeometry, PinholeCamera, Se3};
 use objslam_core::map::{Label, MapError, ObjectMap};
 use objslam_core::naive::{NaiveConfig, NaiveMapper};
-use objslam_core::record::{DrawnObject, RecordError, Recorder};
+use objslam_core::record::{DrawnObject, RecordError, RecordOptions, Recorder};
 mod active;
 mod ar;
 mod plan;
@@ -69,7 +69,7 @@ pub(crate) fn map_err(e: MapError) -> PyErr {
 
 fn record_err(e: RecordError) -> PyErr {
     match e {
-        RecordError::BufferLength { .. } => input_err(e),
+        RecordError::BufferLength { .. } | RecordError::Option { .. } => input_err(e),
         _ => RecordingError::new_err(e.to_string()),
     }
 }
@@ -332,11 +332,25 @@ impl RecorderPy {
 
 #[pymethods]
 impl RecorderPy {
+    /// `options_json`: `objslam_core::record::RecordOptions` as JSON (default: its defaults).
     #[new]
-    #[pyo3(signature = (path, application_id = "objslam"))]
-    fn new(path: &str, application_id: &str) -> PyResult<Self> {
-        let rec = Recorder::create(std::path::Path::new(path), application_id).map_err(record_err)?;
+    #[pyo3(signature = (path, application_id = "objslam", options_json = None))]
+    fn new(path: &str, application_id: &str, options_json: Option<&str>) -> PyResult<Self> {
+        let options: RecordOptions = match options_json {
+            Some(j) => serde_json::from_str(j).map_err(|e| json_err("options_json", e))?,
+            None => RecordOptions::default(),
+        };
+        let rec = Recorder::create(std::path::Path::new(path), application_id, options).map_err(record_err)?;
         Ok(Self { inner: Some(rec) })
+    }
+
+    /// The arm's links: `{link name: world_from_link (4x4)}`.
+    fn log_robot_pose(&self, links: std::collections::HashMap<String, Bound<'_, PyAny>>) -> PyResult<()> {
+        let mut poses = Vec::with_capacity(links.len());
+        for (name, m) in links {
+            poses.push((name, pose(&m, "links")?));
+        }
+        self.rec()?.log_robot_pose(&poses).map_err(record_err)
     }
 
     fn set_frame(&self, frame: u32, sim_time_s: f64) -> PyResult<()> {

@@ -6,8 +6,8 @@ package is the body: SAPIEN scenes (:mod:`objslam.scene`, :mod:`objslam.world`),
 (:mod:`objslam.episode`). Public surface:
 
 - :func:`load_scene`, :func:`generate_scene`, :class:`SceneSpec`, :class:`SceneFileError`
-- :class:`RunConfig`, :func:`load_run_config`
-- :func:`run_episode`
+- :class:`RunConfig`, :class:`ConfigError`, :func:`load_run_config`
+- :func:`run_episode` (returns an :class:`EpisodeResult`)
 - :class:`NaiveMapper`, :class:`Planner` (Panda motion planning, grasps), :class:`Recorder`, :func:`evaluate_map`, :func:`load_map`, :func:`save_map`
 - :func:`match_maps`, :func:`relocalise` (scene matching of two map JSONs; helpers in
   :mod:`objslam.topo`)
@@ -35,6 +35,8 @@ from ._native import (
 from .scene import SceneFileError, SceneSpec, generate_scene, load_scene
 
 __all__ = [
+    "ConfigError",
+    "EpisodeResult",
     "InputError",
     "MapFileError",
     "NaiveMapper",
@@ -43,6 +45,7 @@ __all__ = [
     "PlanningError",
     "Recorder",
     "RecordingError",
+    "RunConfig",
     "SceneFileError",
     "SceneSpec",
     "__version__",
@@ -59,13 +62,24 @@ __all__ = [
 ]
 
 
-def __getattr__(name: str):  # lazy: these import SAPIEN
-    if name == "run_episode":
-        from .episode import run_episode
+_LAZY = {
+    "run_episode": "episode",
+    "EpisodeResult": "episode",
+    "load_run_config": "config",
+    "RunConfig": "config",
+    "ConfigError": "config",
+}
+"""Names imported on first use: the episode runner imports SAPIEN."""
 
-        return run_episode
-    if name == "load_run_config":
-        from .config import load_run_config
 
-        return load_run_config
-    raise AttributeError(name)
+def __getattr__(name: str):
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module 'objslam' has no attribute {name!r}")
+    import importlib
+
+    return getattr(importlib.import_module(f".{module}", __name__), name)
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))

@@ -255,6 +255,17 @@ class RecordConfig:
     map_points: bool = True
     """Log the SLAM map points (``world/map/points``, world frame) every ``every_n_frames`` frames
     (pose sources other than ``fk``, which has no tracker)."""
+    jpeg_quality: int = 85
+    """JPEG quality (1-100) of the colour frames in ``run.rrd``; depth frames are then lossless
+    16-bit PNG in millimetres (the simulated depth is quantised to 1 mm). 0 stores both raw (RGB24
+    and float32 metres: 2.1 MB per 640×480 frame)."""
+    robot: bool = True
+    """Draw the Panda (``world/robot``): its URDF collision meshes (0.15 MB, logged once) moved to
+    the simulated links' poses every frame."""
+    live_url: str = ""
+    """Also stream the recording to a viewer's gRPC proxy while the run goes, e.g.
+    ``rerun+http://127.0.0.1:9876/proxy`` (``experiments/run.py --spawn`` / ``--serve`` start a
+    viewer and set it); empty (default) = file only."""
 
 
 @dataclass(frozen=True)
@@ -439,6 +450,8 @@ class RunConfig:
             raise ConfigError("explore.max_views: must be ≥ 0")
         if self.record.every_n_frames < 1:
             raise ConfigError("record.every_n_frames: must be ≥ 1")
+        if not 0 <= self.record.jpeg_quality <= 100:
+            raise ConfigError(f"record.jpeg_quality: expected 0 (raw) to 100, got {self.record.jpeg_quality}")
         try:
             self.camera.validate()
             self.detector.validate()

@@ -47,7 +47,7 @@ from .detector import Detection, SimulatedDetector
 from .evaluation import offset_removed
 from .scene import SceneFileError, SceneSpec, gt_objects, load_scene, path_name_problem
 from .strategy import DecisionStep, as_view, make_strategy
-from .world import MotionError, SensorFrame, SimWorld, UnreachablePoseError
+from .world import MotionError, SensorFrame, SimWorld, UnreachablePoseError, panda_urdf_path, pose_to_matrix
 
 #: Timing stages reported per frame (milliseconds).
 STAGES = ("render", "detect", "core", "record")
@@ -285,13 +285,32 @@ def _update_latest(run_dir: Path) -> None:
 class _Recorder:
     """Null-object wrapper so the pipeline does not branch on ``record.enabled``."""
 
-    def __init__(self, path: Path | None) -> None:
-        self.rec = _native.Recorder(str(path), "objslam") if path is not None else None
+    def __init__(self, path: Path | None, options: dict[str, Any] | None = None) -> None:
+        self.rec = (
+            _native.Recorder(str(path), "objslam", json.dumps(options or {})) if path is not None else None
+        )
 
     def __getattr__(self, name: str) -> Callable[..., None]:
         if self.rec is None:
             return lambda *a, **k: None
         return getattr(self.rec, name)
+
+
+def recording_options(cfg: RunConfig, scene: SceneSpec) -> dict[str, Any]:
+    """The recorder's options (``objslam_core::record::RecordOptions``) for a run: frame encoding,
+    live viewer, the table to draw and frame the 3D view on, the arm's URDF."""
+    return {
+        "jpeg_quality": cfg.record.jpeg_quality,
+        "depth_png": cfg.record.jpeg_quality > 0,
+        "live_url": cfg.record.live_url or None,
+        "table": {"center": list(scene.table.center), "size": list(scene.table.size)},
+        "robot_urdf": str(panda_urdf_path()) if cfg.record.robot else None,
+    }
+
+
+def _log_robot(rec: Any, world: SimWorld) -> None:
+    """The simulated arm's link poses (``world/robot/<link>``), for drawing only."""
+    rec.log_robot_pose({link.name: pose_to_matrix(link.entity_pose) for link in world.robot.get_links()})
 
 
 def new_mapper(cfg: RunConfig, scene: SceneSpec) -> Any:
@@ -416,7 +435,7 @@ def run_episode(
         (run_dir / "INCOMPLETE").write_text("this run has not finished (or stopped early: see status.json)\n")
         _write_json(run_dir / "status.json", {"status": "running", **start})
         _write_atomic(run_dir / "config.toml", tomli_w.dumps(to_dict(cfg)))
-        rec = _Recorder(run_dir / "run.rrd" if cfg.record.enabled else None)
+        rec = _Recorder(run_dir / "run.rrd" if cfg.record.enabled else None, recording_options(cfg, scene))
         rng_sensor = np.random.default_rng([cfg.seed, 1])
         rng_detector = np.random.default_rng([cfg.seed, 2])
         world = SimWorld(scene, cfg.camera, rng_sensor)
@@ -451,6 +470,8 @@ def run_episode(
             est_positions.append(used_pose[:3, 3].copy())
             gt_positions.append(frame.world_from_camera_gt[:3, 3].copy())
             rec.set_frame(frame.index, frame.sim_time_s)
+            if cfg.record.robot:
+                _log_robot(rec, world)
             rec.log_camera(
                 world_from_camera=used_pose,
                 intrinsics=frame.intrinsics,

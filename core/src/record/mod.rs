@@ -1,23 +1,32 @@
 //! Rerun recording of a run (feature `rerun`): one `.rrd` file per run, readable by the pinned
-//! viewer (`rerun-sdk==0.36.*`, `make view`).
+//! viewer (`rerun-sdk==0.36.*`, `make view`), optionally streamed live to a viewer as it goes.
 //!
-//! Entry point: [`Recorder`]. Every log call is stamped with the current time set by
-//! [`Recorder::set_frame`] on two timelines: `frame` (sequence) and `sim_time` (seconds of
-//! simulated time).
+//! Entry point: [`Recorder`], created with [`RecordOptions`]. Every log call is stamped with the
+//! current time set by [`Recorder::set_frame`] on two timelines: `frame` (sequence) and `sim_time`
+//! (seconds of simulated time). Every recording carries its viewer layout ([`blueprint`]).
 //!
-//! Entity paths (stable: scripts and blueprints rely on them):
+//! Entity paths (stable: scripts and the blueprint rely on them):
 //! - `world/camera` — estimated `world_from_camera` (Transform3D) + pinhole (OpenCV RDF axes);
-//!   `world/camera/image/rgb`, `world/camera/image/depth`, `world/camera/image/detections`.
+//!   `world/camera/image/rgb` (JPEG, [`RecordOptions::jpeg_quality`]), `world/camera/image/depth`
+//!   (16-bit PNG in millimetres, [`RecordOptions::depth_png`]), `world/camera/image/detections`.
 //! - `world/trajectory/estimated`, `world/trajectory/ground_truth` — camera paths.
-//! - `world/map/objects` — estimated objects (boxes; cylinders under `world/map/cylinders`),
-//!   `world/map/points` — object point clouds.
-//! - `world/ground_truth/objects` (+ `/cylinders`) — simulator truth, never mixed with estimates.
+//! - `world/map/objects` — estimated objects (solid boxes coloured by class, labelled `class #id`;
+//!   cylinders under `world/map/cylinders`), `world/map/points` — object point clouds.
+//! - `world/ground_truth/objects` (+ `/cylinders`) — simulator truth as grey wireframes without
+//!   labels, never mixed with estimates.
+//! - `world/table` — the table top; `world/robot/<link>` — the arm's links ([`Recorder::log_robot_pose`]),
+//!   each drawn by its URDF collision mesh at `world/robot/<link>/mesh` (logged once).
 //! - `timings/<stage>_ms` — per-frame timings as scalars; `log/events` — text events.
 
-use std::path::Path;
+pub mod blueprint;
+mod robot;
+
+use std::path::{Path, PathBuf};
 
 use nalgebra::{Point3, UnitQuaternion};
 use rerun::{RecordingStream, RecordingStreamBuilder};
+
+pub use blueprint::TableTop;
 
 use crate::frame::Detection;
 use crate::geometry::{ObjectGeometry, PinholeCamera, Se3, Shape};
@@ -51,7 +60,71 @@ pub enum RecordError {
         /// Actual length.
         actual: usize,
     },
+    /// Encoding an image (JPEG colour, PNG depth) failed.
+    #[error("encoding {field}: {reason}")]
+    Encode {
+        /// Which image.
+        field: &'static str,
+        /// Underlying message.
+        reason: String,
+    },
+    /// The robot model (URDF or one of its meshes) cannot be read.
+    #[error("robot model {path}: {reason}")]
+    Robot {
+        /// File path.
+        path: String,
+        /// Underlying message.
+        reason: String,
+    },
+    /// An option is out of range.
+    #[error("{field}: {reason}")]
+    Option {
+        /// Option name.
+        field: &'static str,
+        /// What is wrong.
+        reason: String,
+    },
 }
+
+/// JPEG quality of colour frames when not set: visually lossless on the simulator's renders at
+/// about a twentieth of the raw size.
+pub const DEFAULT_JPEG_QUALITY: u8 = 85;
+
+/// What a recording stores and where it goes.
+#[derive(Debug, Clone, PartialEq, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct RecordOptions {
+    /// JPEG quality (1-100) of colour frames, stored as encoded images; 0 stores them raw (RGB24,
+    /// 0.9 MB per 640×480 frame). Default [`DEFAULT_JPEG_QUALITY`].
+    pub jpeg_quality: u8,
+    /// Store depth frames as lossless 16-bit PNG in millimetres (depth beyond 65.5 m or invalid
+    /// becomes 0 = no return); false stores float32 metres. Default true.
+    pub depth_png: bool,
+    /// Also stream to a viewer's gRPC proxy at this URL while recording (e.g.
+    /// `rerun+http://127.0.0.1:9876/proxy`, what `rerun --serve-web` or a native `rerun` listen
+    /// on). Default none.
+    pub live_url: Option<String>,
+    /// The table top to draw (`world/table`) and to frame the 3D view on. Default none.
+    pub table: Option<TableTop>,
+    /// URDF of the arm to draw (`world/robot`): its collision meshes are logged once. Default none.
+    pub robot_urdf: Option<PathBuf>,
+}
+
+impl Default for RecordOptions {
+    fn default() -> Self {
+        Self { jpeg_quality: DEFAULT_JPEG_QUALITY, depth_png: true, live_url: None, table: None, robot_urdf: None }
+    }
+}
+
+/// Thickness of the drawn table top, metres (the top surface is z = 0).
+const TABLE_THICKNESS_M: f32 = 0.02;
+/// Colour of the drawn table.
+const TABLE_COLOR: [u8; 3] = [205, 190, 170];
+/// Colour and line radius of ground-truth wireframes.
+const GROUND_TRUTH_COLOR: [u8; 3] = [150, 150, 150];
+const GROUND_TRUTH_LINE_RADIUS_M: f32 = 0.0015;
+/// Root of the simulator's truth: drawn as wireframes without labels.
+pub const GROUND_TRUTH_ROOT: &str = "world/ground_truth";
 
 /// A labelled object to draw (estimate or ground truth).
 #[derive(Debug, Clone)]
@@ -64,13 +137,50 @@ pub struct DrawnObject {
     pub geometry: ObjectGeometry,
 }
 
-/// Writes one `.rrd` file.
+/// Writes one `.rrd` file (and optionally streams to a live viewer).
 pub struct Recorder {
     stream: RecordingStream,
+    options: RecordOptions,
+    robot_links: Vec<String>,
 }
 
 fn quat(q: &UnitQuaternion<f64>) -> rerun::Quaternion {
     rerun::Quaternion::from_xyzw([q.i as f32, q.j as f32, q.k as f32, q.w as f32])
+}
+
+fn transform(t: &Se3) -> rerun::Transform3D {
+    let v = t.translation.vector;
+    rerun::Transform3D::from_translation_rotation([v.x as f32, v.y as f32, v.z as f32], quat(&t.rotation))
+}
+
+/// Depth in metres → a 16-bit greyscale PNG in millimetres (0 = no return).
+fn depth_png_mm(width: u32, height: u32, depth_m: &[f32]) -> Result<Vec<u8>, RecordError> {
+    let mm: Vec<u8> = depth_m
+        .iter()
+        .map(|&d| {
+            let v = f64::from(d) * 1000.0;
+            if v.is_finite() && v > 0.0 && v <= f64::from(u16::MAX) {
+                v.round() as u16
+            } else {
+                0
+            }
+        })
+        .flat_map(u16::to_ne_bytes)
+        .collect();
+    let mut png = Vec::with_capacity(mm.len() / 3);
+    image::ImageEncoder::write_image(
+        image::codecs::png::PngEncoder::new_with_quality(
+            &mut png,
+            image::codecs::png::CompressionType::Fast,
+            image::codecs::png::FilterType::Sub,
+        ),
+        &mm,
+        width,
+        height,
+        image::ExtendedColorType::L16,
+    )
+    .map_err(|e| RecordError::Encode { field: "depth", reason: e.to_string() })?;
+    Ok(png)
 }
 
 fn v3(p: &Point3<f64>) -> [f32; 3] {
@@ -97,18 +207,52 @@ fn class_color(key: &str) -> rerun::Color {
 }
 
 impl Recorder {
-    /// Create a recording that streams to `path` (created or truncated).
-    pub fn create(path: &Path, application_id: &str) -> Result<Self, RecordError> {
-        let app = rerun::ApplicationId::try_from(application_id.to_string()).map_err(|e| RecordError::Create {
-            path: path.display().to_string(),
-            reason: format!("application id: {e}"),
-        })?;
-        let stream = RecordingStreamBuilder::new(app)
-            .save(path)
-            .map_err(|e| RecordError::Create { path: path.display().to_string(), reason: e.to_string() })?;
-        let rec = Self { stream };
+    /// Create a recording that streams to `path` (created or truncated) and, with
+    /// [`RecordOptions::live_url`], to a viewer; sends the layout, the table and the robot model.
+    pub fn create(path: &Path, application_id: &str, options: RecordOptions) -> Result<Self, RecordError> {
+        let create_err = |reason: String| RecordError::Create { path: path.display().to_string(), reason };
+        if options.jpeg_quality > 100 {
+            return Err(RecordError::Option {
+                field: "jpeg_quality",
+                reason: format!("expected 0 (raw) or 1-100, got {}", options.jpeg_quality),
+            });
+        }
+        let app = rerun::ApplicationId::try_from(application_id.to_string())
+            .map_err(|e| create_err(format!("application id: {e}")))?;
+        let builder = RecordingStreamBuilder::new(app);
+        let stream = match &options.live_url {
+            None => builder.save(path).map_err(|e| create_err(e.to_string()))?,
+            Some(url) => {
+                let uri: rerun::external::re_uri::ProxyUri =
+                    url.parse().map_err(|e| RecordError::Option { field: "live_url", reason: format!("{e}") })?;
+                let file = rerun::sink::FileSink::new(path).map_err(|e| create_err(e.to_string()))?;
+                builder.set_sinks((file, rerun::sink::GrpcSink::new(uri))).map_err(|e| create_err(e.to_string()))?
+            }
+        };
+        blueprint::send(&stream, application_id, options.table.as_ref())?;
+        let mut rec = Self { stream, options, robot_links: Vec::new() };
         rec.log_static("world", &rerun::ViewCoordinates::RIGHT_HAND_Z_UP())?;
+        if let Some(t) = rec.options.table {
+            let half = [0.5 * t.size[0] as f32, 0.5 * t.size[1] as f32, 0.5 * TABLE_THICKNESS_M];
+            rec.log_static(
+                "world/table",
+                &rerun::Boxes3D::from_centers_and_half_sizes(
+                    [[t.center[0] as f32, t.center[1] as f32, -0.5 * TABLE_THICKNESS_M]],
+                    [half],
+                )
+                .with_fill_mode(rerun::FillMode::Solid)
+                .with_colors([rerun::Color::from_rgb(TABLE_COLOR[0], TABLE_COLOR[1], TABLE_COLOR[2])]),
+            )?;
+        }
+        if let Some(urdf) = rec.options.robot_urdf.clone() {
+            rec.robot_links = robot::log_model(&rec, &urdf)?;
+        }
         Ok(rec)
+    }
+
+    /// The options this recording was created with.
+    pub fn options(&self) -> &RecordOptions {
+        &self.options
     }
 
     fn log<AS: ?Sized + rerun::AsComponents>(&self, entity: &str, value: &AS) -> Result<(), RecordError> {
@@ -129,14 +273,7 @@ impl Recorder {
 
     /// The camera: pose and intrinsics at `world/camera`.
     pub fn log_camera(&self, world_from_camera: &Se3, camera: &PinholeCamera) -> Result<(), RecordError> {
-        let t = world_from_camera.translation.vector;
-        self.log(
-            "world/camera",
-            &rerun::Transform3D::from_translation_rotation(
-                [t.x as f32, t.y as f32, t.z as f32],
-                quat(&world_from_camera.rotation),
-            ),
-        )?;
+        self.log("world/camera", &transform(world_from_camera))?;
         self.log(
             "world/camera/image",
             &rerun::Pinhole::from_focal_length_and_resolution(
@@ -149,27 +286,58 @@ impl Recorder {
         )
     }
 
-    /// An RGB image (row-major, 3 bytes per pixel).
+    /// An RGB image (row-major, 3 bytes per pixel): JPEG-encoded at
+    /// [`RecordOptions::jpeg_quality`], raw when it is 0.
     pub fn log_rgb(&self, width: u32, height: u32, rgb: &[u8]) -> Result<(), RecordError> {
         let expected = width as usize * height as usize * 3;
         if rgb.len() != expected {
             return Err(RecordError::BufferLength { field: "rgb", expected, actual: rgb.len() });
         }
-        self.log("world/camera/image/rgb", &rerun::Image::from_rgb24(rgb.to_vec(), [width, height]))
+        const ENTITY: &str = "world/camera/image/rgb";
+        if self.options.jpeg_quality == 0 {
+            return self.log(ENTITY, &rerun::Image::from_rgb24(rgb.to_vec(), [width, height]));
+        }
+        let mut jpeg = Vec::with_capacity(expected / 10);
+        image::codecs::jpeg::JpegEncoder::new_with_quality(&mut jpeg, self.options.jpeg_quality)
+            .encode(rgb, width, height, image::ExtendedColorType::Rgb8)
+            .map_err(|e| RecordError::Encode { field: "rgb", reason: e.to_string() })?;
+        self.log(ENTITY, &rerun::EncodedImage::from_file_contents(jpeg).with_media_type(rerun::MediaType::jpeg()))
     }
 
-    /// A depth image in metres (row-major f32).
+    /// A depth image in metres (row-major f32): a 16-bit millimetre PNG with
+    /// [`RecordOptions::depth_png`] (non-finite, non-positive or beyond 65.535 m → 0, no return),
+    /// else raw float32.
     pub fn log_depth(&self, width: u32, height: u32, depth_m: &[f32]) -> Result<(), RecordError> {
         let expected = width as usize * height as usize;
         if depth_m.len() != expected {
             return Err(RecordError::BufferLength { field: "depth", expected, actual: depth_m.len() });
         }
+        const ENTITY: &str = "world/camera/image/depth";
+        if self.options.depth_png {
+            let png = depth_png_mm(width, height, depth_m)?;
+            return self.log(
+                ENTITY,
+                &rerun::EncodedDepthImage::from_file_contents(png).with_media_type(rerun::MediaType::png()),
+            );
+        }
         let bytes: Vec<u8> = depth_m.iter().flat_map(|d| d.to_le_bytes()).collect();
         self.log(
-            "world/camera/image/depth",
+            ENTITY,
             &rerun::DepthImage::from_data_type_and_bytes(bytes, [width, height], rerun::ChannelDatatype::F32)
                 .with_meter(1.0),
         )
+    }
+
+    /// The arm's links: `world_from_link` of each link by name, at `world/robot/<link>`. Links
+    /// without a mesh in the model are skipped; with no model (no [`RecordOptions::robot_urdf`])
+    /// nothing is logged.
+    pub fn log_robot_pose(&self, links: &[(String, Se3)]) -> Result<(), RecordError> {
+        for (name, world_from_link) in links {
+            if self.robot_links.iter().any(|l| l == name) {
+                self.log(&format!("world/robot/{name}"), &transform(world_from_link))?;
+            }
+        }
+        Ok(())
     }
 
     /// Detections as labelled 2D boxes over the image.
@@ -195,15 +363,34 @@ impl Recorder {
         self.log(&format!("world/trajectory/{which}"), &rerun::LineStrips3D::new([strip]).with_colors([color]))
     }
 
-    /// Objects as boxes and cylinders under `root` (`world/map` or `world/ground_truth`).
+    /// Objects as boxes and cylinders under `root` (`world/map` or [`GROUND_TRUTH_ROOT`]).
+    /// Estimates are solid, coloured by class and labelled `class #id`; the ground truth is a grey
+    /// wireframe without labels, so the two never look alike and only one label marks an object.
     pub fn log_objects(&self, root: &str, objects: &[DrawnObject]) -> Result<(), RecordError> {
+        let truth = root == GROUND_TRUTH_ROOT;
         let (cubes, cyls): (Vec<&DrawnObject>, Vec<&DrawnObject>) =
             objects.iter().partition(|o| o.geometry.shape == Shape::Cuboid);
         let centers =
             |v: &[&DrawnObject]| -> Vec<[f32; 3]> { v.iter().map(|o| v3(&Point3::from(o.geometry.center))).collect() };
         let labels =
             |v: &[&DrawnObject]| -> Vec<String> { v.iter().map(|o| format!("{} #{}", o.label, o.id)).collect() };
-        let colors = |v: &[&DrawnObject]| -> Vec<rerun::Color> { v.iter().map(|o| class_color(&o.label)).collect() };
+        let colors = |v: &[&DrawnObject]| -> Vec<rerun::Color> {
+            v.iter()
+                .map(|o| {
+                    if truth {
+                        let [r, g, b] = GROUND_TRUTH_COLOR;
+                        rerun::Color::from_rgb(r, g, b)
+                    } else {
+                        class_color(&o.label)
+                    }
+                })
+                .collect()
+        };
+        let (fill, radius) = if truth {
+            (rerun::FillMode::MajorWireframe, GROUND_TRUTH_LINE_RADIUS_M)
+        } else {
+            (rerun::FillMode::Solid, 0.0)
+        };
         let half: Vec<[f32; 3]> = cubes
             .iter()
             .map(|o| {
@@ -213,22 +400,28 @@ impl Recorder {
             .collect();
         let rotations: Vec<rerun::Quaternion> =
             cubes.iter().map(|o| quat(&UnitQuaternion::from_euler_angles(0.0, 0.0, o.geometry.yaw_rad))).collect();
-        self.log(
-            &format!("{root}/objects"),
-            &rerun::Boxes3D::from_centers_and_half_sizes(centers(&cubes), half)
-                .with_quaternions(rotations)
-                .with_labels(labels(&cubes))
-                .with_colors(colors(&cubes)),
-        )?;
+        let mut boxes = rerun::Boxes3D::from_centers_and_half_sizes(centers(&cubes), half)
+            .with_quaternions(rotations)
+            .with_colors(colors(&cubes))
+            .with_fill_mode(fill)
+            .with_labels(labels(&cubes))
+            .with_show_labels(!truth);
+        if truth {
+            boxes = boxes.with_radii([radius]);
+        }
+        self.log(&format!("{root}/objects"), &boxes)?;
         let lengths: Vec<f32> = cyls.iter().map(|o| (2.0 * o.geometry.half_extents.z) as f32).collect();
         let radii: Vec<f32> = cyls.iter().map(|o| o.geometry.radius() as f32).collect();
-        self.log(
-            &format!("{root}/cylinders"),
-            &rerun::Cylinders3D::from_lengths_and_radii(lengths, radii)
-                .with_centers(centers(&cyls))
-                .with_labels(labels(&cyls))
-                .with_colors(colors(&cyls)),
-        )
+        let mut cylinders = rerun::Cylinders3D::from_lengths_and_radii(lengths, radii)
+            .with_centers(centers(&cyls))
+            .with_colors(colors(&cyls))
+            .with_fill_mode(fill)
+            .with_labels(labels(&cyls))
+            .with_show_labels(!truth);
+        if truth {
+            cylinders = cylinders.with_line_radii([radius]);
+        }
+        self.log(&format!("{root}/cylinders"), &cylinders)
     }
 
     /// A point cloud under `entity`, one colour per point group key.
@@ -301,13 +494,39 @@ mod tests {
     use crate::map::Label;
     use nalgebra::Vector3;
 
+    fn temp_dir(tag: &str) -> PathBuf {
+        let dir = std::env::temp_dir().join(format!("objslam-record-{tag}-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap_or_else(|e| panic!("{e}"));
+        dir
+    }
+
+    fn record_frames(path: &Path, options: RecordOptions) -> u64 {
+        {
+            let rec = Recorder::create(path, "objslam-test", options).unwrap_or_else(|e| panic!("{e}"));
+            let cam = PinholeCamera::from_fovy(64, 48, 1.0).unwrap_or_else(|e| panic!("{e}"));
+            // A smooth gradient image and a tilted plane: what a camera sees of a table.
+            let rgb: Vec<u8> = (0..64 * 48).flat_map(|i| [(i % 64 * 4) as u8, (i / 64 * 5) as u8, 90]).collect();
+            let depth: Vec<f32> = (0..64 * 48).map(|i| 0.6 + 0.002 * (i / 64) as f32).collect();
+            for f in 0..20 {
+                rec.set_frame(f, 0.25 * f64::from(f));
+                rec.log_camera(&Se3::identity(), &cam).unwrap_or_else(|e| panic!("{e}"));
+                rec.log_rgb(64, 48, &rgb).unwrap_or_else(|e| panic!("{e}"));
+                rec.log_depth(64, 48, &depth).unwrap_or_else(|e| panic!("{e}"));
+            }
+            rec.flush().unwrap_or_else(|e| panic!("{e}"));
+        }
+        std::fs::metadata(path).map(|m| m.len()).unwrap_or(0)
+    }
+
     #[test]
     fn writes_a_nonempty_rrd() {
-        let dir = std::env::temp_dir().join(format!("objslam-record-test-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap_or_else(|e| panic!("{e}"));
+        let dir = temp_dir("basic");
         let path = dir.join("t.rrd");
         {
-            let rec = Recorder::create(&path, "objslam-test").unwrap_or_else(|e| panic!("{e}"));
+            let table = TableTop { center: [0.5, 0.0], size: [0.8, 1.0] };
+            let rec =
+                Recorder::create(&path, "objslam-test", RecordOptions { table: Some(table), ..Default::default() })
+                    .unwrap_or_else(|e| panic!("{e}"));
             let cam = PinholeCamera::from_fovy(8, 6, 1.0).unwrap_or_else(|e| panic!("{e}"));
             rec.set_frame(0, 0.0);
             rec.log_camera(&Se3::identity(), &cam).unwrap_or_else(|e| panic!("{e}"));
@@ -323,14 +542,12 @@ mod tests {
                 half_extents: Vector3::new(0.03, 0.03, 0.05),
             };
             let b = ObjectGeometry { shape: Shape::Cuboid, yaw_rad: 0.4, ..g };
-            rec.log_objects(
-                "world/map",
-                &[
-                    DrawnObject { id: 0, label: "cup".into(), geometry: g },
-                    DrawnObject { id: 1, label: "block".into(), geometry: b },
-                ],
-            )
-            .unwrap_or_else(|e| panic!("{e}"));
+            let objects = [
+                DrawnObject { id: 0, label: "cup".into(), geometry: g },
+                DrawnObject { id: 1, label: "block".into(), geometry: b },
+            ];
+            rec.log_objects("world/map", &objects).unwrap_or_else(|e| panic!("{e}"));
+            rec.log_objects(GROUND_TRUTH_ROOT, &objects).unwrap_or_else(|e| panic!("{e}"));
             rec.log_trajectory("estimated", &[Point3::origin(), Point3::new(0.1, 0.0, 0.5)])
                 .unwrap_or_else(|e| panic!("{e}"));
             rec.log_scalar("timings/render_ms", 70.0).unwrap_or_else(|e| panic!("{e}"));
@@ -339,6 +556,76 @@ mod tests {
         }
         let len = std::fs::metadata(&path).map(|m| m.len()).unwrap_or(0);
         assert!(len > 1000, "rrd has {len} bytes");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn encoded_frames_are_smaller_than_raw_ones() {
+        let dir = temp_dir("size");
+        let raw = record_frames(
+            &dir.join("raw.rrd"),
+            RecordOptions { jpeg_quality: 0, depth_png: false, ..Default::default() },
+        );
+        let encoded = record_frames(&dir.join("enc.rrd"), RecordOptions::default());
+        // 20 frames of 64×48: 184 kB of raw colour and 246 kB of raw depth.
+        assert!(raw > 20 * 64 * 48 * 3, "raw recording has {raw} bytes");
+        assert!(encoded * 3 < raw, "encoded {encoded} bytes vs raw {raw}");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn depth_png_round_trips_in_millimetres() {
+        let depth = [0.0f32, 0.4567, 1.0, f32::NAN, -1.0, 70.0, 2.5, 0.0011];
+        let png = depth_png_mm(4, 2, &depth).unwrap_or_else(|e| panic!("{e}"));
+        let img = image::load_from_memory(&png).unwrap_or_else(|e| panic!("{e}")).into_luma16();
+        let got: Vec<u16> = img.pixels().map(|p| p.0[0]).collect();
+        assert_eq!(got, vec![0, 457, 1000, 0, 0, 0, 2500, 1]);
+    }
+
+    #[test]
+    fn bad_jpeg_quality_is_a_named_error() {
+        let dir = temp_dir("quality");
+        let r = Recorder::create(
+            &dir.join("q.rrd"),
+            "objslam-test",
+            RecordOptions { jpeg_quality: 101, ..Default::default() },
+        );
+        assert!(matches!(r, Err(RecordError::Option { field: "jpeg_quality", .. })));
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn robot_model_logs_the_links_with_meshes() {
+        let dir = temp_dir("robot");
+        // A one-triangle ASCII STL and a URDF with one meshed link and one empty link.
+        std::fs::write(
+            dir.join("tri.stl"),
+            "solid t\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 0\nvertex 0 1 0\nendloop\nendfacet\nendsolid t\n",
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        let urdf = dir.join("r.urdf");
+        std::fs::write(
+            &urdf,
+            r#"<robot name="r"><link name="base"><collision><origin xyz="0 0 0.1" rpy="0 0 0"/>
+<geometry><mesh filename="tri.stl"/></geometry></collision></link><link name="tip"/>
+<joint name="j" type="fixed"><parent link="base"/><child link="tip"/></joint></robot>"#,
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        let rec = Recorder::create(
+            &dir.join("r.rrd"),
+            "objslam-test",
+            RecordOptions { robot_urdf: Some(urdf), ..Default::default() },
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(rec.robot_links, vec!["base".to_string()]);
+        rec.log_robot_pose(&[("base".into(), Se3::identity()), ("tip".into(), Se3::identity())])
+            .unwrap_or_else(|e| panic!("{e}"));
+        let missing = Recorder::create(
+            &dir.join("m.rrd"),
+            "objslam-test",
+            RecordOptions { robot_urdf: Some(dir.join("none.urdf")), ..Default::default() },
+        );
+        assert!(matches!(missing, Err(RecordError::Robot { .. })));
         let _ = std::fs::remove_dir_all(&dir);
     }
 }
