@@ -354,6 +354,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--workers", type=int, default=2, help="pool processes, or CPUs of a local Ray instance")
     ap.add_argument("--backend", choices=BACKENDS, default="pool", help="pool (default) or ray: one Ray task per episode")
     ap.add_argument("--address", default=None, help="Ray cluster address (backend ray); default: a local instance")
+    ap.add_argument(
+        "--preset", help="world-model preset: realistic (default.toml) or ideal (overlays configs/presets/ideal.toml)"
+    )
     ap.add_argument("--config", action="append", default=[])
     ap.add_argument("--set", action="append", default=[])
     ap.add_argument("--out", default=str(REPO / "reports"))
@@ -376,6 +379,8 @@ def main(argv: list[str] | None = None) -> int:
         write_reports(rows, Path(a.out), command)
         print(f"{len(rows)} episodes → {a.out}/exploration.md")
         return 0
+    if a.preset:
+        a.set.append(f'preset="{a.preset}"')
     jobs = [
         Job(sc, st, sd, tuple(a.config), tuple(a.set)) for sc in a.scenes for st in a.strategies for sd in a.seeds
     ]

@@ -1,4 +1,4 @@
-"""Run one episode: ``python experiments/run.py [--scene S] [--strategy X] [--seed N] [--set k=v ...]``.
+"""Run one episode: ``python experiments/run.py [--scene S] [--strategy X] [--seed N] [--preset P] [--set k=v ...]``.
 
 Writes ``runs/<date>/<time>_<strategy>_<scene>_<seed>/`` and prints a per-object table and the means.
 Exit status 0 on success, 1 on a failed run (its folder is kept and marked), 2 on a bad config.
@@ -19,6 +19,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--scene", help="scene file (default from experiments/configs/default.toml)")
     ap.add_argument("--strategy", help="view-selection strategy (default: init)")
     ap.add_argument("--seed", type=int, help="run seed")
+    ap.add_argument(
+        "--preset", help="world-model preset: realistic (default.toml) or ideal (overlays configs/presets/ideal.toml)"
+    )
     ap.add_argument("--config", action="append", default=[], help="extra TOML overlay (repeatable)")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a config key")
     ap.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -32,7 +35,7 @@ def main(argv: list[str] | None = None) -> int:
     if a.seed is not None:
         overrides.append(f"seed={a.seed}")
     try:
-        cfg = load_run_config(overlays=a.config, overrides=overrides, strategy=a.strategy)
+        cfg = load_run_config(overlays=a.config, overrides=overrides, strategy=a.strategy, preset=a.preset)
     except (ConfigError, SceneFileError) as e:
         print(f"config error: {e}", file=sys.stderr)
         return 2

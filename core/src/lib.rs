@@ -22,6 +22,8 @@
 //! - [`plan`]: Panda kinematics, collision checking, RRT-Connect, Ruckig trajectories, grasps.
 //! - [`topo`]: semantic topological map, random-walk descriptors, scene matching, relocalisation.
 //! - `record` (feature `rerun`): one Rerun recording per run.
+//! - [`sensor`]: the RGB-D camera model (D435-class active-stereo depth, colour noise and blur,
+//!   calibration errors) the simulator applies to rendered frames.
 //! - [`slam`]: RGB-D visual tracking (ORB features, PnP + RANSAC, local BA), pose sources, ATE/RPE.
 
 pub mod active;
@@ -37,5 +39,6 @@ pub mod pipeline;
 pub mod plan;
 #[cfg(feature = "rerun")]
 pub mod record;
+pub mod sensor;
 pub mod slam;
 pub mod topo;
