@@ -11,7 +11,7 @@ GRASP_ARGS ?=
 PLACE_ARGS ?=
 ROBUSTNESS_ARGS ?=
 
-.PHONY: help setup run test test-rust test-py bench benchmark associate parameterize slam grasp grasp-robustness place match match-sim report view lint fmt clean
+.PHONY: help setup run test test-rust test-py bench benchmark associate parameterize slam grasp grasp-robustness place match match-sim sensor report view lint fmt clean
 
 help: ## List the targets
 	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*## "}; {printf "  \033[1m%-12s\033[0m %s\n", $$1, $$2}'
@@ -61,6 +61,9 @@ match: ## Scene matching vs shared-object ratio (500 trials per row) → reports
 
 match-sim: setup ## Scene matching, part (b): maps of two simulator runs per scene (7 scenes × 2 Init episodes) → sim_pairs in reports/scene_matching.{md,json}
 	$(PY) experiments/match_sim.py $(MATCH_SIM_ARGS)
+
+sensor: setup ## Depth sensor error vs distance per preset (realistic, ideal) from SAPIEN renders → reports/sensor.{md,json}
+	$(PY) experiments/sensor.py $(SENSOR_ARGS)
 
 report: ## Report of the latest run folder → reports/foundation_run.{md,json}
 	$(PY) experiments/report_run.py

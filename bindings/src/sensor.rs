@@ -63,8 +63,8 @@ pub fn sensor_model<'py>(
     };
     let motion = req.camera_end_from_start.map(|m| Matrix4::from_fn(|r, c| m[r][c]));
     let frame = RenderedFrame { width: w, height: h, points_in_camera: p, normals_in_camera: n, rgb: c };
-    let out = simulate_frame(&req.config, &unit, &frame, motion.as_ref(), req.seed, req.frame_index)
-        .map_err(input_err)?;
+    let out =
+        simulate_frame(&req.config, &unit, &frame, motion.as_ref(), req.seed, req.frame_index).map_err(input_err)?;
     let depth = Array2::from_shape_vec((h, w), out.depth_m).map_err(input_err)?.into_pyarray(py);
     let colour = if out.rgb.is_empty() {
         None

@@ -47,12 +47,7 @@ impl ColourConfig {
         check("camera.colour.exposure_s", self.exposure_s, (0.0..=0.2).contains(&self.exposure_s), R)?;
         check("camera.colour.shot_gain", self.shot_gain, (0.0..=10.0).contains(&self.shot_gain), R)?;
         check("camera.colour.read_noise", self.read_noise, (0.0..=50.0).contains(&self.read_noise), R)?;
-        check(
-            "camera.colour.max_blur_taps",
-            self.max_blur_taps as f64,
-            (1..=64).contains(&self.max_blur_taps),
-            R,
-        )?;
+        check("camera.colour.max_blur_taps", self.max_blur_taps as f64, (1..=64).contains(&self.max_blur_taps), R)?;
         Ok(())
     }
 }
@@ -101,11 +96,8 @@ fn blur(cfg: &ColourConfig, unit: &SensorUnit, frame: &RenderedFrame<'_>, m: &Ma
                 Vector4::new((x as f64 + 0.5 - k.cx) / k.fx * far, (y as f64 + 0.5 - k.cy) / k.fy * far, far, 1.0)
             };
             let q = m * p;
-            let (du, dv) = if q.z > 1e-6 {
-                (k.fx * (q.x / q.z - p.x / p.z), k.fy * (q.y / q.z - p.y / p.z))
-            } else {
-                (0.0, 0.0)
-            };
+            let (du, dv) =
+                if q.z > 1e-6 { (k.fx * (q.x / q.z - p.x / p.z), k.fy * (q.y / q.z - p.y / p.z)) } else { (0.0, 0.0) };
             let len = (du * du + dv * dv).sqrt();
             let taps = ((len.ceil() as usize) + 1).min(cfg.max_blur_taps);
             if taps <= 1 || len < 0.5 {

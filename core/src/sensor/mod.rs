@@ -320,7 +320,9 @@ pub fn simulate_frame(
 ) -> Result<SensorFrame, SensorError> {
     config.validate()?;
     let n = frame.width * frame.height;
-    for (field, len) in [("points_in_camera", frame.points_in_camera.len()), ("normals_in_camera", frame.normals_in_camera.len())] {
+    for (field, len) in
+        [("points_in_camera", frame.points_in_camera.len()), ("normals_in_camera", frame.normals_in_camera.len())]
+    {
         if len != 3 * n {
             return Err(SensorError::BufferLength { field, expected: 3 * n, actual: len });
         }
