@@ -3,7 +3,7 @@
 use crate::input_err;
 use nalgebra::{Matrix3, Matrix4};
 use numpy::ndarray::{Array2, Array3};
-use numpy::{IntoPyArray, PyArray2, PyArray3, PyReadonlyArray3};
+use numpy::{IntoPyArray, PyArray2, PyArray3, PyReadonlyArray3, PyUntypedArrayMethods};
 use objslam_core::sensor::{simulate_frame, Intrinsics, RenderedFrame, SensorConfig, SensorUnit};
 use pyo3::prelude::*;
 use serde::Deserialize;
@@ -54,7 +54,7 @@ pub fn sensor_model<'py>(
         let info = serde_json::json!({ "unit": unit, "stats": null });
         return Ok((None, None, info.to_string()));
     };
-    let [h, w, _] = *points.shape() else { return Err(input_err("points: expected shape (H, W, 3)")) };
+    let &[h, w, _] = points.shape() else { return Err(input_err("points: expected shape (H, W, 3)")) };
     let p = slice(&points, "points", h, w)?;
     let n = slice(&normals, "normals", h, w)?;
     let c = match &rgb {

@@ -175,6 +175,9 @@ class CameraConfig:
             raise ValueError("camera.near_m/far_m: need 0 < near < far")
         if self.model not in CAMERA_MODELS:
             raise ValueError(f"camera.model: unknown {self.model!r}; known: {', '.join(CAMERA_MODELS)}")
+        for key, v in (("camera.stereo.mixed_band_px", self.stereo.mixed_band_px), ("camera.colour.max_blur_taps", self.colour.max_blur_taps)):
+            if v < 0:
+                raise ValueError(f"{key}: {v} must be ≥ 0")
         # The core checks every sensor-model range and names the key (``camera.stereo.baseline_m``).
         from . import _native
 

@@ -337,6 +337,9 @@ pub fn stereo_depth(
     (out, stats)
 }
 
+/// Widening of each registered pixel's rectangle, pixels (no pinholes from rounding).
+const EPS: f64 = 0.02;
+
 /// Registration (step 6) and quantisation (step 7).
 fn register(cfg: &StereoDepthConfig, unit: &SensorUnit, z: &[f32], w: usize, h: usize) -> Vec<f32> {
     let e = &unit.registration_error;
@@ -370,8 +373,9 @@ fn register(cfg: &StereoDepthConfig, unit: &SensorUnit, z: &[f32], w: usize, h: 
             // Pixel (x, y) spans [x, x + 1) in continuous coordinates; fill the target pixels whose
             // centres the projected corners enclose.
             let zq = (a.2 + b.2) * 0.5;
-            let (x0, x1) = ((a.0.min(b.0)).round().max(0.0), (a.0.max(b.0)).round().min(w as f64));
-            let (y0, y1) = ((a.1.min(b.1)).round().max(0.0), (a.1.max(b.1)).round().min(h as f64));
+            // A hair wider than the corners, so rounding leaves no pinholes between neighbours.
+            let (x0, x1) = ((a.0.min(b.0) - EPS).round().max(0.0), (a.0.max(b.0) + EPS).round().min(w as f64));
+            let (y0, y1) = ((a.1.min(b.1) - EPS).round().max(0.0), (a.1.max(b.1) + EPS).round().min(h as f64));
             let (x0, x1, y0, y1) = (x0 as usize, x1 as usize, y0 as usize, y1 as usize);
             for ty in y0..y1 {
                 for tx in x0..x1 {
@@ -396,7 +400,7 @@ fn register(cfg: &StereoDepthConfig, unit: &SensorUnit, z: &[f32], w: usize, h: 
 
 #[cfg(test)]
 mod tests {
-    use super::super::{Intrinsics, SensorConfig};
+    use super::super::Intrinsics;
     use super::*;
 
     const W: usize = 640;
@@ -452,8 +456,7 @@ mod tests {
 
     #[test]
     fn plane_rms_follows_closed_form_and_is_correlated() {
-        let mut cfg = StereoDepthConfig { unit_m: 0.0, ..Default::default() };
-        cfg.shadow = false;
+        let cfg = StereoDepthConfig { unit_m: 0.0, shadow: false, ..Default::default() };
         for z0 in [0.3f32, 0.5, 0.7, 1.0] {
             let (p, n) = scene(z0, None);
             let mut sq = 0.0;
@@ -584,7 +587,6 @@ mod tests {
         let y = 240;
         let edge = (300..W).find(|&x| (d[y * W + x] - 0.4).abs() > 0.01).unwrap();
         assert!((edge as i64 - 404).abs() <= 1, "edge at {edge}");
-        let _ = SensorConfig::default();
     }
 
     #[test]

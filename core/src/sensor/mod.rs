@@ -373,12 +373,14 @@ mod tests {
 
     #[test]
     fn bad_parameter_names_the_field() {
-        let mut cfg = SensorConfig::default();
-        cfg.stereo.baseline_m = -1.0;
+        let cfg =
+            SensorConfig { stereo: StereoDepthConfig { baseline_m: -1.0, ..Default::default() }, ..Default::default() };
         let e = cfg.validate().unwrap_err();
         assert!(e.to_string().starts_with("camera.stereo.baseline_m"), "{e}");
-        let mut cfg = SensorConfig::default();
-        cfg.calibration.extrinsic_rot_sigma_deg = f64::NAN;
+        let cfg = SensorConfig {
+            calibration: CalibrationConfig { extrinsic_rot_sigma_deg: f64::NAN, ..Default::default() },
+            ..Default::default()
+        };
         assert!(cfg.validate().unwrap_err().to_string().contains("extrinsic_rot_sigma_deg"));
     }
 
