@@ -52,7 +52,7 @@ fn scene() -> (Vec<f32>, Vec<f32>, Vec<u8>) {
 fn bench(c: &mut Criterion) {
     let cfg = SensorConfig::default();
     let k = Intrinsics { fx: 433.0, fy: 433.0, cx: 320.0, cy: 240.0 };
-    let unit = SensorUnit::draw(&cfg, k, 3).expect("valid config");
+    let unit = SensorUnit::draw(&cfg, k, 3).unwrap_or_else(|e| panic!("{e}"));
     let (p, n, rgb) = scene();
     let frame = RenderedFrame { width: W, height: H, points_in_camera: &p, normals_in_camera: &n, rgb: &rgb };
     let mut motion = Matrix4::identity();
@@ -64,7 +64,9 @@ fn bench(c: &mut Criterion) {
     c.bench_function("sensor_model_640x480", |b| {
         b.iter(|| {
             i += 1;
-            black_box(simulate_frame(&cfg, &unit, black_box(&frame), Some(&motion), 7, i).expect("ok"))
+            black_box(
+                simulate_frame(&cfg, &unit, black_box(&frame), Some(&motion), 7, i).unwrap_or_else(|e| panic!("{e}")),
+            )
         })
     });
 }

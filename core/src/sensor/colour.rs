@@ -124,6 +124,7 @@ fn blur(cfg: &ColourConfig, unit: &SensorUnit, frame: &RenderedFrame<'_>, m: &Ma
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used)] // tests may unwrap (STYLE.md 18)
 mod tests {
     use super::super::Intrinsics;
     use super::*;

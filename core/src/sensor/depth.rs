@@ -399,6 +399,7 @@ fn register(cfg: &StereoDepthConfig, unit: &SensorUnit, z: &[f32], w: usize, h: 
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used)] // tests may unwrap (STYLE.md 18)
 mod tests {
     use super::super::Intrinsics;
     use super::*;

@@ -340,6 +340,7 @@ pub fn simulate_frame(
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used)] // tests may unwrap (STYLE.md 18)
 mod tests {
     use super::*;
 
