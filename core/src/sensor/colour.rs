@@ -8,15 +8,16 @@
 //!   The caller computes the motion from the joint velocities and
 //!   [`ColourConfig::exposure_s`].
 //! - **Noise**: Poissonian-Gaussian (Foi et al. 2008) on 8-bit values:
-//!   `σ²(I) = shot_gain · I + read_noise²`, one draw per channel (a sum of four uniforms: unit
-//!   variance, tails cut at 3.5 σ), rounded and clipped to 0-255.
+//!   `σ²(I) = shot_gain · I + read_noise²`, one draw per channel (the normal quantile of a 12-bit
+//!   uniform, five per 64-bit draw, scaled to unit variance), rounded and clipped to 0-255.
 //!
 //! Not modelled: rolling shutter (the D435's colour imager has one), exposure and white-balance
 //! changes, lens distortion and vignetting.
 
 use super::{check, RenderedFrame, SensorError, SensorUnit, SplitMix64, TAG_COLOUR};
-use nalgebra::{Matrix4, Vector4};
+use nalgebra::Matrix4;
 use serde::{Deserialize, Serialize};
+use std::sync::OnceLock;
 
 /// Colour model parameters (run configuration `[camera.colour]`).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -70,49 +71,122 @@ pub fn colour_image(
     if cfg.shot_gain > 0.0 || cfg.read_noise > 0.0 {
         let sigma: Vec<f32> =
             (0..256).map(|i| (cfg.shot_gain * i as f64 + cfg.read_noise * cfg.read_noise).sqrt() as f32).collect();
+        let table = normal_table();
         let mut rng = SplitMix64::new(seed, &[TAG_COLOUR, frame_index]);
-        for v in out.iter_mut().take(3 * w * h) {
-            let x = *v as f32 + sigma[*v as usize] * rng.approx_normal();
-            *v = x.round().clamp(0.0, 255.0) as u8;
+        for chunk in out[..3 * w * h].chunks_mut(5) {
+            let mut r = rng.next_u64();
+            for v in chunk {
+                let g = table[(r & 0xFFF) as usize];
+                r >>= 12;
+                let x = *v as f32 + sigma[*v as usize] * g + 0.5;
+                *v = x.clamp(0.0, 255.0) as u8;
+            }
         }
     }
     out
 }
 
+/// Standard normal quantiles of the 4096 midpoints `(i + ½) / 4096`, rescaled to unit variance.
+fn normal_table() -> &'static [f32] {
+    static TABLE: OnceLock<Vec<f32>> = OnceLock::new();
+    TABLE.get_or_init(|| {
+        let q: Vec<f64> = (0..4096).map(|i| inverse_normal_cdf((i as f64 + 0.5) / 4096.0)).collect();
+        let sd = (q.iter().map(|v| v * v).sum::<f64>() / q.len() as f64).sqrt();
+        q.iter().map(|v| (v / sd) as f32).collect()
+    })
+}
+
+/// Acklam's rational approximation of the standard normal quantile (relative error < 1.2e-9).
+fn inverse_normal_cdf(p: f64) -> f64 {
+    const A: [f64; 6] = [
+        -39.696_830_286_653_76,
+        220.946_098_424_520_5,
+        -275.928_510_446_968_7,
+        138.357_751_867_269,
+        -30.664_798_066_147_16,
+        2.506_628_277_459_239,
+    ];
+    const B: [f64; 5] = [
+        -54.476_098_798_224_06,
+        161.585_836_858_040_9,
+        -155.698_979_859_886_6,
+        66.801_311_887_719_72,
+        -13.280_681_552_885_72,
+    ];
+    const C: [f64; 6] = [
+        -7.784_894_002_430_293e-3,
+        -0.322_396_458_041_136_5,
+        -2.400_758_277_161_838,
+        -2.549_732_539_343_734,
+        4.374_664_141_464_968,
+        2.938_163_982_698_783,
+    ];
+    const D: [f64; 4] =
+        [7.784_695_709_041_462e-3, 0.322_467_129_070_039_8, 2.445_134_137_142_996, 3.754_408_661_907_416];
+    let tail = |q: f64| {
+        (((((C[0] * q + C[1]) * q + C[2]) * q + C[3]) * q + C[4]) * q + C[5])
+            / ((((D[0] * q + D[1]) * q + D[2]) * q + D[3]) * q + 1.0)
+    };
+    if p < 0.024_25 {
+        tail((-2.0 * p.ln()).sqrt())
+    } else if p > 1.0 - 0.024_25 {
+        -tail((-2.0 * (1.0 - p).ln()).sqrt())
+    } else {
+        let q = p - 0.5;
+        let r = q * q;
+        (((((A[0] * r + A[1]) * r + A[2]) * r + A[3]) * r + A[4]) * r + A[5]) * q
+            / (((((B[0] * r + B[1]) * r + B[2]) * r + B[3]) * r + B[4]) * r + 1.0)
+    }
+}
+
 fn blur(cfg: &ColourConfig, unit: &SensorUnit, frame: &RenderedFrame<'_>, m: &Matrix4<f64>) -> Vec<u8> {
+    const FAR_M: f64 = 10.0;
     let (w, h) = (frame.width, frame.height);
     let k = &unit.colour_true;
     let src = frame.rgb;
     let pts = frame.points_in_camera;
     let mut out = vec![0u8; 3 * w * h];
-    let far = 10.0;
+    let rot = m.fixed_view::<3, 3>(0, 0).into_owned();
+    let t = m.fixed_view::<3, 1>(0, 3).into_owned();
+    // Ray direction (x / z, y / z, 1) of each pixel centre, rotated: r = rot · (ax, ay, 1).
+    let ax: Vec<f64> = (0..w).map(|x| (x as f64 + 0.5 - k.cx) / k.fx).collect();
+    let (wi, hi) = (w as i64 - 1, h as i64 - 1);
     for y in 0..h {
-        for x in 0..w {
+        let ay = (y as f64 + 0.5 - k.cy) / k.fy;
+        let row_part = rot.column(1) * ay + rot.column(2);
+        for (x, &ax_x) in ax.iter().enumerate() {
             let i = y * w + x;
-            let zp = pts[3 * i + 2];
-            let p = if zp.is_finite() && zp > 0.0 {
-                Vector4::new(pts[3 * i] as f64, pts[3 * i + 1] as f64, zp as f64, 1.0)
-            } else {
-                Vector4::new((x as f64 + 0.5 - k.cx) / k.fx * far, (y as f64 + 0.5 - k.cy) / k.fy * far, far, 1.0)
-            };
-            let q = m * p;
-            let (du, dv) =
-                if q.z > 1e-6 { (k.fx * (q.x / q.z - p.x / p.z), k.fy * (q.y / q.z - p.y / p.z)) } else { (0.0, 0.0) };
-            let len = (du * du + dv * dv).sqrt();
-            let taps = ((len.ceil() as usize) + 1).min(cfg.max_blur_taps);
-            if taps <= 1 || len < 0.5 {
+            let zp = pts[3 * i + 2] as f64;
+            let z = if zp.is_finite() && zp > 0.0 { zp } else { FAR_M };
+            let r = rot.column(0) * ax_x + row_part;
+            let qz = z * r.z + t.z;
+            if qz <= 1e-6 {
                 out[3 * i..3 * i + 3].copy_from_slice(&src[3 * i..3 * i + 3]);
                 continue;
             }
+            let inv = 1.0 / qz;
+            let du = k.fx * ((z * r.x + t.x) * inv - ax_x);
+            let dv = k.fy * ((z * r.y + t.y) * inv - ay);
+            let len_sq = du * du + dv * dv;
+            if len_sq < 0.25 {
+                out[3 * i..3 * i + 3].copy_from_slice(&src[3 * i..3 * i + 3]);
+                continue;
+            }
+            let taps = ((len_sq.sqrt() as usize) + 2).min(cfg.max_blur_taps).max(2);
+            // Fixed point 16.16 along the path from −½ to +½ of the motion, centred on the pixel.
+            let step = 1.0 / (taps - 1) as f64;
+            let (mut fx, mut fy) =
+                (((x as f64 + 0.5 - 0.5 * du) * 65536.0) as i64, ((y as f64 + 0.5 - 0.5 * dv) * 65536.0) as i64);
+            let (sx, sy) = ((du * step * 65536.0) as i64, (dv * step * 65536.0) as i64);
             let mut acc = [0u32; 3];
-            for t in 0..taps {
-                let s = t as f64 / (taps - 1) as f64 - 0.5;
-                let sx = (x as f64 + s * du).round().clamp(0.0, (w - 1) as f64) as usize;
-                let sy = (y as f64 + s * dv).round().clamp(0.0, (h - 1) as f64) as usize;
-                let j = 3 * (sy * w + sx);
+            for _ in 0..taps {
+                let (px, py) = ((fx >> 16).clamp(0, wi) as usize, (fy >> 16).clamp(0, hi) as usize);
+                let j = 3 * (py * w + px);
                 acc[0] += src[j] as u32;
                 acc[1] += src[j + 1] as u32;
                 acc[2] += src[j + 2] as u32;
+                fx += sx;
+                fy += sy;
             }
             let n = taps as u32;
             for c in 0..3 {

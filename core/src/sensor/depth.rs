@@ -37,7 +37,7 @@
 //! than the colour's and the band falls outside the registered image), temporal noise
 //! correlation, multipath and specular surfaces.
 
-use super::{check, RenderedFrame, SensorError, SensorUnit, SplitMix64, TAG_DEPTH};
+use super::{check, round_fast, RenderedFrame, SensorError, SensorUnit, SplitMix64, TAG_DEPTH};
 use nalgebra::{Matrix3, Vector3};
 use serde::{Deserialize, Serialize};
 
@@ -177,7 +177,7 @@ pub(crate) fn correlated_field(width: usize, height: usize, cell_px: f64, rng: &
                 let g = (i as f64 + 0.5) / cell_px;
                 let k = g.floor();
                 let a = (g - k) as f32;
-                (k as usize, a, ((1.0 - a) * (1.0 - a) + a * a).sqrt())
+                (k as usize, a, 1.0 / ((1.0 - a) * (1.0 - a) + a * a).sqrt())
             })
             .collect()
     };
@@ -189,10 +189,44 @@ pub(crate) fn correlated_field(width: usize, height: usize, cell_px: f64, rng: &
         for (o, &(i, a, nx)) in row.iter_mut().zip(xs.iter()) {
             let top = r0[i] * (1.0 - a) + r0[i + 1] * a;
             let bot = r1[i] * (1.0 - a) + r1[i + 1] * a;
-            *o = (top * (1.0 - b) + bot * b) / (nx * ny);
+            *o = (top * (1.0 - b) + bot * b) * (nx * ny);
         }
     }
     out
+}
+
+/// Minimum and maximum of the positive values of `z` within `r` pixels (a square window), per pixel;
+/// `(inf, 0)` where there are none.
+fn window_min_max(z: &[f32], w: usize, h: usize, r: usize) -> (Vec<f32>, Vec<f32>) {
+    let mut row_lo = vec![f32::INFINITY; w * h];
+    let mut row_hi = vec![0.0f32; w * h];
+    for y in 0..h {
+        let row = &z[y * w..(y + 1) * w];
+        for x in 0..w {
+            let (mut l, mut u) = (f32::INFINITY, 0.0f32);
+            for &v in &row[x.saturating_sub(r)..(x + r + 1).min(w)] {
+                if v > 0.0 {
+                    l = l.min(v);
+                    u = u.max(v);
+                }
+            }
+            row_lo[y * w + x] = l;
+            row_hi[y * w + x] = u;
+        }
+    }
+    let mut lo = vec![f32::INFINITY; w * h];
+    let mut hi = vec![0.0f32; w * h];
+    for y in 0..h {
+        for yy in y.saturating_sub(r)..(y + r + 1).min(h) {
+            let (src_lo, src_hi) = (&row_lo[yy * w..(yy + 1) * w], &row_hi[yy * w..(yy + 1) * w]);
+            let (dst_lo, dst_hi) = (&mut lo[y * w..(y + 1) * w], &mut hi[y * w..(y + 1) * w]);
+            for x in 0..w {
+                dst_lo[x] = dst_lo[x].min(src_lo[x]);
+                dst_hi[x] = dst_hi[x].max(src_hi[x]);
+            }
+        }
+    }
+    (lo, hi)
 }
 
 /// Invalid-pixel causes on the rendered grid.
@@ -262,20 +296,23 @@ pub fn stereo_depth(
             }
         }
     }
-    // 3. Grazing incidence.
+    // 3. Grazing incidence (squared cosines: a square root only where a dropout is possible).
     let (c0, c1) = (cfg.grazing_start_deg.to_radians().cos(), cfg.grazing_end_deg.to_radians().cos());
+    let c0_sq = (c0 * c0) as f32;
     for i in 0..n {
         if state[i] != OK {
             continue;
         }
-        let p = Vector3::new(pts[3 * i] as f64, pts[3 * i + 1] as f64, pts[3 * i + 2] as f64);
-        let nv = Vector3::new(nrm[3 * i] as f64, nrm[3 * i + 1] as f64, nrm[3 * i + 2] as f64);
-        let (pn, nn) = (p.norm(), nv.norm());
-        if pn <= 0.0 || nn <= 0.0 || !nn.is_finite() {
+        let (px, py, pz) = (pts[3 * i], pts[3 * i + 1], pts[3 * i + 2]);
+        let (nx, ny, nz) = (nrm[3 * i], nrm[3 * i + 1], nrm[3 * i + 2]);
+        let dot = px * nx + py * ny + pz * nz;
+        let denom = (px * px + py * py + pz * pz) * (nx * nx + ny * ny + nz * nz);
+        if denom.is_nan() || denom <= 0.0 || denom.is_infinite() {
             continue;
         }
-        let cos = (p.dot(&nv) / (pn * nn)).abs();
-        if cos < c0 {
+        let cos_sq = dot * dot / denom;
+        if cos_sq < c0_sq {
+            let cos = (cos_sq as f64).sqrt();
             let p_drop = ((c0 - cos) / (c0 - c1)).clamp(0.0, 1.0);
             if rng.uniform() < p_drop {
                 state[i] = GRAZING;
@@ -283,39 +320,19 @@ pub fn stereo_depth(
             }
         }
     }
-    // 4. Mixed depths at silhouettes, from the true depths of the neighbourhood.
-    let band = cfg.mixed_band_px as isize;
+    // 4. Mixed depths at silhouettes, from the true depths of the neighbourhood (separable
+    // min / max over the (2 band + 1)² window, valid depths only).
+    let band = cfg.mixed_band_px;
     if band > 0 && cfg.mixed_fraction > 0.0 {
-        let z_true = z.clone();
-        for y in 0..h as isize {
-            for x in 0..w as isize {
-                let i = (y as usize) * w + x as usize;
-                if state[i] != OK {
-                    continue;
-                }
-                let (mut lo, mut hi) = (f32::INFINITY, 0.0f32);
-                for dy in -band..=band {
-                    let yy = y + dy;
-                    if yy < 0 || yy >= h as isize {
-                        continue;
-                    }
-                    for dx in -band..=band {
-                        let xx = x + dx;
-                        if xx < 0 || xx >= w as isize {
-                            continue;
-                        }
-                        let v = z_true[yy as usize * w + xx as usize];
-                        if v > 0.0 {
-                            lo = lo.min(v);
-                            hi = hi.max(v);
-                        }
-                    }
-                }
-                let jump = (hi - lo) as f64;
-                if jump > cfg.edge_jump_m + cfg.edge_jump_rel * lo as f64 && rng.uniform() < cfg.mixed_fraction {
-                    z[i] = lo + (rng.uniform() as f32) * (hi - lo);
-                    stats.mixed += 1;
-                }
+        let (lo, hi) = window_min_max(&z, w, h, band);
+        for i in 0..n {
+            if state[i] != OK {
+                continue;
+            }
+            let (l, u) = (lo[i], hi[i]);
+            if ((u - l) as f64) > cfg.edge_jump_m + cfg.edge_jump_rel * l as f64 && rng.uniform() < cfg.mixed_fraction {
+                z[i] = l + (rng.uniform() as f32) * (u - l);
+                stats.mixed += 1;
             }
         }
     }
@@ -350,13 +367,17 @@ fn register(cfg: &StereoDepthConfig, unit: &SensorUnit, z: &[f32], w: usize, h: 
     let m = r * Matrix3::new(k, 0.0, ox, 0.0, k, oy, 0.0, 0.0, 1.0);
     let t = Vector3::new(e[0][3], e[1][3], e[2][3]);
     let (kt, ka) = (&unit.colour_true, &unit.colour_assumed);
-    let project = |x: f64, y: f64, zv: f64| -> Option<(f64, f64, f64)> {
-        let p = Vector3::new((x - kt.cx) / kt.fx * zv, (y - kt.cy) / kt.fy * zv, zv);
-        let q = m * p + t;
+    // m · (ray direction of continuous image point (u, v)) = u' · col0 + v' · col1 + col2.
+    let (c0, c1, c2) = (m.column(0).into_owned(), m.column(1).into_owned(), m.column(2).into_owned());
+    let col_dir: Vec<Vector3<f64>> = (0..=w).map(|x| c0 * ((x as f64 - kt.cx) / kt.fx)).collect();
+    let row_dir: Vec<Vector3<f64>> = (0..=h).map(|y| c1 * ((y as f64 - kt.cy) / kt.fy) + c2).collect();
+    let project = |dir: Vector3<f64>, zv: f64| -> Option<(f64, f64, f64)> {
+        let q = dir * zv + t;
         if q.z <= 1e-6 {
             return None;
         }
-        Some((ka.fx * q.x / q.z + ka.cx, ka.fy * q.y / q.z + ka.cy, q.z))
+        let inv = 1.0 / q.z;
+        Some((ka.fx * q.x * inv + ka.cx, ka.fy * q.y * inv + ka.cy, q.z))
     };
     let mut out = vec![f32::INFINITY; w * h];
     for y in 0..h {
@@ -366,22 +387,23 @@ fn register(cfg: &StereoDepthConfig, unit: &SensorUnit, z: &[f32], w: usize, h: 
                 continue;
             }
             let zv = zv as f64;
-            let (Some(a), Some(b)) = (project(x as f64, y as f64, zv), project(x as f64 + 1.0, y as f64 + 1.0, zv))
+            let (Some(a), Some(b)) =
+                (project(col_dir[x] + row_dir[y], zv), project(col_dir[x + 1] + row_dir[y + 1], zv))
             else {
                 continue;
             };
             // Pixel (x, y) spans [x, x + 1) in continuous coordinates; fill the target pixels whose
             // centres the projected corners enclose.
-            let zq = (a.2 + b.2) * 0.5;
+            let zq = ((a.2 + b.2) * 0.5) as f32;
             // A hair wider than the corners, so rounding leaves no pinholes between neighbours.
-            let (x0, x1) = ((a.0.min(b.0) - EPS).round().max(0.0), (a.0.max(b.0) + EPS).round().min(w as f64));
-            let (y0, y1) = ((a.1.min(b.1) - EPS).round().max(0.0), (a.1.max(b.1) + EPS).round().min(h as f64));
-            let (x0, x1, y0, y1) = (x0 as usize, x1 as usize, y0 as usize, y1 as usize);
+            let x0 = round_fast(a.0.min(b.0) - EPS).max(0.0) as usize;
+            let x1 = round_fast(a.0.max(b.0) + EPS).clamp(0.0, w as f64) as usize;
+            let y0 = round_fast(a.1.min(b.1) - EPS).max(0.0) as usize;
+            let y1 = round_fast(a.1.max(b.1) + EPS).clamp(0.0, h as f64) as usize;
             for ty in y0..y1 {
-                for tx in x0..x1 {
-                    let o = &mut out[ty * w + tx];
-                    if (zq as f32) < *o {
-                        *o = zq as f32;
+                for o in &mut out[ty * w + x0.min(x1)..ty * w + x1] {
+                    if zq < *o {
+                        *o = zq;
                     }
                 }
             }
@@ -392,7 +414,7 @@ fn register(cfg: &StereoDepthConfig, unit: &SensorUnit, z: &[f32], w: usize, h: 
         if !v.is_finite() {
             *v = 0.0;
         } else if q > 0.0 {
-            *v = ((*v as f64 / q).round() * q) as f32;
+            *v = ((*v as f64 / q + 0.5) as i64 as f64 * q) as f32;
         }
     }
     out
