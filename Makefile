@@ -14,7 +14,7 @@ ROBUSTNESS_ARGS ?=
 RUNS_ARGS ?=
 AR_ARGS ?=
 
-.PHONY: help setup run runs test test-fast test-rust test-rust-unit test-py fuzz bench benchmark associate parameterize slam grasp grasp-robustness place match match-sim report ar reports-index view lint fmt clean
+.PHONY: help setup run runs test test-fast test-rust test-rust-unit test-py fuzz bench benchmark associate parameterize slam grasp grasp-robustness place match match-sim ar report sensor reports-index view lint fmt clean
 
 help: ## List the targets
 	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*## "}; {printf "  \033[1m%-12s\033[0m %s\n", $$1, $$2}'
@@ -83,6 +83,10 @@ ar: setup ## AR on exploration maps vs the simulator's truth: occlusion IoU, dro
 	$(PY) experiments/ar.py $(AR_ARGS)
 
 report: ## Report of the latest run folder → reports/foundation_run.json
+sensor: setup ## Depth sensor error vs distance per preset (realistic, ideal) from SAPIEN renders → reports/sensor.json
+	$(PY) experiments/sensor.py $(SENSOR_ARGS)
+
+report: ## Report of the latest run folder → reports/foundation_run.{md,json}
 	$(PY) experiments/report_run.py
 
 reports-index: ## Regenerate reports/README.md (one line per report: question, headline figure, command)

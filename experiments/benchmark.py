@@ -337,6 +337,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--workers", type=int, default=2, help="pool processes, or CPUs of a local Ray instance")
     ap.add_argument("--backend", choices=BACKENDS, default="pool", help="pool: local processes; ray: one Ray task per episode")
     ap.add_argument("--address", default=None, help="Ray cluster address (backend ray; default: a local instance)")
+    ap.add_argument(
+        "--preset",
+        choices=("realistic", "ideal"),
+        help="world-model preset: realistic (default.toml) or ideal (overlays configs/presets/ideal.toml)",
+    )
     ap.add_argument("--config", action="append", default=[], help="run-config TOML overlay (repeatable)")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a config key (repeatable)")
     ap.add_argument("--out", default=str(REPO / "reports"), help="report folder")
@@ -373,6 +378,8 @@ def main(argv: list[str] | None = None) -> int:
         write_reports(rows, Path(a.out), command, config)
         print(f"{len(rows)} episodes → {a.out}/pages/exploration.md")
         return 0
+    if a.preset:
+        a.set.append(f'preset="{a.preset}"')
     jobs = [
         Job(sc, st, sd, tuple(a.config), tuple(a.set)) for sc in a.scenes for st in a.strategies for sd in a.seeds
     ]

@@ -1,4 +1,4 @@
-"""Run one episode: ``python experiments/run.py [--scene S] [--strategy X] [--seed N] [--set k=v ...]``.
+"""Run one episode: ``python experiments/run.py [--scene S] [--strategy X] [--seed N] [--preset P] [--set k=v ...]``.
 
 Writes ``runs/<date>/<time>_<strategy>_<scene>_<seed>/`` and prints a per-object table and the means.
 Its ``run.rrd`` opens in the Rerun viewer with ``make view``; ``--spawn`` / ``--serve`` show the
@@ -31,6 +31,11 @@ def main(argv: list[str] | None = None) -> int:
         "experiments/strategies/<name>.toml holds each one's settings)",
     )
     ap.add_argument("--seed", type=int, help=f"run seed (default: {base.seed})")
+    ap.add_argument(
+        "--preset",
+        choices=("realistic", "ideal"),
+        help="world-model preset: realistic (default.toml) or ideal (overlays configs/presets/ideal.toml)",
+    )
     ap.add_argument("--config", action="append", default=[], help="extra TOML overlay (repeatable)")
     ap.add_argument(
         "--set", action="append", default=[], metavar="KEY=VALUE", help="override a config key, e.g. record.jpeg_quality=0"
@@ -59,7 +64,7 @@ def main(argv: list[str] | None = None) -> int:
             print("no display: serving a web viewer instead of opening a window", file=sys.stderr)
         overrides.append(f'record.live_url="{start_viewer(web=a.serve or not has_display())}"')
     try:
-        cfg = load_run_config(overlays=a.config, overrides=overrides, strategy=a.strategy)
+        cfg = load_run_config(overlays=a.config, overrides=overrides, strategy=a.strategy, preset=a.preset)
     except (ConfigError, SceneFileError) as e:
         print(f"config error: {e}", file=sys.stderr)
         return 2

@@ -14,7 +14,7 @@ from objslam.world import SimWorld, UnreachablePoseError, look_at
 
 from .conftest import SCENES
 
-SMALL = CameraConfig(width=320, height=240, depth_noise=DepthNoiseConfig(0.0, 0.0))
+SMALL = CameraConfig(width=320, height=240, model="ideal", depth_noise=DepthNoiseConfig(0.0, 0.0))
 
 
 @pytest.fixture(scope="module")

@@ -23,6 +23,8 @@
 //! - [`plan`]: Panda kinematics, collision checking, RRT-Connect, Ruckig trajectories, grasps.
 //! - [`topo`]: semantic topological map, random-walk descriptors, scene matching, relocalisation.
 //! - `record` (feature `rerun`): one Rerun recording per run.
+//! - [`sensor`]: the RGB-D camera model (D435-class active-stereo depth, colour noise and blur,
+//!   calibration errors) the simulator applies to rendered frames.
 //! - [`slam`]: RGB-D visual tracking (ORB features, PnP + RANSAC, local BA), pose sources, ATE/RPE.
 //! - [`system`]: the per-frame loop (tracking → gauge → pipeline → grids) and the session's
 //!   decisions behind one type, [`system::System`].
@@ -41,6 +43,7 @@ pub mod pipeline;
 pub mod plan;
 #[cfg(feature = "rerun")]
 pub mod record;
+pub mod sensor;
 pub mod slam;
 pub mod system;
 pub mod topo;

@@ -1,10 +1,18 @@
 """Run configuration: typed dataclasses composed from TOML layers.
 
-A run's configuration is ``experiments/configs/default.toml``, then the strategy's file
-``experiments/configs/strategies/<strategy>.toml``, then any ``--config`` overlays, then
-``--set key.sub=value`` overrides (N scenes + M methods = O(N + M) files). The resolved result is
-written to the run folder as ``config.toml`` and can be re-run as is. Unknown keys are errors that
-name the key.
+A run's configuration is ``experiments/configs/default.toml``, then the world-model preset's file
+``experiments/configs/presets/<preset>.toml`` when another preset than the default's is chosen,
+then the strategy's file ``experiments/configs/strategies/<strategy>.toml``, then any ``--config``
+overlays, then ``--set key.sub=value`` overrides (N scenes + M methods = O(N + M) files). The
+resolved result is written to the run folder as ``config.toml`` and can be re-run as is. Unknown
+keys are errors that name the key.
+
+World-model presets: ``default.toml`` is the ``realistic`` world (``preset = "realistic"``: the
+D435-class RGB-D camera, a detector with persistent errors, varied textures, ...); the overlay
+``presets/ideal.toml`` sets ``preset = "ideal"`` and every world-model parameter back to the ideal
+world (exact depth with 0.1 % noise, perfect registration and colour, per-frame detector noise,
+axis-aligned textures), kept as an ablation. ``--preset ideal`` on the experiment scripts, the
+``preset`` argument of :func:`load_run_config` and ``--set preset=ideal`` all overlay that file.
 """
 
 from __future__ import annotations
@@ -17,11 +25,13 @@ from typing import Any, get_type_hints
 
 import tomllib
 
-from .camera import CameraConfig, DepthNoiseConfig
+from .camera import CalibrationConfig, CameraConfig, ColourConfig, DepthNoiseConfig, StereoDepthConfig
 from .detector import DetectorConfig
+from .textures import TextureConfig
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 CONFIG_DIR = REPO_ROOT / "experiments" / "configs"
+PRESET_DIR = CONFIG_DIR / "presets"
 
 
 class ConfigError(ValueError):
@@ -272,6 +282,9 @@ class RecordConfig:
 class RunConfig:
     """One episode."""
 
+    preset: str = "realistic"
+    """World-model preset the run was composed with: ``realistic`` (``default.toml``) or a file of
+    ``experiments/configs/presets/`` (``ideal``); reports say which made them."""
     scene: str = "scenes/scene01.toml"
     """Scene file (relative to the repository root or absolute)."""
     strategy: str = "object-driven"
@@ -375,6 +388,7 @@ class RunConfig:
     at the end, 3D IoU 0.23."""
     camera: CameraConfig = field(default_factory=CameraConfig)
     detector: DetectorConfig = field(default_factory=DetectorConfig)
+    textures: TextureConfig = field(default_factory=TextureConfig)
     naive: NaiveMapperConfig = field(default_factory=NaiveMapperConfig)
     param: ParamRunConfig = field(default_factory=ParamRunConfig)
     pose_noise: PoseNoiseConfig = field(default_factory=PoseNoiseConfig)
@@ -408,6 +422,8 @@ class RunConfig:
             raise ConfigError(
                 f"association_mode: unknown {self.association_mode!r}; known: {', '.join(ASSOCIATION_MODES)}"
             )
+        if self.preset not in available_presets():
+            raise ConfigError(f"preset: unknown {self.preset!r}; known: {', '.join(available_presets())}")
         if self.seed < 0:
             raise ConfigError("seed: must be ≥ 0")
         if not (0 < self.frame_rate_hz <= 60):
@@ -455,6 +471,7 @@ class RunConfig:
         try:
             self.camera.validate()
             self.detector.validate()
+            self.textures.validate()
         except ValueError as e:
             raise ConfigError(str(e)) from e
 
@@ -553,25 +570,50 @@ def _read(path: Path) -> dict[str, Any]:
         raise ConfigError(f"{path}: {e}") from e
 
 
+def available_presets() -> tuple[str, ...]:
+    """The default's preset (``realistic``) and the overlays in ``experiments/configs/presets/``."""
+    default = _read(CONFIG_DIR / "default.toml").get("preset", "realistic")
+    files = sorted(p.stem for p in PRESET_DIR.glob("*.toml")) if PRESET_DIR.is_dir() else []
+    return (default, *(f for f in files if f != default))
+
+
 def load_run_config(
-    *, overlays: list[str | Path] = (), overrides: list[str] = (), strategy: str | None = None
+    *,
+    overlays: list[str | Path] = (),
+    overrides: list[str] = (),
+    strategy: str | None = None,
+    preset: str | None = None,
 ) -> RunConfig:
-    """Compose default.toml ← strategy file ← overlays ← overrides, validate, return."""
+    """Compose default.toml ← preset file ← strategy file ← overlays ← overrides, validate, return.
+    The preset is ``preset`` if given, else the last ``preset`` key of the overlays and overrides,
+    else the default's; a preset other than the default's overlays ``presets/<preset>.toml``."""
     data = _read(CONFIG_DIR / "default.toml")
     layers = [parse_override(o) for o in overrides]
+    overlay_data = [_read(Path(p)) for p in overlays]
+    chosen_preset = preset
+    if chosen_preset is None:
+        for layer in [*overlay_data, *layers]:
+            chosen_preset = layer.get("preset", chosen_preset)
+    default_preset = data.get("preset", "realistic")
+    chosen_preset = chosen_preset or default_preset
+    if not isinstance(chosen_preset, str) or chosen_preset not in available_presets():
+        raise ConfigError(f"preset: unknown {chosen_preset!r}; known: {', '.join(available_presets())}")
+    if chosen_preset != default_preset:
+        data = _merge(data, _read(PRESET_DIR / f"{chosen_preset}.toml"))
     chosen = strategy
-    for layer in [*(_read(Path(p)) for p in overlays), *layers]:
+    for layer in [*overlay_data, *layers]:
         chosen = layer.get("strategy", chosen)
     chosen = chosen or data.get("strategy", "init")
     strategy_file = CONFIG_DIR / "strategies" / f"{chosen}.toml"
     if strategy_file.exists():
         data = _merge(data, _read(strategy_file))
-    for p in overlays:
-        data = _merge(data, _read(Path(p)))
+    for layer in overlay_data:
+        data = _merge(data, layer)
     for layer in layers:
         data = _merge(data, layer)
     if strategy is not None:
         data["strategy"] = strategy
+    data["preset"] = chosen_preset
     cfg = _build(RunConfig, data, "")
     cfg.validate()
     return cfg
@@ -596,7 +638,9 @@ def replace(cfg: RunConfig, **changes: Any) -> RunConfig:
 
 
 __all__ = [
+    "CalibrationConfig",
     "CameraConfig",
+    "ColourConfig",
     "ConfigError",
     "DepthNoiseConfig",
     "DetectorConfig",
@@ -605,6 +649,9 @@ __all__ = [
     "NaiveMapperConfig",
     "RecordConfig",
     "RunConfig",
+    "StereoDepthConfig",
+    "TextureConfig",
+    "available_presets",
     "load_run_config",
     "parse_override",
     "to_dict",

@@ -438,7 +438,7 @@ def run_episode(
         rec = _Recorder(run_dir / "run.rrd" if cfg.record.enabled else None, recording_options(cfg, scene))
         rng_sensor = np.random.default_rng([cfg.seed, 1])
         rng_detector = np.random.default_rng([cfg.seed, 2])
-        world = SimWorld(scene, cfg.camera, rng_sensor)
+        world = SimWorld(scene, cfg.camera, rng_sensor, textures=cfg.textures)
         detector = SimulatedDetector(cfg.detector, rng_detector)
         rec.log_objects("world/ground_truth", json.dumps(gt_objects(scene, world.ground_truth())))
         init_views = mapper.initial_views()
@@ -452,7 +452,7 @@ def run_episode(
         def process(frame: SensorFrame) -> None:
             nonlocal frames
             t0 = time.perf_counter()
-            dets: list[Detection] = detector.detect(frame.segmentation, world.actor_to_object)
+            dets: list[Detection] = detector.detect(frame.segmentation, world.actor_to_object, frame.detector_view)
             t1 = time.perf_counter()
             assigned = mapper.update(
                 index=frame.index,

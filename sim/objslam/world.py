@@ -34,10 +34,11 @@ import numpy as np
 import sapien
 
 from . import _native
-from .camera import SAPIEN_FROM_CV, CameraConfig
+from .camera import CV_FROM_GL, SAPIEN_FROM_CV, CameraConfig, RgbdSensor
+from .detector import DetectorView
 from .meshes import get_asset
 from .scene import ObjectSpec, SceneSpec
-from .textures import object_texture, table_texture
+from .textures import TextureConfig, object_texture, table_texture
 
 #: Physics rate, Hz.
 PHYSICS_HZ = 240
@@ -107,6 +108,8 @@ class SensorFrame:
     """(4, 4) true camera pose from the renderer (evaluation only)."""
     qpos: np.ndarray
     """Measured joint positions (9,)."""
+    detector_view: DetectorView | None = None
+    """What the simulated detector may know of the frame's true geometry (simulator side only)."""
 
 
 def pose_to_matrix(p: sapien.Pose) -> np.ndarray:
@@ -139,15 +142,25 @@ class SimWorld:
     """A built scene with the robot and its hand camera."""
 
     def __init__(
-        self, spec: SceneSpec, camera: CameraConfig, rng: np.random.Generator, *, grasp_physics: bool = False
+        self,
+        spec: SceneSpec,
+        camera: CameraConfig,
+        rng: np.random.Generator,
+        *,
+        grasp_physics: bool = False,
+        textures: TextureConfig | None = None,
     ) -> None:
         """``grasp_physics``: ManiSkill's settings for reliable grasps (contact offset 0.02 m, 25 solver
         position iterations, finger patch radius 0.1 m; see :data:`GRASP_PHYSICS`). Off for the
-        mapping episodes, whose physics only settles objects."""
+        mapping episodes, whose physics only settles objects. ``textures``: how surfaces are
+        textured (default :class:`~objslam.textures.TextureConfig`). With the ``d435`` camera model
+        the sensor unit's seed is drawn from ``rng``."""
         camera.validate()
         self.spec = spec
         self.camera_config = camera
+        self.textures = textures if textures is not None else TextureConfig()
         self.rng = rng
+        self.sensor = RgbdSensor(camera, int(rng.integers(1 << 62))) if camera.model == "d435" else None
         self.frame_index = 0
         self.sim_time_s = 0.0
         self.camera_path_length_m = 0.0
@@ -200,9 +213,17 @@ class SimWorld:
             camera.far_m,
         )
         self.intrinsics = camera.intrinsics()
+        """The colour intrinsics the estimator assumes (frames carry these)."""
+        k_render = self.intrinsics
+        if self.sensor is not None:
+            # The unit's true intrinsics differ from the assumed ones by its calibration error.
+            k_render = self.sensor.true_intrinsics()
+            self.camera.set_perspective_parameters(
+                camera.near_m, camera.far_m, k_render[0, 0], k_render[1, 1], k_render[0, 2], k_render[1, 2], 0.0
+            )
         k = np.asarray(self.camera.get_intrinsic_matrix(), dtype=np.float64)
-        if not np.allclose(k, self.intrinsics, atol=1e-2):
-            raise RuntimeError(f"camera intrinsics disagree with the config: {k} vs {self.intrinsics}")
+        if not np.allclose(k, k_render, atol=1e-2):
+            raise RuntimeError(f"camera intrinsics disagree with the config: {k} vs {k_render}")
         self.actor_to_object = {
             a.per_scene_id: (oid, spec.objects[oid].cls) for oid, a in self.object_actors.items()
         }
@@ -216,7 +237,9 @@ class SimWorld:
     def _build_table(self) -> None:
         t = self.spec.table
         mat = sapien.render.RenderMaterial()
-        mat.base_color_texture = sapien.render.RenderTexture2D(table_texture(self.spec.seed), "R8G8B8A8Unorm")
+        mat.base_color_texture = sapien.render.RenderTexture2D(
+            table_texture(self.spec.seed, style=self.textures.style), "R8G8B8A8Unorm"
+        )
         b = self.scene.create_actor_builder()
         half = [t.size[0] / 2, t.size[1] / 2, 0.025]
         b.add_box_collision(half_size=half)
@@ -239,7 +262,9 @@ class SimWorld:
                 continue
             mat = sapien.render.RenderMaterial()
             mat.base_color_texture = sapien.render.RenderTexture2D(
-                object_texture(self.spec.seed, o.id), "R8G8B8A8Unorm"
+                object_texture(
+                    self.spec.seed, o.id, style=self.textures.style, poor_fraction=self.textures.poor_fraction
+                ), "R8G8B8A8Unorm"
             )
             mat.roughness = 0.8
             b = self.scene.create_actor_builder()
@@ -577,19 +602,34 @@ class SimWorld:
 
     # ----- sensing --------------------------------------------------------------------------------
     def render(self) -> SensorFrame:
-        """Render the hand camera now."""
+        """Render the hand camera now and apply the sensor model (:attr:`CameraConfig.model`)."""
         self.scene.update_render()
         self.camera.take_picture()
         rgba = self.camera.get_picture("Color")
         pos = self.camera.get_picture("Position")
         seg = self.camera.get_picture("Segmentation")[..., 1].astype(np.uint32)
         rgb = (np.clip(rgba[..., :3], 0, 1) * 255 + 0.5).astype(np.uint8)
-        depth = np.where(pos[..., 3] < 1, -pos[..., 2], 0.0).astype(np.float32)
-        depth[depth > self.camera_config.far_m] = 0.0
-        if self.camera_config.mask_robot_depth:
-            depth[np.isin(seg, list(self.robot_actor_ids))] = 0.0
-        depth = self.camera_config.depth_noise.apply(depth, self.rng)
+        robot = np.isin(seg, list(self.robot_actor_ids)) if self.camera_config.mask_robot_depth else None
         q = self.qpos()
+        if self.sensor is None:
+            depth = np.where(pos[..., 3] < 1, -pos[..., 2], 0.0).astype(np.float32)
+            depth[depth > self.camera_config.far_m] = 0.0
+            if robot is not None:
+                depth[robot] = 0.0
+            depth = self.camera_config.depth_noise.apply(depth, self.rng)
+        else:
+            # The renderer's geometry in OpenCV camera axes; no surface (and the robot's own
+            # pixels, the finger tips) as z = 0. Segmentation is used only for the robot mask.
+            points = pos[..., :3] * CV_FROM_GL
+            gone = pos[..., 3] >= 1
+            if robot is not None:
+                gone |= robot
+            points[gone] = 0.0
+            normals = self.camera.get_picture("Normal")[..., :3] * CV_FROM_GL
+            rgb, depth = self.sensor.apply(
+                points, normals, rgb, frame_index=self.frame_index, camera_end_from_start=self._exposure_motion(q)
+            )
+        world_from_camera_gt = self.world_from_camera_gt()
         frame = SensorFrame(
             index=self.frame_index,
             sim_time_s=self.sim_time_s,
@@ -598,11 +638,36 @@ class SimWorld:
             segmentation=seg,
             intrinsics=self.intrinsics,
             world_from_camera_fk=self.world_from_camera_fk(q),
-            world_from_camera_gt=self.world_from_camera_gt(),
+            world_from_camera_gt=world_from_camera_gt,
             qpos=q,
+            detector_view=self._detector_view(world_from_camera_gt),
         )
         self.frame_index += 1
         return frame
+
+    def _exposure_motion(self, q: np.ndarray) -> np.ndarray | None:
+        """``camera_end_from_start`` over the colour exposure centred on now, from the arm's joint
+        velocities over the last physics step (None at rest or without exposure)."""
+        t = self.camera_config.colour.exposure_s
+        v = self._arm_velocity
+        if t <= 0 or float(np.max(np.abs(v))) < 1e-4:
+            return None
+        q0, q1 = q.copy(), q.copy()
+        q0[:7] -= v * t / 2
+        q1[:7] += v * t / 2
+        return np.linalg.inv(self.world_from_camera_fk(q1)) @ self.world_from_camera_fk(q0)
+
+    def _detector_view(self, world_from_camera_gt: np.ndarray) -> DetectorView:
+        """The frame's true geometry as the simulated detector may use it (never the estimator)."""
+        gt = self.ground_truth()
+        return DetectorView(
+            world_from_camera=world_from_camera_gt,
+            intrinsics=self.sensor.true_intrinsics() if self.sensor is not None else self.intrinsics,
+            object_centres={a: gt[oid][0] for a, (oid, _) in self.actor_to_object.items()},
+            table_actor_id=self.table.per_scene_id,
+            table_center=tuple(self.spec.table.center),
+            table_size=tuple(self.spec.table.size),
+        )
 
     def ground_truth(self) -> dict[int, tuple[np.ndarray, float]]:
         """Current object poses: id → (centre (3,), yaw rad). Evaluation only."""

@@ -1,0 +1,622 @@
+//! Active-stereo depth (Intel RealSense D435 class, 640 × 480), from the renderer's geometry.
+//!
+//! Per frame, on the colour camera's rendered pixel grid (the depth imager is taken to sit at the
+//! colour camera; the calibration error between them is [`super::SensorUnit`]'s):
+//! 1. **Range**: surfaces nearer than [`StereoDepthConfig::min_range_m`] (beyond the 126-pixel
+//!    disparity search: Min-Z = focal × baseline / 126, D400 datasheet) or farther than
+//!    [`StereoDepthConfig::max_range_m`] give no return.
+//! 2. **Second-imager shadow**: depth is computed in the left imager's frame; a pixel whose ray
+//!    from the right imager, [`StereoDepthConfig::baseline_m`] along +x, is blocked by a nearer
+//!    surface has no match and is invalid (Keselman et al. 2017, the left-right check). One
+//!    scanline pass per row: in rectified coordinates the right image sees pixel `u` at
+//!    `u − f·B/z`; a pixel whose right-image coordinate lies beyond that of a pixel to its right
+//!    is hidden from the right imager. The D435's emitter sits between the imagers on the same
+//!    line, so its shadow lies inside this one (a texture-poor surface in it would also fail).
+//! 3. **Grazing incidence**: the return drops out with a probability rising linearly from 0 at
+//!    [`StereoDepthConfig::grazing_start_deg`] to 1 at [`StereoDepthConfig::grazing_end_deg`]
+//!    between the viewing ray and the rendered surface normal (the matching window sees the
+//!    surface foreshortened to nothing).
+//! 4. **Silhouettes (flying pixels)**: a pixel within [`StereoDepthConfig::mixed_band_px`] of a
+//!    depth jump larger than `edge_jump_m + edge_jump_rel · z` takes, with probability
+//!    [`StereoDepthConfig::mixed_fraction`], a depth mixed between the near and far side
+//!    (`z_near + α (z_far − z_near)`, α uniform): the matching window straddles both surfaces.
+//! 5. **Disparity noise**: the disparity `d = f·B/z` gets an error of RMS
+//!    [`StereoDepthConfig::subpixel_rms_px`], spatially correlated as block matching makes it (a
+//!    unit-variance field interpolated bilinearly from independent values on a grid of
+//!    [`StereoDepthConfig::correlation_px`] depth pixels, normalised per pixel); to first order the
+//!    depth RMS is `z² · s / (f · B)` (Intel's tuning white paper), 1.04 mm at 0.5 m with the
+//!    defaults. Then the unit's **depth-scale** error multiplies every value.
+//! 6. **Registration**: each depth pixel's two corners go through the depth intrinsic error and
+//!    the colour ← depth extrinsic error and are projected with the *assumed* colour intrinsics;
+//!    the rectangle between them is filled, nearest surface kept (librealsense's align-to-colour).
+//!    Colour pixels no depth pixel reaches stay 0.
+//! 7. **Quantisation** to [`StereoDepthConfig::unit_m`] (the 16-bit depth unit, 1 mm by default).
+//!
+//! Not modelled: depth motion blur (the D435's depth imagers have a global shutter and short
+//! exposure), the invalid band at the depth image's left border (the depth field of view is wider
+//! than the colour's and the band falls outside the registered image), temporal noise
+//! correlation, multipath and specular surfaces.
+
+use super::{check, round_fast, RenderedFrame, SensorError, SensorUnit, SplitMix64, TAG_DEPTH};
+use nalgebra::{Matrix3, Vector3};
+use serde::{Deserialize, Serialize};
+
+/// Depth model parameters (run configuration `[camera.stereo]`).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct StereoDepthConfig {
+    /// Depth imager focal length, pixels (D435 at 640 × 480: librealsense reports fx ≈ 381-386;
+    /// 383). Enters the disparity `f·B/z`, hence the noise and Min-Z.
+    pub focal_px: f64,
+    /// Stereo baseline, metres (D435: 50 mm, datasheet).
+    pub baseline_m: f64,
+    /// Disparity error RMS, pixels ("subpixel"; about 0.08 on a textured flat target, Intel's
+    /// tuning white paper; 0.05-0.1 typical).
+    pub subpixel_rms_px: f64,
+    /// Correlation length of the disparity error, depth pixels: the spacing of the grid the noise
+    /// field is interpolated from (stereo matching windows of the D4 ASIC are several pixels wide).
+    pub correlation_px: f64,
+    /// Per-episode depth-scale error, standard deviation (0.5 %; clipped to 3 σ = 1.5 %, inside
+    /// the datasheet's 2 % absolute-accuracy bound).
+    pub scale_sigma: f64,
+    /// Minimum range, metres (Min-Z = 383 px × 50 mm / 126 px = 0.152 m at 640 × 480).
+    pub min_range_m: f64,
+    /// Maximum range, metres (the datasheet quotes up to about 10 m; 3 m is beyond every surface
+    /// of the tabletop scenes and equals the renderer's far plane).
+    pub max_range_m: f64,
+    /// Depth unit, metres (1 mm, the D400 default).
+    pub unit_m: f64,
+    /// Depth jump marking a silhouette: absolute part, metres.
+    pub edge_jump_m: f64,
+    /// Depth jump marking a silhouette: part relative to the nearer depth.
+    pub edge_jump_rel: f64,
+    /// Half-width of the mixed band at silhouettes, pixels (0 = none).
+    pub mixed_band_px: usize,
+    /// Share of the band's pixels that take a mixed depth.
+    pub mixed_fraction: f64,
+    /// Incidence angle where grazing dropouts start, degrees.
+    pub grazing_start_deg: f64,
+    /// Incidence angle where every return drops out, degrees.
+    pub grazing_end_deg: f64,
+    /// Model the second imager's shadow.
+    pub shadow: bool,
+}
+
+impl Default for StereoDepthConfig {
+    fn default() -> Self {
+        Self {
+            focal_px: 383.0,
+            baseline_m: 0.050,
+            subpixel_rms_px: 0.08,
+            correlation_px: 4.0,
+            scale_sigma: 0.005,
+            min_range_m: 0.152,
+            max_range_m: 3.0,
+            unit_m: 0.001,
+            edge_jump_m: 0.01,
+            edge_jump_rel: 0.02,
+            mixed_band_px: 1,
+            mixed_fraction: 0.5,
+            grazing_start_deg: 70.0,
+            grazing_end_deg: 85.0,
+            shadow: true,
+        }
+    }
+}
+
+impl StereoDepthConfig {
+    /// Range checks; errors name the field.
+    pub fn validate(&self) -> Result<(), SensorError> {
+        const R: &str = "outside its range (see the field's doc)";
+        check("camera.stereo.focal_px", self.focal_px, (50.0..=5000.0).contains(&self.focal_px), R)?;
+        check("camera.stereo.baseline_m", self.baseline_m, self.baseline_m > 0.0 && self.baseline_m <= 1.0, R)?;
+        check("camera.stereo.subpixel_rms_px", self.subpixel_rms_px, (0.0..=2.0).contains(&self.subpixel_rms_px), R)?;
+        check("camera.stereo.correlation_px", self.correlation_px, (1.0..=64.0).contains(&self.correlation_px), R)?;
+        check("camera.stereo.scale_sigma", self.scale_sigma, (0.0..=0.05).contains(&self.scale_sigma), R)?;
+        check("camera.stereo.min_range_m", self.min_range_m, self.min_range_m >= 0.0, R)?;
+        check(
+            "camera.stereo.max_range_m",
+            self.max_range_m,
+            self.max_range_m > self.min_range_m && self.max_range_m <= 100.0,
+            "must exceed min_range_m and be at most 100",
+        )?;
+        check("camera.stereo.unit_m", self.unit_m, (0.0..=0.01).contains(&self.unit_m), R)?;
+        check("camera.stereo.edge_jump_m", self.edge_jump_m, self.edge_jump_m >= 0.0, R)?;
+        check("camera.stereo.edge_jump_rel", self.edge_jump_rel, self.edge_jump_rel >= 0.0, R)?;
+        check("camera.stereo.mixed_band_px", self.mixed_band_px as f64, self.mixed_band_px <= 8, R)?;
+        check("camera.stereo.mixed_fraction", self.mixed_fraction, (0.0..=1.0).contains(&self.mixed_fraction), R)?;
+        check(
+            "camera.stereo.grazing_start_deg",
+            self.grazing_start_deg,
+            (0.0..=90.0).contains(&self.grazing_start_deg),
+            R,
+        )?;
+        check(
+            "camera.stereo.grazing_end_deg",
+            self.grazing_end_deg,
+            self.grazing_end_deg > self.grazing_start_deg && self.grazing_end_deg <= 90.0,
+            "must exceed grazing_start_deg and be at most 90",
+        )?;
+        Ok(())
+    }
+
+    /// The model's depth RMS at distance `z_m` from disparity noise alone, metres:
+    /// `z² · s / (f · B)`.
+    pub fn depth_rms_m(&self, z_m: f64) -> f64 {
+        z_m * z_m * self.subpixel_rms_px / (self.focal_px * self.baseline_m)
+    }
+}
+
+/// What the depth model did to a frame (pixel counts on the rendered grid, before registration).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct DepthStats {
+    /// Pixels with a rendered surface.
+    pub surface: usize,
+    /// Dropped for range.
+    pub out_of_range: usize,
+    /// Invalid in the second imager's shadow.
+    pub shadow: usize,
+    /// Dropped at grazing incidence.
+    pub grazing: usize,
+    /// Given a mixed depth at a silhouette.
+    pub mixed: usize,
+    /// Registered pixels with a depth.
+    pub valid_out: usize,
+}
+
+/// A unit-variance, spatially correlated field: independent normals on a grid of spacing
+/// `cell_px` pixels, interpolated bilinearly and divided by the interpolation's standard
+/// deviation at each pixel (so every pixel has variance 1).
+pub(crate) fn correlated_field(width: usize, height: usize, cell_px: f64, rng: &mut SplitMix64) -> Vec<f32> {
+    let gw = (width as f64 / cell_px).ceil() as usize + 2;
+    let gh = (height as f64 / cell_px).ceil() as usize + 2;
+    let grid: Vec<f32> = (0..gw * gh).map(|_| rng.normal() as f32).collect();
+    let axis = |n: usize| -> Vec<(usize, f32, f32)> {
+        (0..n)
+            .map(|i| {
+                let g = (i as f64 + 0.5) / cell_px;
+                let k = g.floor();
+                let a = (g - k) as f32;
+                (k as usize, a, 1.0 / ((1.0 - a) * (1.0 - a) + a * a).sqrt())
+            })
+            .collect()
+    };
+    let (xs, ys) = (axis(width), axis(height));
+    let mut out = vec![0.0f32; width * height];
+    for (y, &(j, b, ny)) in ys.iter().enumerate() {
+        let (r0, r1) = (&grid[j * gw..(j + 1) * gw], &grid[(j + 1) * gw..(j + 2) * gw]);
+        let row = &mut out[y * width..(y + 1) * width];
+        for (o, &(i, a, nx)) in row.iter_mut().zip(xs.iter()) {
+            let top = r0[i] * (1.0 - a) + r0[i + 1] * a;
+            let bot = r1[i] * (1.0 - a) + r1[i + 1] * a;
+            *o = (top * (1.0 - b) + bot * b) * (nx * ny);
+        }
+    }
+    out
+}
+
+/// Minimum and maximum of the positive values of `z` within `r` pixels (a square window), per pixel;
+/// `(inf, 0)` where there are none.
+fn window_min_max(z: &[f32], w: usize, h: usize, r: usize) -> (Vec<f32>, Vec<f32>) {
+    let mut row_lo = vec![f32::INFINITY; w * h];
+    let mut row_hi = vec![0.0f32; w * h];
+    for y in 0..h {
+        let row = &z[y * w..(y + 1) * w];
+        for x in 0..w {
+            let (mut l, mut u) = (f32::INFINITY, 0.0f32);
+            for &v in &row[x.saturating_sub(r)..(x + r + 1).min(w)] {
+                if v > 0.0 {
+                    l = l.min(v);
+                    u = u.max(v);
+                }
+            }
+            row_lo[y * w + x] = l;
+            row_hi[y * w + x] = u;
+        }
+    }
+    let mut lo = vec![f32::INFINITY; w * h];
+    let mut hi = vec![0.0f32; w * h];
+    for y in 0..h {
+        for yy in y.saturating_sub(r)..(y + r + 1).min(h) {
+            let (src_lo, src_hi) = (&row_lo[yy * w..(yy + 1) * w], &row_hi[yy * w..(yy + 1) * w]);
+            let (dst_lo, dst_hi) = (&mut lo[y * w..(y + 1) * w], &mut hi[y * w..(y + 1) * w]);
+            for x in 0..w {
+                dst_lo[x] = dst_lo[x].min(src_lo[x]);
+                dst_hi[x] = dst_hi[x].max(src_hi[x]);
+            }
+        }
+    }
+    (lo, hi)
+}
+
+/// Invalid-pixel causes on the rendered grid.
+const OK: u8 = 0;
+const NONE: u8 = 1;
+const RANGE: u8 = 2;
+const SHADOW: u8 = 3;
+const GRAZING: u8 = 4;
+
+/// The depth model on one frame (module docs); returns the registered depth image and counts.
+/// Buffer lengths are the caller's to check ([`super::simulate_frame`] does).
+pub fn stereo_depth(
+    cfg: &StereoDepthConfig,
+    unit: &SensorUnit,
+    frame: &RenderedFrame<'_>,
+    seed: u64,
+    frame_index: u64,
+) -> (Vec<f32>, DepthStats) {
+    let (w, h) = (frame.width, frame.height);
+    let n = w * h;
+    let mut rng = SplitMix64::new(seed, &[TAG_DEPTH, frame_index]);
+    let mut stats = DepthStats::default();
+    let pts = frame.points_in_camera;
+    let nrm = frame.normals_in_camera;
+    let mut z: Vec<f32> = (0..n)
+        .map(|i| {
+            let v = pts[3 * i + 2];
+            if v.is_finite() && v > 0.0 {
+                v
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    let mut state = vec![OK; n];
+    for i in 0..n {
+        if z[i] <= 0.0 {
+            state[i] = NONE;
+        } else {
+            stats.surface += 1;
+            let zi = z[i] as f64;
+            if zi < cfg.min_range_m || zi > cfg.max_range_m {
+                state[i] = RANGE;
+                stats.out_of_range += 1;
+            }
+        }
+    }
+    // 2. The second imager's shadow, in the rendered grid (true colour focal length).
+    if cfg.shadow {
+        let fb = unit.colour_true.fx * cfg.baseline_m;
+        for y in 0..h {
+            let mut m = f64::INFINITY;
+            for x in (0..w).rev() {
+                let i = y * w + x;
+                if state[i] == NONE {
+                    continue;
+                }
+                let r = x as f64 - fb / z[i] as f64;
+                if r > m + 1e-3 {
+                    if state[i] == OK {
+                        state[i] = SHADOW;
+                        stats.shadow += 1;
+                    }
+                } else {
+                    m = r;
+                }
+            }
+        }
+    }
+    // 3. Grazing incidence (squared cosines: a square root only where a dropout is possible).
+    let (c0, c1) = (cfg.grazing_start_deg.to_radians().cos(), cfg.grazing_end_deg.to_radians().cos());
+    let c0_sq = (c0 * c0) as f32;
+    for i in 0..n {
+        if state[i] != OK {
+            continue;
+        }
+        let (px, py, pz) = (pts[3 * i], pts[3 * i + 1], pts[3 * i + 2]);
+        let (nx, ny, nz) = (nrm[3 * i], nrm[3 * i + 1], nrm[3 * i + 2]);
+        let dot = px * nx + py * ny + pz * nz;
+        let denom = (px * px + py * py + pz * pz) * (nx * nx + ny * ny + nz * nz);
+        if denom.is_nan() || denom <= 0.0 || denom.is_infinite() {
+            continue;
+        }
+        let cos_sq = dot * dot / denom;
+        if cos_sq < c0_sq {
+            let cos = (cos_sq as f64).sqrt();
+            let p_drop = ((c0 - cos) / (c0 - c1)).clamp(0.0, 1.0);
+            if rng.uniform() < p_drop {
+                state[i] = GRAZING;
+                stats.grazing += 1;
+            }
+        }
+    }
+    // 4. Mixed depths at silhouettes, from the true depths of the neighbourhood (separable
+    // min / max over the (2 band + 1)² window, valid depths only).
+    let band = cfg.mixed_band_px;
+    if band > 0 && cfg.mixed_fraction > 0.0 {
+        let (lo, hi) = window_min_max(&z, w, h, band);
+        for i in 0..n {
+            if state[i] != OK {
+                continue;
+            }
+            let (l, u) = (lo[i], hi[i]);
+            if ((u - l) as f64) > cfg.edge_jump_m + cfg.edge_jump_rel * l as f64 && rng.uniform() < cfg.mixed_fraction {
+                z[i] = l + (rng.uniform() as f32) * (u - l);
+                stats.mixed += 1;
+            }
+        }
+    }
+    // 5. Correlated disparity noise, then the unit's scale error.
+    let cell = cfg.correlation_px * unit.colour_true.fx / cfg.focal_px;
+    let field = correlated_field(w, h, cell.max(1.0), &mut rng);
+    let fb_d = cfg.focal_px * cfg.baseline_m;
+    for i in 0..n {
+        if state[i] != OK {
+            z[i] = 0.0;
+            continue;
+        }
+        let d = fb_d / z[i] as f64 + cfg.subpixel_rms_px * field[i] as f64;
+        z[i] = if d > 0.0 { (fb_d / d * unit.depth_scale) as f32 } else { 0.0 };
+    }
+    // 6. Registration to the colour image by the assumed calibration.
+    let out = register(cfg, unit, &z, w, h);
+    stats.valid_out = out.iter().filter(|v| **v > 0.0).count();
+    (out, stats)
+}
+
+/// Widening of each registered pixel's rectangle, pixels (no pinholes from rounding).
+const EPS: f64 = 0.02;
+
+/// Registration (step 6) and quantisation (step 7).
+fn register(cfg: &StereoDepthConfig, unit: &SensorUnit, z: &[f32], w: usize, h: usize) -> Vec<f32> {
+    let e = &unit.registration_error;
+    let r = Matrix3::new(e[0][0], e[0][1], e[0][2], e[1][0], e[1][1], e[1][2], e[2][0], e[2][1], e[2][2]);
+    let k = unit.depth_focal_ratio;
+    let [ox, oy] = unit.depth_pp_offset;
+    // Depth intrinsic error (x' = k x + o z) then the extrinsic rotation, as one matrix.
+    let m = r * Matrix3::new(k, 0.0, ox, 0.0, k, oy, 0.0, 0.0, 1.0);
+    let t = Vector3::new(e[0][3], e[1][3], e[2][3]);
+    let (kt, ka) = (&unit.colour_true, &unit.colour_assumed);
+    // m · (ray direction of continuous image point (u, v)) = u' · col0 + v' · col1 + col2.
+    let (c0, c1, c2) = (m.column(0).into_owned(), m.column(1).into_owned(), m.column(2).into_owned());
+    let col_dir: Vec<Vector3<f64>> = (0..=w).map(|x| c0 * ((x as f64 - kt.cx) / kt.fx)).collect();
+    let row_dir: Vec<Vector3<f64>> = (0..=h).map(|y| c1 * ((y as f64 - kt.cy) / kt.fy) + c2).collect();
+    let project = |dir: Vector3<f64>, zv: f64| -> Option<(f64, f64, f64)> {
+        let q = dir * zv + t;
+        if q.z <= 1e-6 {
+            return None;
+        }
+        let inv = 1.0 / q.z;
+        Some((ka.fx * q.x * inv + ka.cx, ka.fy * q.y * inv + ka.cy, q.z))
+    };
+    let mut out = vec![f32::INFINITY; w * h];
+    for y in 0..h {
+        for x in 0..w {
+            let zv = z[y * w + x];
+            if zv <= 0.0 {
+                continue;
+            }
+            let zv = zv as f64;
+            let (Some(a), Some(b)) =
+                (project(col_dir[x] + row_dir[y], zv), project(col_dir[x + 1] + row_dir[y + 1], zv))
+            else {
+                continue;
+            };
+            // Pixel (x, y) spans [x, x + 1) in continuous coordinates; fill the target pixels whose
+            // centres the projected corners enclose.
+            let zq = ((a.2 + b.2) * 0.5) as f32;
+            // A hair wider than the corners, so rounding leaves no pinholes between neighbours.
+            let x0 = round_fast(a.0.min(b.0) - EPS).max(0.0) as usize;
+            let x1 = round_fast(a.0.max(b.0) + EPS).clamp(0.0, w as f64) as usize;
+            let y0 = round_fast(a.1.min(b.1) - EPS).max(0.0) as usize;
+            let y1 = round_fast(a.1.max(b.1) + EPS).clamp(0.0, h as f64) as usize;
+            for ty in y0..y1 {
+                for o in &mut out[ty * w + x0.min(x1)..ty * w + x1] {
+                    if zq < *o {
+                        *o = zq;
+                    }
+                }
+            }
+        }
+    }
+    let q = cfg.unit_m;
+    for v in out.iter_mut() {
+        if !v.is_finite() {
+            *v = 0.0;
+        } else if q > 0.0 {
+            *v = ((*v as f64 / q + 0.5) as i64 as f64 * q) as f32;
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)] // tests may unwrap (STYLE.md 18)
+mod tests {
+    use super::super::Intrinsics;
+    use super::*;
+
+    const W: usize = 640;
+    const H: usize = 480;
+
+    fn exact_unit(k: Intrinsics) -> SensorUnit {
+        let mut e = [[0.0; 4]; 4];
+        for (i, row) in e.iter_mut().enumerate() {
+            row[i] = 1.0;
+        }
+        SensorUnit {
+            colour_assumed: k,
+            colour_true: k,
+            depth_scale: 1.0,
+            depth_focal_ratio: 1.0,
+            depth_pp_offset: [0.0, 0.0],
+            registration_error: e,
+        }
+    }
+
+    fn k() -> Intrinsics {
+        Intrinsics { fx: 433.0, fy: 433.0, cx: 320.0, cy: 240.0 }
+    }
+
+    /// A fronto-parallel plane at `z_plane`, with an optional box face at `z_box` over columns
+    /// `box_cols` and rows 100..380.
+    fn scene(z_plane: f32, z_box: Option<(f32, std::ops::Range<usize>)>) -> (Vec<f32>, Vec<f32>) {
+        let k = k();
+        let mut p = vec![0.0f32; 3 * W * H];
+        let mut nrm = vec![0.0f32; 3 * W * H];
+        for y in 0..H {
+            for x in 0..W {
+                let mut zv = z_plane;
+                if let Some((zb, cols)) = &z_box {
+                    if cols.contains(&x) && (100..380).contains(&y) {
+                        zv = *zb;
+                    }
+                }
+                let i = y * W + x;
+                p[3 * i] = ((x as f64 + 0.5 - k.cx) / k.fx) as f32 * zv;
+                p[3 * i + 1] = ((y as f64 + 0.5 - k.cy) / k.fy) as f32 * zv;
+                p[3 * i + 2] = zv;
+                nrm[3 * i + 2] = -1.0;
+            }
+        }
+        (p, nrm)
+    }
+
+    fn run(cfg: &StereoDepthConfig, p: &[f32], nrm: &[f32], seed: u64, frame: u64) -> (Vec<f32>, DepthStats) {
+        let f = RenderedFrame { width: W, height: H, points_in_camera: p, normals_in_camera: nrm, rgb: &[] };
+        stereo_depth(cfg, &exact_unit(k()), &f, seed, frame)
+    }
+
+    #[test]
+    fn plane_rms_follows_closed_form_and_is_correlated() {
+        let cfg = StereoDepthConfig { unit_m: 0.0, shadow: false, ..Default::default() };
+        for z0 in [0.3f32, 0.5, 0.7, 1.0] {
+            let (p, n) = scene(z0, None);
+            let mut sq = 0.0;
+            let mut count = 0usize;
+            let mut lag1 = 0.0;
+            let mut lag_n = 0usize;
+            for frame in 0..4 {
+                let (d, _) = run(&cfg, &p, &n, 11, frame);
+                for y in 20..H - 20 {
+                    for x in 20..W - 20 {
+                        let e = (d[y * W + x] - z0) as f64;
+                        sq += e * e;
+                        count += 1;
+                        let e1 = (d[y * W + x + 1] - z0) as f64;
+                        lag1 += e * e1;
+                        lag_n += 1;
+                    }
+                }
+            }
+            let rms = (sq / count as f64).sqrt();
+            let want = cfg.depth_rms_m(z0 as f64);
+            assert!((rms / want - 1.0).abs() < 0.1, "z {z0}: rms {rms} vs {want}");
+            // Neighbouring pixels are strongly correlated (correlation length > 1 px).
+            let rho = (lag1 / lag_n as f64) / (sq / count as f64);
+            assert!(rho > 0.6, "lag-1 correlation {rho}");
+        }
+    }
+
+    #[test]
+    fn correlation_decays_over_the_cell() {
+        let mut rng = SplitMix64::new(5, &[1]);
+        let f = correlated_field(W, H, 8.0, &mut rng);
+        let corr = |lag: usize| {
+            let (mut s, mut s0) = (0.0f64, 0.0f64);
+            for y in 0..H {
+                for x in 0..W - lag {
+                    s += (f[y * W + x] * f[y * W + x + lag]) as f64;
+                    s0 += (f[y * W + x] * f[y * W + x]) as f64;
+                }
+            }
+            s / s0
+        };
+        assert!(corr(1) > 0.9);
+        assert!(corr(4) > 0.3 && corr(4) < 0.8, "{}", corr(4));
+        assert!(corr(24).abs() < 0.1, "{}", corr(24));
+    }
+
+    #[test]
+    fn shadow_beside_a_step_edge() {
+        let cfg = StereoDepthConfig { mixed_band_px: 0, subpixel_rms_px: 0.0, ..Default::default() };
+        // A box face at 0.4 m in front of a plane at 0.6 m, columns 250..400.
+        let (p, n) = scene(0.6, Some((0.4, 250..400)));
+        let (d, stats) = run(&cfg, &p, &n, 1, 0);
+        // Hidden from the right imager (at +x): the background just left of the box, over
+        // f·B·(1/z_near − 1/z_far) = 433 · 0.05 · (2.5 − 1.667) = 18 px.
+        let width = 433.0 * 0.05 * (1.0 / 0.4 - 1.0 / 0.6);
+        let y = 240;
+        let invalid: Vec<usize> = (200..250).filter(|&x| d[y * W + x] == 0.0).collect();
+        assert!((invalid.len() as f64 - width).abs() <= 1.5, "{} vs {width}", invalid.len());
+        assert!(invalid.iter().all(|&x| x >= 230), "shadow sits next to the box: {invalid:?}");
+        // Right of the box nothing is hidden.
+        assert!((400..450).all(|x| d[y * W + x] > 0.0));
+        assert!(stats.shadow > 0);
+    }
+
+    #[test]
+    fn mixed_pixels_only_at_silhouettes() {
+        let cfg = StereoDepthConfig { subpixel_rms_px: 0.0, shadow: false, mixed_fraction: 1.0, ..Default::default() };
+        let (p, n) = scene(0.6, Some((0.4, 250..400)));
+        let (d, stats) = run(&cfg, &p, &n, 1, 0);
+        let y = 240;
+        // Mixed values lie between the two surfaces, only within one pixel of the edge.
+        for x in 0..W {
+            let v = d[y * W + x];
+            let near_edge = (248..=251).contains(&x) || (398..=401).contains(&x);
+            if !near_edge {
+                assert!((v - 0.6).abs() < 1e-3 || (v - 0.4).abs() < 1e-3, "x {x}: {v}");
+            } else {
+                assert!((0.399..=0.601).contains(&v), "x {x}: {v}");
+            }
+        }
+        assert!(stats.mixed > 0);
+    }
+
+    #[test]
+    fn range_limits() {
+        let cfg = StereoDepthConfig::default();
+        let (p, n) = scene(0.12, None);
+        let (d, stats) = run(&cfg, &p, &n, 1, 0);
+        assert!(d.iter().all(|v| *v == 0.0));
+        assert_eq!(stats.out_of_range, W * H);
+        let (p, n) = scene(3.5, None);
+        assert!(run(&cfg, &p, &n, 1, 0).0.iter().all(|v| *v == 0.0));
+        let (p, n) = scene(0.16, None);
+        let (d, _) = run(&cfg, &p, &n, 1, 0);
+        assert!(d.iter().filter(|v| **v > 0.0).count() > W * H * 99 / 100);
+    }
+
+    #[test]
+    fn grazing_surfaces_drop_out() {
+        let cfg = StereoDepthConfig::default();
+        let (p, mut n) = scene(0.5, None);
+        // Every normal at 88 degrees from its pixel's viewing ray.
+        let (c88, s88) = ((88f64).to_radians().cos(), (88f64).to_radians().sin());
+        for i in 0..W * H {
+            let r = Vector3::new(p[3 * i] as f64, p[3 * i + 1] as f64, p[3 * i + 2] as f64).normalize();
+            let u = r.cross(&Vector3::y()).normalize();
+            let nv = r * c88 + u * s88;
+            for a in 0..3 {
+                n[3 * i + a] = nv[a] as f32;
+            }
+        }
+        let (d, stats) = run(&cfg, &p, &n, 1, 0);
+        let c = 240 * W + 320;
+        assert_eq!(d[c], 0.0);
+        assert_eq!(stats.grazing, W * H);
+    }
+
+    #[test]
+    fn registration_error_shifts_depth_by_the_projected_offset() {
+        let cfg = StereoDepthConfig { subpixel_rms_px: 0.0, shadow: false, mixed_band_px: 0, ..Default::default() };
+        let (p, n) = scene(0.6, Some((0.4, 250..400)));
+        let mut unit = exact_unit(k());
+        unit.registration_error[0][3] = 0.004; // 4 mm along x
+        let f = RenderedFrame { width: W, height: H, points_in_camera: &p, normals_in_camera: &n, rgb: &[] };
+        let (d, _) = stereo_depth(&cfg, &unit, &f, 1, 0);
+        // The box's right edge moves by f · t / z = 433 · 0.004 / 0.4 = 4.3 px.
+        let y = 240;
+        let edge = (300..W).find(|&x| (d[y * W + x] - 0.4).abs() > 0.01).unwrap();
+        assert!((edge as i64 - 404).abs() <= 1, "edge at {edge}");
+    }
+
+    #[test]
+    fn deterministic_per_seed_and_frame() {
+        let cfg = StereoDepthConfig::default();
+        let (p, n) = scene(0.5, Some((0.3, 200..300)));
+        assert_eq!(run(&cfg, &p, &n, 4, 2).0, run(&cfg, &p, &n, 4, 2).0);
+        assert_ne!(run(&cfg, &p, &n, 4, 2).0, run(&cfg, &p, &n, 4, 3).0);
+    }
+}
