@@ -2,12 +2,12 @@
 
 ``python experiments/ablations.py associate [--seeds 0] [--workers 2] [--set k=v]``
     scenes × association modes (naive, iou, iou_np, iou_t, ensemble), parameterization off so only
-    association differs → ``reports/association.{md,json}`` (the paper's Table I layout: objects in
+    association differs → ``reports/association.json`` (page ``reports/pages/association.md``) (the paper's Table I layout: objects in
     the map vs ground truth, plus fragmentation, merges and purity from simulator ids).
 
 ``python experiments/ablations.py slam [--strategy object-driven] [--seeds 0] ...``
     scenes × pose sources (slam, kinematics) with the default exploration strategy →
-    ``reports/slam.{md,json}`` (ATE, RPE, lost frames). The SLAM expresses its map in the world by
+    ``reports/slam.json`` (ATE, RPE, lost frames). The SLAM expresses its map in the world by
     a robust fit to every view's kinematic prior, so its error falls with the number of views
     (Init alone: 4 views). Two absolute ATEs: ``ate_rmse_m`` scores the pose each frame was mapped
     with (online, causal: the first view can only be as good as its prior) and
@@ -16,7 +16,7 @@
 ``python experiments/ablations.py parameterize [--seeds 0] ...``
     scenes with the ensemble association and parameterization on; each run's map is evaluated
     after every stage (raw points, iForest, line alignment, refinement) →
-    ``reports/parameterization.{md,json}``.
+    ``reports/parameterization.json``.
 
 Detector noise: the defaults of ``experiments/configs/default.toml`` (5 % misses, 2 % box jitter,
 2 % label confusion, 0.05 false positives per frame), stated in each report.
@@ -235,7 +235,7 @@ POSE_SOURCES = ("slam", "kinematics")
 
 
 def slam(a: argparse.Namespace, command: str) -> int:
-    """Scenes × pose sources (Init strategy) → reports/slam.{md,json}."""
+    """Scenes × pose sources (Init strategy) → reports/slam.json."""
     jobs = [
         Job(sc, a.strategy, sd, tuple(a.config), (*a.set, f'pose_source="{ps}"'), {"pose_source": ps})
         for sc in scene_files()

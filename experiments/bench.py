@@ -1,5 +1,5 @@
 """``make bench``: every criterion benchmark of the core and every Python reference timing
-(``experiments/bench/*_refs.py``) in one run → ``reports/bench.json`` + ``reports/bench.md``.
+(``experiments/bench/*_refs.py``) in one run → ``reports/bench.json`` + ``reports/pages/bench.md``.
 
 bench.json = {"machine": str, "command": "make bench", "entries": {name: {"median_ms": float}}}.
 Criterion ids are the entry names; medians come from ``target/criterion/<id>/new/estimates.json``.

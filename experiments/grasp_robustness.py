@@ -1,7 +1,7 @@
 """Grasp success against a map centre error of known size, with and without contact retries.
 
-    python experiments/grasp_robustness.py --run [--errors 0 3 6 9] [--retries 0 2] [--seeds 0 1 2] --out reports/grasping_robustness
-    python experiments/grasp_robustness.py --manifest runs/X/rob.json [--manifest ...] --out reports/grasping_robustness
+    python experiments/grasp_robustness.py --run [--errors 0 3 6 9] [--retries 0 2] [--seeds 0 1 2] --out runs/grasp_robustness/report
+    python experiments/grasp_robustness.py --manifest runs/X/rob.json [--manifest ...] --out runs/grasp_robustness/report
 
 ``--run`` grasps on the ground-truth maps of the exploration benchmark's scenes (the map's only
 error is the one injected) with ``experiments/grasp.py --sources ground_truth --centre-error-mm D

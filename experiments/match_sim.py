@@ -20,7 +20,7 @@ truth through each run's evaluation (``metrics.json`` objects: ``gt_id`` ↔ ``e
 
 The result is merged into ``reports/scene_matching.json`` (keys ``sim_pairs``,
 ``sim_pairs_protocol``, ``sim_pairs_command``; part (a)'s ``rows`` are kept) and into the section
-of ``reports/scene_matching.md`` between the ``sim_pairs`` markers (``make match`` keeps both).
+of ``reports/pages/scene_matching.md`` between the ``sim_pairs`` markers (``make match`` keeps both).
 ``--reuse`` takes the run folders listed in the existing report when they are still complete.
 """
 

@@ -1,7 +1,7 @@
 """Signed size and centre errors of the matched estimates of a benchmark sweep, per strategy and
 shape: which way the estimator is biased, not only how much (3D IoU hides the sign).
 
-    python experiments/size_errors.py reports/exploration_fk/exploration.json [--out FILE.md]
+    python experiments/size_errors.py reports/exploration.json [--out FILE.md]
 
 Reads each row's run folder (``metrics.json`` for the matches, ``map.json`` for the estimates) and
 the scene files for the ground truth. Millimetres; mean / population std over matched objects.

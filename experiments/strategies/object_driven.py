@@ -6,7 +6,7 @@ it. Start here when a strategy should keep the discovery behaviour of the built-
 ``objslam.strategy.built_in_scores`` gives the built-in's candidates and scores at the step (its
 docs list the rules); ``take_best`` takes the best reachable one, as the built-in does. With the
 same seed it chooses the same views as the built-in strategy (``tests/test_strategy.py``,
-``reports/exploration_python_strategy/default_discovery/``). Its config:
+``studies/python_strategy/README.md``). Its config:
 ``experiments/configs/strategies/object-driven-py.toml``.
 """
 

@@ -16,7 +16,7 @@
 //!   scene02, seed 3, 35° camera, with one return enough a cup seen untruncated in only the last
 //!   two frames of the episode was never confirmed, its cells counted seen, and the session
 //!   stopped; a pilot, not kept as a report: the effect on the benchmark is the "objects never
-//!   mapped" table of `reports/exploration_narrow_fov`).
+//!   mapped" table of `studies/narrow_fov/README.md`).
 //! - The discovery gain of a candidate view: D(x) = (cell_m / object cell)² · N(x) bits, where
 //!   N(x) = the unseen, not-known cells whose centre projects into the candidate's image within
 //!   range and whose ray from the camera is not blocked by the table or a mapped object. The unit is

@@ -31,7 +31,7 @@
 //!
 //! The top of that extent is the highest point, which depth noise biases upwards: the maximum
 //! of the top face's thousands of noisy returns lies about 3 σ above the face (measured on the
-//! exploration benchmark with exact camera poses, `reports/exploration_fk/size_errors.md`;
+//! exploration benchmark with exact camera poses, `studies/size_errors/README.md`;
 //! 0.5 mm + 1 mm-quantised depth noise: cylinders 1.5 mm too tall, every strategy; cuboids, whose
 //! extent comes from the forest and the refinement, 0.2 mm). With [`CylinderFitConfig::top_from_face`] the top is instead the median
 //! height of the top face's points: those in the top band and horizontally inside
