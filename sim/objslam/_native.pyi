@@ -173,6 +173,14 @@ def ar_run(
 ) -> tuple[str, np.ndarray, np.ndarray | None]: ...
 def match_maps(prior_map_json: str, query_map_json: str, config_json: str | None = None) -> dict[str, Any]: ...
 def relocalise(prior_map_json: str, query_map_json: str, config_json: str | None = None) -> dict[str, Any]: ...
+def sensor_model(
+    request_json: str,
+    points: npt.NDArray[np.float32] | None = None,
+    normals: npt.NDArray[np.float32] | None = None,
+    rgb: npt.NDArray[np.uint8] | None = None,
+) -> tuple[npt.NDArray[np.float32] | None, npt.NDArray[np.uint8] | None, str]:
+    """The RGB-D sensor model (``objslam_core::sensor``) on one rendered frame: ``(depth, rgb,
+    info_json)``; without ``points`` only the unit's calibration state (``info_json["unit"]``)."""
 
 class PlanningError(ObjslamError): ...
 
