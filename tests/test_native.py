@@ -69,7 +69,7 @@ def test_depth_box_gives_object_at_expected_place(tmp_path: Path) -> None:
     objslam.save_map(m.map_json(), str(path))
     assert json.loads(objslam.load_map(str(path))) == json.loads(m.map_json())
     bad = tmp_path / "bad.json"
-    bad.write_text(m.map_json().replace('"version": 1', '"version": 7'))
+    bad.write_text(m.map_json().replace('"version": 2', '"version": 7'))
     with pytest.raises(objslam.MapFileError, match="version 7"):
         objslam.load_map(str(bad))
     with pytest.raises(objslam.MapFileError):
