@@ -22,6 +22,7 @@ fn grey_image(obj: &Bound<'_, PyAny>) -> PyResult<GreyImage> {
         .extract()
         .map_err(|_| pyo3::exceptions::PyTypeError::new_err("grey: expected a uint8 array of shape (H, W)"))?;
     let a = arr.as_array();
+    crate::check_elements("grey", a.shape())?;
     let (h, w) = (a.shape()[0], a.shape()[1]);
     GreyImage::new(w as u32, h as u32, a.iter().copied().collect()).map_err(input_err)
 }
@@ -55,9 +56,26 @@ fn call_reachable(
     }
 }
 
+/// `reachable` must be callable (a function of a 4x4 `world_from_camera` returning a bool).
+fn check_callable(reachable: &Bound<'_, PyAny>) -> PyResult<()> {
+    if reachable.is_callable() {
+        Ok(())
+    } else {
+        Err(pyo3::exceptions::PyTypeError::new_err(format!(
+            "reachable: expected a callable taking a 4x4 world_from_camera and returning a bool, got {}",
+            reachable.get_type()
+        )))
+    }
+}
+
 /// A list of 4x4 views; the error names the index.
 fn view_list(views: &[Bound<'_, PyAny>]) -> PyResult<Vec<Se3>> {
     views.iter().enumerate().map(|(i, v)| pose(v, "views").map_err(|e| input_err(format!("views[{i}]: {e}")))).collect()
+}
+
+/// A map object id from Python; the error names the argument.
+fn object_id(id: i64, field: &str) -> PyResult<u32> {
+    u32::try_from(id).map_err(|_| input_err(format!("{field}: an object id is in 0..={}, got {id}", u32::MAX)))
 }
 
 /// A candidate view and the map object it was sampled around.
@@ -80,11 +98,10 @@ impl ActiveMapperPy {
         table: (f64, f64, f64, f64),
         tracker_config_json: Option<&str>,
     ) -> PyResult<Self> {
-        let tracker: Option<TrackerConfig> = tracker_config_json
-            .map(|t| serde_json::from_str(t).map_err(|e| json_err("tracker_config", e)))
-            .transpose()?;
-        let mc: PipelineConfig = serde_json::from_str(mapper_config_json).map_err(|e| json_err("mapper_config", e))?;
-        let ac: ActiveConfig = serde_json::from_str(active_config_json).map_err(|e| json_err("active_config", e))?;
+        let tracker: Option<TrackerConfig> =
+            tracker_config_json.map(|t| crate::parse_json("tracker_config", t)).transpose()?;
+        let mc: PipelineConfig = crate::parse_json("mapper_config", mapper_config_json)?;
+        let ac: ActiveConfig = crate::parse_json("active_config", active_config_json)?;
         let rect = TableRect { center_m: [table.0, table.1], size_m: [table.2, table.3], height_m: 0.0 };
         Ok(Self { system: System::new(mc, ac, tracker, rect).map_err(input_err)? })
     }
@@ -141,6 +158,7 @@ impl ActiveMapperPy {
     ) -> PyResult<Bound<'py, PyDict>> {
         let cam = camera(intrinsics, width, height)?;
         let current = pose(world_from_camera, "world_from_camera")?;
+        check_callable(reachable)?;
         let callback_error: std::cell::RefCell<Option<PyErr>> = std::cell::RefCell::new(None);
         let check = |p: &Se3| -> bool { call_reachable(py, reachable, p, &callback_error) };
         let decision = self.system.next_view(&cam, &current, &check).map_err(input_err)?;
@@ -184,7 +202,8 @@ impl ActiveMapperPy {
     /// `around` (map object ids; None = every object), without the reachability filter: a list
     /// of (4x4 `world_from_camera`, target object id).
     #[pyo3(signature = (*, around = None))]
-    fn candidate_views<'py>(&self, py: Python<'py>, around: Option<Vec<u32>>) -> PyResult<Vec<TargetedView<'py>>> {
+    fn candidate_views<'py>(&self, py: Python<'py>, around: Option<Vec<i64>>) -> PyResult<Vec<TargetedView<'py>>> {
+        let around = around.map(|ids| ids.into_iter().map(|i| object_id(i, "around")).collect::<PyResult<Vec<_>>>()).transpose()?;
         let s = &self.system;
         let views = s.session().candidate_views(&s.map(), around.as_deref()).map_err(input_err)?;
         Ok(views.iter().map(|v| (matrix_py(py, &v.world_from_camera), v.target_object)).collect())
@@ -291,6 +310,7 @@ impl ActiveMapperPy {
         limit: usize,
     ) -> PyResult<usize> {
         let cam = camera(intrinsics, width, height)?;
+        check_callable(reachable)?;
         let callback_error: std::cell::RefCell<Option<PyErr>> = std::cell::RefCell::new(None);
         let check = |p: &Se3| -> bool { call_reachable(py, reachable, p, &callback_error) };
         let s = &self.system;
@@ -379,8 +399,8 @@ impl ActiveMapperPy {
     }
 
     /// The surviving object id of any id returned by `update` (follows duplicate merges).
-    fn resolve_id(&self, id: u32) -> u32 {
-        self.system.pipeline().resolve_id(id)
+    fn resolve_id(&self, id: i64) -> PyResult<u32> {
+        Ok(self.system.pipeline().resolve_id(object_id(id, "id")?))
     }
 
     /// Association metrics (JSON) from (object id, GT id or None) pairs of every assigned detection;

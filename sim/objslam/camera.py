@@ -173,6 +173,12 @@ class CameraConfig:
             raise ValueError(f"camera.fovy_deg: {self.fovy_deg} outside [5, 150]")
         if not (0 < self.near_m < self.far_m):
             raise ValueError("camera.near_m/far_m: need 0 < near < far")
+        for key, v in (
+            ("camera.depth_noise.sigma_rel", self.depth_noise.sigma_rel),
+            ("camera.depth_noise.quantisation_m", self.depth_noise.quantisation_m),
+        ):
+            if not (math.isfinite(v) and v >= 0):
+                raise ValueError(f"{key}: {v} must be a finite number ≥ 0 (0 turns it off)")
         if self.model not in CAMERA_MODELS:
             raise ValueError(f"camera.model: unknown {self.model!r}; known: {', '.join(CAMERA_MODELS)}")
         for key, v in (("camera.stereo.mixed_band_px", self.stereo.mixed_band_px), ("camera.colour.max_blur_taps", self.colour.max_blur_taps)):
