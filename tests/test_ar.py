@@ -66,7 +66,8 @@ def test_box_behind_a_box_loses_exactly_the_projected_overlap() -> None:
     assert masks[0]["silhouette_px"] == silhouette == int((coverage[0] > 0).sum())
     assert masks[0]["visible_px"] == silhouette - hidden == int((coverage[0] == 2).sum())
     assert depth.shape == (480, 640) and depth[240, 320] == pytest.approx(0.8, abs=1e-6)
-    assert depth[5, 5] == pytest.approx(1.0, abs=1e-6)  # the table
+    assert depth[100, 100] == pytest.approx(1.0, abs=1e-6)  # the table
+    assert depth[5, 5] == 0.0  # beyond its edge
 
 
 def test_pick_fires_the_class_event_and_drop_rests_on_top() -> None:
