@@ -1,5 +1,5 @@
 """``make ar``: augmented reality on maps built by exploration episodes, measured against the
-simulator's truth → ``reports/ar.{md,json}``.
+simulator's truth → ``reports/ar.json`` (page ``reports/pages/ar.md``).
 
 For every scene × seed an object-driven episode builds the object map (or ``--runs`` reuses run
 folders). Then, in a fresh simulator world of the same scene (objects settled as in the episode):
@@ -30,7 +30,6 @@ import json
 import math
 import shlex
 import statistics
-import subprocess
 import sys
 from datetime import datetime, timezone
 from pathlib import Path
@@ -42,12 +41,13 @@ from objslam import _native
 from objslam.camera import SAPIEN_FROM_CV
 from objslam.config import load_run_config, to_dict
 from objslam.episode import run_episode
+from objslam.provenance import commit, report_files
 from objslam.scene import gt_objects, load_scene
 from objslam.world import SimWorld, look_at
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "experiments"))
-from bench import machine
+from objslam.provenance import machine
 
 VIEW_DISTANCE_M = 0.40
 """Horizontal distance from the looked-at object to the AR camera, metres."""
@@ -65,16 +65,6 @@ SLIDE_START_M = 0.10
 """Free distance between the sliding box's start and the map object's side, metres."""
 MATCH_RADIUS_M = 0.05
 """A map object is the true object of the same class with the nearest centre within this, metres."""
-
-
-def commit_id() -> str:
-    def git(*args: str) -> str:
-        return subprocess.run(
-            ["git", *args], check=False, cwd=REPO, capture_output=True, text=True
-        ).stdout.strip()
-
-    head = git("rev-parse", "--short", "HEAD") or "unknown"
-    return head + ("-dirty" if git("status", "--porcelain", "--untracked-files=no") else "")
 
 
 def footprint_radius(o: dict[str, Any]) -> float:
@@ -404,7 +394,7 @@ def write_reports(
         and s["median_rest_error_cm"] <= 1.0,
     }
     report = {
-        "commit": commit_id(),
+        "commit": commit(),
         "command": command,
         "machine": machine(),
         "date": datetime.now(timezone.utc).strftime("%Y-%m-%d"),
@@ -414,7 +404,7 @@ def write_reports(
         "rows": rows,
     }
     out.mkdir(parents=True, exist_ok=True)
-    (out / "ar.json").write_text(json.dumps(report, indent=2) + "\n")
+    (report_files(out, "ar")[0]).write_text(json.dumps(report, indent=2) + "\n")
     lines = [
         "# Augmented reality on the object map, against the simulator's truth",
         "",
@@ -455,9 +445,9 @@ def write_reports(
         )
     lines += [
         "",
-        "Time per AR frame: criterion entry `ar_frame_640x480` in `reports/bench.md` (`make bench`).",
+        "Time per AR frame: criterion entry `ar_frame_640x480` in `reports/bench.json` (`make bench`).",
     ]
-    (out / "ar.md").write_text("\n".join(lines) + "\n")
+    (report_files(out, "ar")[1]).write_text("\n".join(lines) + "\n")
     return report
 
 
@@ -525,7 +515,7 @@ def main(argv: list[str] | None = None) -> int:
             rd, map_json = str(result.run_dir), result.map_json
         else:
             map_json = (Path(rd) / "map.json").read_text()
-        images = Path(a.out) / "ar_images" if len(rows) < a.images else None
+        images = Path(a.out) / "pages" / "ar_images" if len(rows) < a.images else None
         row = evaluate(cfg, map_json, rd, images)
         rows.append(row)
         configs.append(to_dict(cfg))

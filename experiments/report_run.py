@@ -15,10 +15,9 @@ import tomllib
 
 REPO = Path(__file__).resolve().parents[1]
 
-from bench import machine
 from objslam.cli import HelpFormatter
 from objslam.episode import format_table
-from objslam.provenance import provenance, report_files
+from objslam.provenance import machine, provenance, report_files
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -1,5 +1,5 @@
 """``make sensor``: the depth sensor's measured error against distance, per world-model preset,
-from real SAPIEN renders → ``reports/sensor.{md,json}``.
+from real SAPIEN renders → ``reports/sensor.json`` (page ``reports/pages/sensor.md``).
 
 For each preset (``realistic``: the D435-class model of ``objslam_core::sensor``; ``ideal``: exact
 depth with 0.1 % noise) the hand camera looks straight down at the table of a scene from
@@ -34,7 +34,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import subprocess
 import sys
 from pathlib import Path
 from typing import Any
@@ -42,7 +41,7 @@ from typing import Any
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench import machine
+from objslam.provenance import commit, machine, report_files
 
 REPO = Path(__file__).resolve().parents[1]
 #: Table pixels this far from a silhouette are "plane" pixels.
@@ -56,16 +55,6 @@ EXPLAINED_PX = 6
 EDGE_JUMP_M = 0.01
 #: D435 figures (core/src/sensor/mod.rs cites them): focal at 640x480, baseline, subpixel RMS.
 D435_FOCAL_PX, D435_BASELINE_M, D435_SUBPIXEL_PX = 383.0, 0.050, 0.08
-
-
-def commit() -> str:
-    """``git rev-parse --short HEAD``, with ``-dirty`` when the tree has changes."""
-    try:
-        head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], check=False, cwd=REPO, capture_output=True, text=True).stdout
-        dirty = subprocess.run(["git", "status", "--porcelain"], check=False, cwd=REPO, capture_output=True, text=True).stdout
-    except OSError:
-        return "unknown"
-    return head.strip() + ("-dirty" if dirty.strip() else "")
 
 
 def _dilate(mask: np.ndarray, r: int) -> np.ndarray:
@@ -204,7 +193,7 @@ def measure(preset: str, scene: str, seed: int, distances: list[float], frames: 
 def write_report(out: Path, result: dict) -> None:
     """``sensor.json`` and ``sensor.md``."""
     out.mkdir(parents=True, exist_ok=True)
-    (out / "sensor.json").write_text(json.dumps(result, indent=1) + "\n")
+    (report_files(out, "sensor")[0]).write_text(json.dumps(result, indent=1) + "\n")
     lines = [
         "# Depth sensor error against distance, per world-model preset",
         "",
@@ -257,7 +246,7 @@ def write_report(out: Path, result: dict) -> None:
         "The prior's pose error (arm calibration model) is reported by the arm model's experiment.",
         "",
     ]
-    (out / "sensor.md").write_text("\n".join(lines))
+    (report_files(out, "sensor")[1]).write_text("\n".join(lines))
 
 
 def checks(rows: list[dict]) -> list[dict]:
@@ -300,7 +289,7 @@ def main(argv: list[str] | None = None) -> int:
     }
     result["checks"] = checks(rows)
     write_report(Path(a.out), result)
-    print(Path(a.out, "sensor.md").read_text())
+    print(report_files(a.out, "sensor")[1].read_text())
     return 0 if all(c["ok"] for c in result["checks"]) else 1
 
 

@@ -341,3 +341,43 @@ def test_a_value_the_core_refuses_is_named_as_written_before_any_folder(tmp_path
     with pytest.raises(ConfigError, match=r"explore\.done_occupied_ratio"):
         run_episode(cfg, progress=False)
     assert not any(tmp_path.iterdir())
+
+
+def _small_mapper():
+    return _native.ActiveMapper(mapper_config_json="{}", active_config_json="{}", table=(0.5, 0.0, 0.8, 1.2))
+
+
+def test_active_mapper_arguments_are_checked_by_name() -> None:
+    m = _small_mapper()
+    k = np.array([[300.0, 0, 160], [0, 300.0, 120], [0, 0, 1]])
+    with pytest.raises(TypeError, match="reachable: expected a callable"):
+        m.next_view(intrinsics=k, width=320, height=240, world_from_camera=np.eye(4), reachable=3)
+    with pytest.raises(_native.InputError, match="id: an object id"):
+        m.resolve_id(-1)
+    with pytest.raises(_native.InputError, match="around: an object id"):
+        m.candidate_views(around=[-1])
+    with pytest.raises(_native.InputError, match="active_config"):
+        _native.ActiveMapper(
+            mapper_config_json="{}", active_config_json='{"explore": {"max_views": "ten"}}', table=(0.5, 0.0, 0.8, 1.2)
+        )
+
+
+def test_a_broadcast_grey_image_is_refused_before_it_is_copied() -> None:
+    m = _small_mapper()
+    k = np.array([[300.0, 0, 160], [0, 300.0, 120], [0, 0, 1]])
+    huge = np.broadcast_to(np.zeros(1, dtype=np.uint8), (100_000, 100_000))
+    with pytest.raises(_native.InputError, match="grey"):
+        m.update(
+            index=0,
+            intrinsics=k,
+            depth=np.zeros((240, 320), dtype=np.float32),
+            world_from_camera=np.eye(4),
+            detections=[],
+            grey=huge,
+        )
+
+
+@pytest.mark.parametrize("value", ["-0.001", "nan"])
+def test_impossible_depth_noise_is_a_config_error(value: str) -> None:
+    with pytest.raises(ConfigError, match="camera.depth_noise.sigma_rel"):
+        load_run_config(overrides=[f"camera.depth_noise.sigma_rel={value}"])
