@@ -152,9 +152,10 @@ def test_hard_and_test_seeds_differ() -> None:
     assert len(HARD) >= 7 and len(TEST) >= 7 and not hard & test
 
 
-SMALL = CameraConfig(width=320, height=240, depth_noise=DepthNoiseConfig(0.0, 0.0))
+SMALL = CameraConfig(width=320, height=240, model="ideal", depth_noise=DepthNoiseConfig(0.0, 0.0))
 
 
+@pytest.mark.slow
 def test_mesh_scene_renders_and_depth_matches_the_ground_truth() -> None:
     """A scene of four meshes in SAPIEN: each is visible, stands where its file says, and the points
     its depth pixels back-project to lie inside its ground-truth primitive (grown by 4 mm for the
