@@ -11,7 +11,7 @@ use objslam_core::frame::GreyImage;
 use objslam_core::geometry::Se3;
 use objslam_core::map::EstimateStage;
 use objslam_core::pipeline::{MapPointObservation, ObjectPipeline, PipelineConfig, PipelineError};
-use objslam_core::slam::{ate_rmse_m, rpe, TrackInput, Tracker, TrackerConfig};
+use objslam_core::slam::{ate_rmse_m, rpe, PoseSource, TrackInput, Tracker, TrackerConfig};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
@@ -122,9 +122,10 @@ impl ActiveMapperPy {
     }
 
     /// Fuse one frame into the map and the surface grids; returns per-detection object ids.
-    /// With a tracker, `world_from_camera` is the forward-kinematics prior and the tracked pose is
-    /// used (`grey` required); `world_from_camera_gt` (evaluation only: ATE / RPE, and the
-    /// `ground_truth` pose source) and `view_index` (per-view calibration bias) feed the tracker.
+    /// With a tracker, `world_from_camera` is the kinematic prior (used as given) and the tracked
+    /// pose is used (`grey` required); `view_index` (one per arm move) feeds the tracker;
+    /// `world_from_camera_gt` is for ATE / RPE and reaches the tracker only under the
+    /// `ground_truth` pose source.
     #[pyo3(signature = (*, index, intrinsics, depth, world_from_camera, detections, grey = None,
                         world_from_camera_gt = None, view_index = 0))]
     #[allow(clippy::too_many_arguments)]
@@ -145,14 +146,15 @@ impl ActiveMapperPy {
         let mut map_points: Option<Vec<MapPointObservation>> = None;
         if let Some(tracker) = self.tracker.as_mut() {
             let g = grey.as_ref().ok_or_else(|| input_err("grey: required when a tracker is configured"))?;
+            let oracle = gt.filter(|_| tracker.config().pose_source == PoseSource::GroundTruth);
             let out = tracker
                 .track(&TrackInput {
                     grey: g,
                     depth: &frame.depth,
                     camera: &frame.camera,
-                    world_from_camera_fk: frame.world_from_camera,
+                    world_from_camera_prior: frame.world_from_camera,
                     view_index,
-                    world_from_camera_gt: gt,
+                    world_from_camera_oracle: oracle,
                 })
                 .map_err(input_err)?;
             frame.world_from_camera = out.world_from_camera;

@@ -17,7 +17,7 @@ use anyhow::{anyhow, Context, Result};
 use nalgebra::{Matrix3, Matrix4, Vector3};
 use objslam_core::frame::{DepthImage, GreyImage};
 use objslam_core::geometry::{se3_from_matrix, PinholeCamera, Se3};
-use objslam_core::slam::{ate_rmse_m, rpe, TrackInput, Tracker, TrackerConfig};
+use objslam_core::slam::{ate_rmse_m, rpe, PoseSource, TrackInput, Tracker, TrackerConfig};
 
 fn mat4(v: &serde_json::Value) -> Result<Matrix4<f64>> {
     let a = v.as_array().ok_or_else(|| anyhow!("pose is not an array"))?;
@@ -103,9 +103,9 @@ fn main() -> Result<()> {
             grey: &grey,
             depth: &depth,
             camera: &camera,
-            world_from_camera_fk: fk,
+            world_from_camera_prior: fk,
             view_index: view,
-            world_from_camera_gt: Some(gt),
+            world_from_camera_oracle: (config.pose_source == PoseSource::GroundTruth).then_some(gt),
         })?;
         if verbose {
             let err = (out.world_from_camera.translation.vector - gt.translation.vector).norm() * 1e3;
