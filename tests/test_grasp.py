@@ -15,7 +15,6 @@ from objslam.world import READY_QPOS, panda_urdf_path
 
 from .conftest import SCENES
 
-
 #: A robot exactly like its model (the grasp mechanics tested here, not the arm's accuracy).
 EXACT_ROBOT = ["robot.hand_eye_trans_m=0", "robot.hand_eye_rot_deg=0", "robot.joint_offset_deg=0",
                "robot.time_offset_max_s=0"]
