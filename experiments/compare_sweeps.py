@@ -24,7 +24,7 @@ METRICS = (
     ("iou3d", ".3f"),
     ("cde_cm", ".2f"),
     ("yae_deg", ".2f"),
-    ("iou3d_aligned", ".3f"),
+    ("iou3d_oracle_aligned", ".3f"),
     ("views", ".1f"),
     ("path_length_m", ".2f"),
     ("ate_mm", ".2f"),

@@ -35,7 +35,8 @@ from objslam.provenance import provenance, report_files
 
 REPO = Path(__file__).resolve().parents[1]
 SOURCES = ("estimated", "ground_truth", "init_only")
-CAUSES = ("no_ik", "no_path", "too_wide", "collided", "missed", "slipped", "wrong_object", "phantom", "not_found", "not_in_map")
+CAUSES = ("no_ik", "no_path", "too_wide", "collided", "missed", "slipped", "wrong_object", "phantom", "not_found", "not_in_map",
+          "wrongly_skipped")
 
 
 def perturb_centres(map_objects: list[dict], error_mm: float, seed: int) -> list[dict]:

@@ -48,8 +48,8 @@ def test_a_rigidly_shifted_true_map_is_perfect_after_offset_removal() -> None:
     assert ev["mean"]["iou3d"] < 0.9  # a 5.4 mm shift costs small objects a lot of overlap
     assert ev["mean"]["cde_cm"] == pytest.approx(np.linalg.norm(shift) * 100, abs=1e-9)
     al = offset_removed(gt, mp, ev["objects"])
-    assert al["iou3d_aligned"] == pytest.approx(1.0, abs=1e-9)
-    assert al["cde_aligned_cm"] == pytest.approx(0.0, abs=1e-9)
+    assert al["iou3d_oracle_aligned"] == pytest.approx(1.0, abs=1e-9)
+    assert al["cde_oracle_aligned_cm"] == pytest.approx(0.0, abs=1e-9)
     assert al["map_offset_mm"] == pytest.approx(np.linalg.norm(shift) * 1000, abs=1e-9)
     assert mp == before  # the input map is not modified
 
@@ -63,7 +63,7 @@ def test_offset_is_the_median_so_one_wrong_object_does_not_move_it() -> None:
     ev = json.loads(_native.evaluate_map(json.dumps(gt), json.dumps(mp)))
     al = offset_removed(gt, mp, ev["objects"])
     assert al["map_offset_mm"] == pytest.approx(3.0, abs=1e-9)
-    assert al["iou3d_aligned"] < 1.0
+    assert al["iou3d_oracle_aligned"] < 1.0
 
 
 def test_no_matched_object_gives_no_aligned_metrics() -> None:
@@ -71,8 +71,8 @@ def test_no_matched_object_gives_no_aligned_metrics() -> None:
     empty = {"format": "objslam-map", "version": 1, "objects": [], "next_id": 0}
     ev = json.loads(_native.evaluate_map(json.dumps(gt), json.dumps(empty)))
     assert offset_removed(gt, empty, ev["objects"]) == {
-        "iou3d_aligned": None,
-        "cde_aligned_cm": None,
+        "iou3d_oracle_aligned": None,
+        "cde_oracle_aligned_cm": None,
         "map_offset_mm": None,
     }
 

@@ -15,11 +15,15 @@ from objslam.world import READY_QPOS, panda_urdf_path
 
 from .conftest import SCENES
 
+#: A robot exactly like its model (the grasp mechanics tested here, not the arm's accuracy).
+EXACT_ROBOT = ["robot.hand_eye_trans_m=0", "robot.hand_eye_rot_deg=0", "robot.joint_offset_deg=0",
+               "robot.time_offset_max_s=0"]
+
 
 @pytest.fixture(scope="module")
 def scene01_session(ci_overlay):
     scene = load_scene(SCENES[0])
-    cfg = load_run_config(overlays=[ci_overlay], overrides=[], strategy="init")
+    cfg = load_run_config(overlays=[ci_overlay], overrides=EXACT_ROBOT, strategy="init")
     return scene, cfg
 
 
@@ -96,7 +100,7 @@ def test_an_object_blocked_by_a_neighbour_is_grasped_once_the_neighbour_is_set_a
     # body reaches the can, and along its 15 cm side it does not fit. With the true poses as the map
     # it has no collision-free grasp until the can has been grasped and set aside.
     scene = load_scene(SCENES[5])
-    cfg = load_run_config(overlays=[ci_overlay], overrides=[], strategy="init")
+    cfg = load_run_config(overlays=[ci_overlay], overrides=EXACT_ROBOT, strategy="init")
     gt_map = [{**g, "n_observations": 0} for g in gt_objects(scene)]
     book = next(g["id"] for g in gt_map if g["label"] == "book")
     fixed = {r["gt_id"]: r for r in run_grasp_session(scene, cfg, gt_map, GraspRunConfig(defer_unreachable=False))}
@@ -179,9 +183,11 @@ def test_register_local_removes_the_local_maps_common_offset() -> None:
 def test_a_finger_landing_on_the_rim_moves_the_hand_over_and_the_grasp_succeeds(ci_overlay, retries) -> None:
     # scene03's 7.4 cm cup leaves the open fingers 3 mm a side. A map centre 5 mm off along the
     # closing axis puts a finger on its rim: blind, the approach collides; with contact retries the
-    # touch stops the descent, the hand moves towards the touched side and the grasp lifts the cup.
+    # touch (felt through the external wrench estimate: the hand stalls, the upward force rises, its
+    # moment says which side) stops the descent, the hand moves towards the touched side and the
+    # grasp lifts the cup.
     scene = load_scene(SCENES[2])
-    cfg = load_run_config(overlays=[ci_overlay], overrides=[], strategy="init")
+    cfg = load_run_config(overlays=[ci_overlay], overrides=EXACT_ROBOT, strategy="init")
     session = GraspSession(scene, cfg, GraspRunConfig(contact_retries=retries))
     gt = gt_objects(scene, session.world.ground_truth())
     cup = next(g for g in gt if g["label"] == "cup" and 2 * g["geometry"]["half_extents"][0] > 0.072)

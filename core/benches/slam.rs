@@ -17,7 +17,9 @@ use criterion::{criterion_group, criterion_main, Criterion};
 use nalgebra::Point3;
 use objslam_core::geometry::PinholeCamera;
 use objslam_core::slam::synthetic::{look_at, shapes_texture, TabletopScene};
-use objslam_core::slam::{OrbConfig, OrbExtractor, TrackInput, Tracker, TrackerConfig};
+use objslam_core::slam::{
+    OrbConfig, OrbExtractor, PriorNoiseConfig, SyntheticPriorError, TrackInput, Tracker, TrackerConfig,
+};
 
 /// Frames cycled through by the ORB benchmark (same count as the Python reference).
 const N_FRAMES: u64 = 8;
@@ -47,6 +49,8 @@ fn track_frame(c: &mut Criterion) {
     let frames: Vec<_> = poses.iter().map(|p| scene.render(&cam, p)).collect();
     // Back-and-forth playback order.
     let order: Vec<usize> = (0..frames.len()).chain((1..frames.len() - 1).rev()).collect();
+    // The prior of a robot with an independent 1 cm / 1° error per view.
+    let robot = SyntheticPriorError::new(PriorNoiseConfig::default(), 1);
     let mut tracker = Tracker::new(TrackerConfig::default()).unwrap_or_else(|e| panic!("{e}"));
     let mut step = 0usize;
     let run = |tracker: &mut Tracker, step: usize| {
@@ -56,9 +60,9 @@ fn track_frame(c: &mut Criterion) {
             grey,
             depth,
             camera: &cam,
-            world_from_camera_fk: poses[i],
+            world_from_camera_prior: robot.perturb(&poses[i], (step / 2) as u64, step as u64),
             view_index: (step / 2) as u64,
-            world_from_camera_gt: None,
+            world_from_camera_oracle: None,
         };
         tracker.track(&input).unwrap_or_else(|e| panic!("{e}"))
     };

@@ -17,7 +17,7 @@ use std::path::Path;
 use anyhow::{anyhow, Context, Result};
 use nalgebra::{Matrix3, Matrix4, Vector3};
 use objslam_core::geometry::{se3_from_matrix, Se3};
-use objslam_core::slam::{ate_rmse_m, rpe, TrackInput, Tracker, TrackerConfig};
+use objslam_core::slam::{ate_rmse_m, rpe, PoseSource, TrackInput, Tracker, TrackerConfig};
 use objslam_core::system::capture::{Capture, CaptureEvent};
 
 /// ATE after the best rigid alignment (Horn / Umeyama without scale) of the estimate to the truth.
@@ -77,9 +77,9 @@ fn main() -> Result<()> {
             grey: &grey,
             depth: &frame.depth,
             camera: &frame.camera,
-            world_from_camera_fk: frame.world_from_camera,
+            world_from_camera_prior: frame.world_from_camera,
             view_index: f.view_index,
-            world_from_camera_gt: Some(gt),
+            world_from_camera_oracle: (tracker.config().pose_source == PoseSource::GroundTruth).then_some(gt),
         })?;
         if verbose {
             let err = (out.world_from_camera.translation.vector - gt.translation.vector).norm() * 1e3;

@@ -6,8 +6,8 @@ use objslam_core::frame::{DepthImage, GreyImage};
 use objslam_core::geometry::{Box2, PinholeCamera, Se3};
 use objslam_core::slam::synthetic::{look_at, TabletopScene};
 use objslam_core::slam::{
-    ate_rmse_m, rpe, KinematicNoiseConfig, LostReason, PoseSource, SlamError, TrackInput, Tracker, TrackerConfig,
-    TrackingState,
+    ate_rmse_m, rpe, LostReason, PoseSource, PriorNoiseConfig, SlamError, SyntheticPriorError, TrackInput, Tracker,
+    TrackerConfig, TrackingState,
 };
 
 const N_FRAMES: usize = 40;
@@ -39,18 +39,34 @@ fn sequence() -> Sequence {
     Sequence { frames, gt }
 }
 
+/// The robot's prior error in these tests (unless a test says otherwise): an independent
+/// 1 cm / 1° bias per view and 0.5 mm / 0.05° jitter per frame, seed 1.
+fn robot() -> SyntheticPriorError {
+    SyntheticPriorError::new(PriorNoiseConfig::default(), 1)
+}
+
 fn run(seq: &Sequence, config: TrackerConfig) -> (Vec<Se3>, Vec<Se3>, usize, Tracker) {
+    run_with_robot(seq, config, &robot())
+}
+
+/// Track the sequence with priors from `robot` (the oracle pose only under `ground_truth`).
+fn run_with_robot(
+    seq: &Sequence,
+    config: TrackerConfig,
+    robot: &SyntheticPriorError,
+) -> (Vec<Se3>, Vec<Se3>, usize, Tracker) {
     let cam = camera();
     let mut tracker = Tracker::new(config).unwrap_or_else(|e| panic!("{e}"));
     let mut online = Vec::new();
     for (i, ((grey, depth), gt)) in seq.frames.iter().zip(&seq.gt).enumerate() {
+        let view = (i / FRAMES_PER_VIEW) as u64;
         let input = TrackInput {
             grey,
             depth,
             camera: &cam,
-            world_from_camera_fk: *gt,
-            view_index: (i / FRAMES_PER_VIEW) as u64,
-            world_from_camera_gt: Some(*gt),
+            world_from_camera_prior: robot.perturb(gt, view, i as u64),
+            view_index: view,
+            world_from_camera_oracle: (config.pose_source == PoseSource::GroundTruth).then_some(*gt),
         };
         let out = tracker.track(&input).unwrap_or_else(|e| panic!("frame {i}: {e}"));
         online.push(out.world_from_camera);
@@ -59,8 +75,8 @@ fn run(seq: &Sequence, config: TrackerConfig) -> (Vec<Se3>, Vec<Se3>, usize, Tra
     (online, tracker.trajectory(), lost, tracker)
 }
 
-/// Track one frame whose prior and ground truth are both `gt` (the prior's noise is the
-/// tracker's), panicking on a typed error.
+/// Track one frame at true pose `gt` with the prior of [`robot`] (its frame index is the
+/// tracker's call count), panicking on a typed error.
 fn track_at(
     tracker: &mut Tracker,
     cam: &PinholeCamera,
@@ -69,13 +85,14 @@ fn track_at(
     gt: Se3,
     view: u64,
 ) -> objslam_core::slam::TrackOutput {
+    let frame = tracker.trajectory().len() as u64;
     let input = TrackInput {
         grey,
         depth,
         camera: cam,
-        world_from_camera_fk: gt,
+        world_from_camera_prior: robot().perturb(&gt, view, frame),
         view_index: view,
-        world_from_camera_gt: Some(gt),
+        world_from_camera_oracle: None,
     };
     tracker.track(&input).unwrap_or_else(|e| panic!("{e}"))
 }
@@ -83,11 +100,10 @@ fn track_at(
 #[test]
 fn slam_beats_the_kinematic_prior_on_a_synthetic_sequence() {
     let seq = sequence();
-    let noise = KinematicNoiseConfig::default(); // 1 cm / 1° per view, 0.5 mm / 0.05° jitter
-    let slam_cfg = TrackerConfig { kinematic_noise: noise, ..TrackerConfig::default() };
+    let noise = PriorNoiseConfig::default(); // assumed: 1 cm / 1° per view, 0.5 mm / 0.05° jitter
+    let slam_cfg = TrackerConfig { prior_noise: noise, ..TrackerConfig::default() };
     let (online, traj, lost, tracker) = run(&seq, slam_cfg);
-    let kin_cfg =
-        TrackerConfig { pose_source: PoseSource::Kinematics, kinematic_noise: noise, ..TrackerConfig::default() };
+    let kin_cfg = TrackerConfig { pose_source: PoseSource::Kinematics, prior_noise: noise, ..TrackerConfig::default() };
     let (kin, _, kin_lost, _) = run(&seq, kin_cfg);
     let ate_online = ate_rmse_m(&online, &seq.gt).unwrap_or_else(|e| panic!("{e}"));
     let ate_traj = ate_rmse_m(&traj, &seq.gt).unwrap_or_else(|e| panic!("{e}"));
@@ -111,11 +127,61 @@ fn slam_beats_the_kinematic_prior_on_a_synthetic_sequence() {
     assert!(ate_traj < ate_kin && ate_online < ate_kin);
     assert!(rpe_slam.trans_m < rpe_kin.trans_m);
     // Without the prior-mean anchor the map inherits the first view's bias (≈ 9 mm here).
-    let fixed_cfg = TrackerConfig { kinematic_noise: noise, anchor_to_prior_mean: false, ..TrackerConfig::default() };
+    let fixed_cfg = TrackerConfig { prior_noise: noise, anchor_to_prior_mean: false, ..TrackerConfig::default() };
     let (fixed_online, _, _, _) = run(&seq, fixed_cfg);
     let ate_fixed = ate_rmse_m(&fixed_online, &seq.gt).unwrap_or_else(|e| panic!("{e}"));
     eprintln!("ATE slam without anchor {ate_fixed:.4} m");
     assert!(ate_fixed > 2.0 * ate_online);
+}
+
+#[test]
+fn the_estimator_runs_when_its_assumed_noise_differs_from_the_robots() {
+    // The estimator's assumed prior error is its own config; the robot's error is whatever the
+    // prior carries. (a) A robot with a 4 mm / 0.4° error shared by every view (a hand-eye error:
+    // one seed for the bias of every view) under the default 1 cm / 1° assumption: nothing is
+    // lost and the map sits within the shared error (it cannot average out) plus 3 mm.
+    // (b) The default robot (independent 1 cm / 1° per view) under a 3 mm / 0.3° assumption:
+    // gates three times tighter than the robot's error. Still runs; views whose prior the gate
+    // finds too far off are lost, not errors, and the output stays within the prior's error.
+    let seq = sequence();
+    let shared = PriorNoiseConfig { bias_trans_m: 0.004, bias_rot_deg: 0.4, ..PriorNoiseConfig::default() };
+    struct SameEveryView(SyntheticPriorError);
+    let hand_eye = SameEveryView(SyntheticPriorError::new(shared, 7));
+    let cam = camera();
+    let mut tracker = Tracker::new(TrackerConfig::default()).unwrap_or_else(|e| panic!("{e}"));
+    let mut online = Vec::new();
+    for (i, ((grey, depth), gt)) in seq.frames.iter().zip(&seq.gt).enumerate() {
+        let input = TrackInput {
+            grey,
+            depth,
+            camera: &cam,
+            world_from_camera_prior: hand_eye.0.perturb(gt, 0, i as u64),
+            view_index: (i / FRAMES_PER_VIEW) as u64,
+            world_from_camera_oracle: None,
+        };
+        online.push(tracker.track(&input).unwrap_or_else(|e| panic!("frame {i}: {e}")).world_from_camera);
+    }
+    let ate_shared = ate_rmse_m(&online, &seq.gt).unwrap_or_else(|e| panic!("{e}"));
+    eprintln!(
+        "shared 4 mm / 0.4° robot error, default assumption: ATE {:.2} mm, lost {}",
+        ate_shared * 1e3,
+        tracker.n_lost()
+    );
+    assert_eq!(tracker.n_lost(), 0);
+    assert!(ate_shared < 0.004 + 0.003, "ATE {ate_shared}");
+
+    let tight = PriorNoiseConfig { bias_trans_m: 0.003, bias_rot_deg: 0.3, ..PriorNoiseConfig::default() };
+    let (online, _, lost, _) = run(&seq, TrackerConfig { prior_noise: tight, ..TrackerConfig::default() });
+    let ate_tight = ate_rmse_m(&online, &seq.gt).unwrap_or_else(|e| panic!("{e}"));
+    let prior: Vec<Se3> =
+        seq.gt.iter().enumerate().map(|(i, gt)| robot().perturb(gt, (i / FRAMES_PER_VIEW) as u64, i as u64)).collect();
+    let ate_prior = ate_rmse_m(&prior, &seq.gt).unwrap_or_else(|e| panic!("{e}"));
+    eprintln!(
+        "default robot, 3 mm / 0.3° assumption: ATE {:.2} mm (prior {:.2} mm), lost {lost}",
+        ate_tight * 1e3,
+        ate_prior * 1e3
+    );
+    assert!(ate_tight <= ate_prior, "ATE {ate_tight} vs prior {ate_prior}");
 }
 
 #[test]
@@ -135,9 +201,9 @@ fn local_object_points_lie_on_the_boxed_object() {
             grey: &grey,
             depth: &depth,
             camera: &cam,
-            world_from_camera_fk: gt,
+            world_from_camera_prior: gt,
             view_index: 0,
-            world_from_camera_gt: Some(gt),
+            world_from_camera_oracle: Some(gt),
         };
         let out = tracker.track(&input).unwrap_or_else(|e| panic!("{e}"));
         assert!(out.is_ok());
@@ -169,7 +235,14 @@ fn local_object_points_lie_on_the_boxed_object() {
 }
 
 fn input_for<'a>(grey: &'a GreyImage, depth: &'a DepthImage, cam: &'a PinholeCamera, pose: Se3) -> TrackInput<'a> {
-    TrackInput { grey, depth, camera: cam, world_from_camera_fk: pose, view_index: 0, world_from_camera_gt: None }
+    TrackInput {
+        grey,
+        depth,
+        camera: cam,
+        world_from_camera_prior: pose,
+        view_index: 0,
+        world_from_camera_oracle: None,
+    }
 }
 
 #[test]
@@ -204,6 +277,13 @@ fn bad_input_is_a_typed_error_or_a_lost_frame() {
     let mut oracle = Tracker::new(TrackerConfig { pose_source: PoseSource::GroundTruth, ..TrackerConfig::default() })
         .unwrap_or_else(|e| panic!("{e}"));
     assert_eq!(oracle.track(&input_for(&grey, &depth, &cam, gt)), Err(SlamError::MissingGroundTruth));
+    // A true pose offered to any other pose source is refused: it cannot reach an estimate.
+    for source in [PoseSource::Slam, PoseSource::Kinematics] {
+        let mut t = Tracker::new(TrackerConfig { pose_source: source, ..TrackerConfig::default() })
+            .unwrap_or_else(|e| panic!("{e}"));
+        let with_truth = TrackInput { world_from_camera_oracle: Some(gt), ..input_for(&grey, &depth, &cam, gt) };
+        assert_eq!(t.track(&with_truth), Err(SlamError::OracleNotAllowed { pose_source: source }));
+    }
 
     // All-zero (and NaN / negative) depth on an empty map: lost, output = prior.
     let mut no_depth = DepthImage { width: 640, height: 480, data: vec![0.0; 640 * 480] };
@@ -266,9 +346,9 @@ fn garbage_frames_never_panic() {
                     grey: &grey,
                     depth: &depth,
                     camera: &cam,
-                    world_from_camera_fk: pose,
+                    world_from_camera_prior: pose,
                     view_index: f as u64,
-                    world_from_camera_gt: Some(pose),
+                    world_from_camera_oracle: (source == PoseSource::GroundTruth).then_some(pose),
                 };
                 let out = tracker.track(&input).unwrap_or_else(|e| panic!("{w}x{h} {source:?} frame {f}: {e}"));
                 assert!(out.world_from_camera.translation.vector.iter().all(|v| v.is_finite()));
@@ -295,9 +375,9 @@ fn tracking_is_deterministic_and_the_tracker_is_send() {
                     grey,
                     depth,
                     camera: &cam,
-                    world_from_camera_fk: *pose,
+                    world_from_camera_prior: robot().perturb(pose, i as u64, i as u64),
                     view_index: i as u64,
-                    world_from_camera_gt: None,
+                    world_from_camera_oracle: None,
                 };
                 tracker.track(&input).unwrap_or_else(|e| panic!("{e}"))
             })
@@ -316,8 +396,8 @@ fn frames_that_hide_the_scene_keep_the_map_and_tracking_resumes() {
     // map survives and the next frames track against it with the SLAM's accuracy.
     let seq = sequence();
     let cam = camera();
-    let noise = KinematicNoiseConfig::default();
-    let mut tracker = Tracker::new(TrackerConfig { kinematic_noise: noise, ..TrackerConfig::default() })
+    let noise = PriorNoiseConfig::default();
+    let mut tracker = Tracker::new(TrackerConfig { prior_noise: noise, ..TrackerConfig::default() })
         .unwrap_or_else(|e| panic!("{e}"));
     let other = TabletopScene::tabletop(99);
     let (hidden_grey, _) = other.render(&cam, &gt_pose(0));
@@ -454,12 +534,12 @@ fn a_reset_keeps_the_map_frame_and_the_gauge() {
 
 #[test]
 fn a_pose_far_from_the_prior_is_rejected() {
-    // Exact priors (no noise): the gate is 3 x 2 mm. A prior shifted by 2 cm while the images
+    // Exact priors (no error assumed): the gate is 3 x 2 mm. A prior shifted by 2 cm while the images
     // show the true pose: the visual pose agrees with the map, not with the prior, and is
     // rejected as a false consensus; a 3 mm shift passes.
     let seq = sequence();
     let cam = camera();
-    let cfg = TrackerConfig { kinematic_noise: KinematicNoiseConfig::none(), ..TrackerConfig::default() };
+    let cfg = TrackerConfig { prior_noise: PriorNoiseConfig::none(), ..TrackerConfig::default() };
     let mut tracker = Tracker::new(cfg).unwrap_or_else(|e| panic!("{e}"));
     for i in 0..6 {
         let (g, d) = &seq.frames[i];
@@ -472,9 +552,9 @@ fn a_pose_far_from_the_prior_is_rejected() {
             grey: g,
             depth: d,
             camera: &cam,
-            world_from_camera_fk: seq.gt[i] * Se3::translation(shift, 0.0, 0.0),
+            world_from_camera_prior: seq.gt[i] * Se3::translation(shift, 0.0, 0.0),
             view_index: 0,
-            world_from_camera_gt: Some(seq.gt[i]),
+            world_from_camera_oracle: None,
         };
         let out = tracker.track(&input).unwrap_or_else(|e| panic!("{e}"));
         if i == 5 {
@@ -495,7 +575,7 @@ fn a_pose_far_from_the_prior_is_rejected() {
 
 #[test]
 fn a_pose_that_disagrees_with_the_priors_motion_is_dead_reckoned() {
-    // Exact priors (no noise): the prior gate is 3 x 2 mm, the motion gate 2 mm (no bias, so no
+    // Exact priors (no error assumed): the prior gate is 3 x 2 mm, the motion gate 2 mm (no bias, so no
     // conjugation term). Frame 5's prior is shifted by 4 mm while its images show the true pose:
     // within the prior gate, but 4 mm from the last tracked frame moved by the prior's motion. With
     // the motion gate the frame is lost (motion_disagreement) and output dead-reckoned (where the
@@ -506,7 +586,7 @@ fn a_pose_that_disagrees_with_the_priors_motion_is_dead_reckoned() {
     let cam = camera();
     let run_with = |floor_m: f64| {
         let cfg = TrackerConfig {
-            kinematic_noise: KinematicNoiseConfig::none(),
+            prior_noise: PriorNoiseConfig::none(),
             motion_gate_floor_m: floor_m,
             ..TrackerConfig::default()
         };
@@ -519,9 +599,9 @@ fn a_pose_that_disagrees_with_the_priors_motion_is_dead_reckoned() {
                     grey: g,
                     depth: d,
                     camera: &cam,
-                    world_from_camera_fk: seq.gt[i] * Se3::translation(shift, 0.0, 0.0),
+                    world_from_camera_prior: seq.gt[i] * Se3::translation(shift, 0.0, 0.0),
                     view_index: u64::from(i >= 6),
-                    world_from_camera_gt: Some(seq.gt[i]),
+                    world_from_camera_oracle: None,
                 };
                 tracker.track(&input).unwrap_or_else(|e| panic!("{e}"))
             })
@@ -571,7 +651,7 @@ fn the_motion_gate_outvotes_a_single_off_reference() {
     let cam = camera();
     let run_with = |references: usize| {
         let cfg = TrackerConfig {
-            kinematic_noise: KinematicNoiseConfig::none(),
+            prior_noise: PriorNoiseConfig::none(),
             prior_gate_sigmas: 0.0,
             motion_gate_floor_m: 0.004,
             motion_gate_references: references,
@@ -591,9 +671,9 @@ fn the_motion_gate_outvotes_a_single_off_reference() {
                     grey: g,
                     depth: d,
                     camera: &cam,
-                    world_from_camera_fk: seq.gt[i] * Se3::translation(shift, 0.0, 0.0),
+                    world_from_camera_prior: seq.gt[i] * Se3::translation(shift, 0.0, 0.0),
                     view_index: 0,
-                    world_from_camera_gt: Some(seq.gt[i]),
+                    world_from_camera_oracle: None,
                 };
                 tracker.track(&input).unwrap_or_else(|e| panic!("{e}")).state
             })

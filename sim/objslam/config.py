@@ -25,6 +25,7 @@ from typing import Any, get_type_hints
 
 import tomllib
 
+from .calibration import ContactConfig, RobotConfig, TableConfig
 from .camera import CalibrationConfig, CameraConfig, ColourConfig, DepthNoiseConfig, StereoDepthConfig
 from .detector import DetectorConfig
 from .textures import TextureConfig
@@ -223,19 +224,19 @@ class ParamRunConfig:
 
 
 @dataclass(frozen=True)
-class PoseNoiseConfig:
-    """Calibration-error model of the ``kinematics`` / ``slam`` pose sources (per-view bias, per-frame
-    jitter; seeded by the run seed mixed with the scene's seed, ``episode.kinematic_noise_seed``)."""
+class PriorNoiseConfig:
+    """The estimator's assumed error of the kinematic pose prior (core ``PriorNoiseConfig``): the
+    SLAM's world ← map gauge weights and its prior and motion gates. Its own tuning, never read from
+    the simulator: the robot's actual error is ``[robot]`` (:mod:`objslam.calibration`)."""
 
     bias_trans_m: float = 0.01
-    """Per-view translation bias, metres: its magnitude, in a direction drawn uniformly on the sphere
-    per view (core ``KinematicNoiseConfig::bias_trans_m``)."""
+    """Assumed translation error constant over a view, metres (its magnitude). Default 0.01."""
     bias_rot_deg: float = 1.0
-    """Per-view rotation bias, degrees: its angle, about an axis drawn uniformly per view."""
+    """Assumed rotation error constant over a view, degrees. Default 1.0."""
     jitter_trans_m: float = 0.0005
-    """Per-frame translation jitter, standard deviation per axis, metres."""
+    """Assumed per-frame translation error, standard deviation per axis, metres. Default 0.0005."""
     jitter_rot_deg: float = 0.05
-    """Per-frame rotation jitter, standard deviation per axis of the rotation vector, degrees."""
+    """Assumed per-frame rotation error, standard deviation per axis, degrees. Default 0.05."""
 
 
 @dataclass(frozen=True)
@@ -326,11 +327,11 @@ class RunConfig:
     parameterize: bool = True
     """Run object parameterization (iForest, line-alignment yaw, refinement) after association."""
     pose_source: str = "slam"
-    """Camera pose used by the mapper: ``slam`` (default: visual tracking seeded by the noisy
-    kinematic prior, the paper's ORB-SLAM2 role), ``kinematics`` (forward kinematics with the
-    calibration-error model of ``[pose_noise]``), ``ground_truth`` (oracle), ``fk`` (exact forward
-    kinematics of the measured joints — no calibration error and no tracker; the foundation's
-    behaviour, kept for ablations and fast runs)."""
+    """Camera pose used by the mapper: ``slam`` (default: visual tracking seeded by the kinematic
+    prior, the paper's ORB-SLAM2 role), ``kinematics`` (the prior as is, with the tracker's map
+    points), ``ground_truth`` (oracle, an ablation: the only source the true pose reaches), ``fk``
+    (the prior as is, no tracker; fast runs). The prior is forward kinematics of the nominal robot
+    model on the joint readings; its error is the simulated robot's (``[robot]``)."""
     object_points: str = "depth"
     """Local object point clouds for the association: ``depth`` (depth pixels in each box) or
     ``slam_map`` (the SLAM map points observed in each box, the paper's Sec. III-B; needs a
@@ -391,7 +392,10 @@ class RunConfig:
     textures: TextureConfig = field(default_factory=TextureConfig)
     naive: NaiveMapperConfig = field(default_factory=NaiveMapperConfig)
     param: ParamRunConfig = field(default_factory=ParamRunConfig)
-    pose_noise: PoseNoiseConfig = field(default_factory=PoseNoiseConfig)
+    prior_noise: PriorNoiseConfig = field(default_factory=PriorNoiseConfig)
+    robot: RobotConfig = field(default_factory=RobotConfig)
+    table: TableConfig = field(default_factory=TableConfig)
+    contact: ContactConfig = field(default_factory=ContactConfig)
     eval: EvalConfig = field(default_factory=EvalConfig)
     explore: ExploreRunConfig = field(default_factory=ExploreRunConfig)
     record: RecordConfig = field(default_factory=RecordConfig)
@@ -472,6 +476,9 @@ class RunConfig:
             self.camera.validate()
             self.detector.validate()
             self.textures.validate()
+            self.robot.validate()
+            self.table.validate()
+            self.contact.validate()
         except ValueError as e:
             raise ConfigError(str(e)) from e
 
@@ -642,14 +649,18 @@ __all__ = [
     "CameraConfig",
     "ColourConfig",
     "ConfigError",
+    "ContactConfig",
     "DepthNoiseConfig",
     "DetectorConfig",
     "EvalConfig",
     "ExploreRunConfig",
     "NaiveMapperConfig",
+    "PriorNoiseConfig",
     "RecordConfig",
+    "RobotConfig",
     "RunConfig",
     "StereoDepthConfig",
+    "TableConfig",
     "TextureConfig",
     "available_presets",
     "load_run_config",

@@ -42,6 +42,7 @@ from typing import Any
 import numpy as np
 
 from . import _native
+from .calibration import ArmErrors, arm_error_seed, draw_arm_errors, draw_table_plane, pose_error
 from .config import REPO_ROOT, ConfigError, RunConfig, to_dict
 from .detector import Detection, SimulatedDetector
 from .evaluation import offset_removed
@@ -317,6 +318,7 @@ def new_mapper(cfg: RunConfig, scene: SceneSpec) -> Any:
     """A fresh :class:`_native.ActiveMapper` (association, parameterization, grids, tracker) for
     a run config and scene (also used for the local re-observation maps of :mod:`objslam.grasp`)."""
     seeds = algorithm_seeds(cfg.seed, scene.seed) if cfg.seed_algorithms else None
+    table = episode_table_plane(cfg, scene)
     return _native.ActiveMapper(
         mapper_config_json=json.dumps(
             {
@@ -330,6 +332,8 @@ def new_mapper(cfg: RunConfig, scene: SceneSpec) -> Any:
                 # Only when not the default, so a core built before the option still loads.
                 **({"object_points": cfg.object_points} if cfg.object_points != "depth" else {}),
                 "naive": to_dict(cfg.naive),
+                # The table plane the mapper is given ([table]): local clouds cut the table around it.
+                "local": {"table_prior": list(table)},
                 "param": {
                     "iforest": {
                         **({"seed": seeds["iforest"]} if seeds else {}),
@@ -338,9 +342,13 @@ def new_mapper(cfg: RunConfig, scene: SceneSpec) -> Any:
                         "readmit_gap_factor": cfg.param.iforest_readmit_gap,
                     },
                     "window_keep": cfg.param.window_keep,
-                    # The table top is z = 0 (scene files); 0 = no support snap.
+                    # The table plane as the cell's calibration gives it ([table]); 0 = no support snap.
                     **(
-                        {"support_z_m": 0.0, "support_snap_m": cfg.param.support_snap_m}
+                        {
+                            "support_z_m": table[2],
+                            "support_slope": [table[0], table[1]],
+                            "support_snap_m": cfg.param.support_snap_m,
+                        }
                         if cfg.param.support_snap_m > 0.0
                         else {}
                     ),
@@ -368,7 +376,7 @@ def new_mapper(cfg: RunConfig, scene: SceneSpec) -> Any:
                 "motion_gate_floor_deg": cfg.slam_motion_gate_deg,
                 "motion_gate_references": cfg.slam_motion_gate_references,
                 "extend_after_unmapped": cfg.slam_extend_after_unmapped,
-                "kinematic_noise": {**to_dict(cfg.pose_noise), "seed": kinematic_noise_seed(cfg.seed, scene.seed)},
+                "prior_noise": to_dict(cfg.prior_noise),
                 **({"ransac": {"seed": seeds["ransac"]}} if seeds else {}),
             }
         ),
@@ -376,11 +384,24 @@ def new_mapper(cfg: RunConfig, scene: SceneSpec) -> Any:
 
 
 def kinematic_noise_seed(run_seed: int, scene_seed: int) -> int:
-    """Seed of the kinematic prior noise: the run seed mixed with the scene file's seed, so every
-    episode of a benchmark draws its own per-view biases. (With the run seed alone, view k had the
-    same bias in every scene: strategies whose views do not depend on the scene, coverage and
-    init, then carried one shared draw of the map's placement error through all seven scenes.)"""
-    return (run_seed * 1_000_003 + scene_seed) % (1 << 63)
+    """The episode's seed: the run seed mixed with the scene file's seed (the arm and table
+    calibration draws, :func:`objslam.calibration.arm_error_seed`, and the algorithm seeds), so every
+    episode of a benchmark draws its own. (With the run seed alone, strategies whose views do not
+    depend on the scene, coverage and init, carried one shared draw through all seven scenes.)"""
+    return arm_error_seed(run_seed, scene_seed)
+
+
+def episode_arm_errors(cfg: RunConfig, scene: SceneSpec) -> ArmErrors:
+    """How the episode's simulated robot differs from its nominal model (``[robot]``), drawn from the
+    run and scene seeds; the grasp and placement worlds of the same run and scene get the same robot."""
+    return draw_arm_errors(cfg.robot, arm_error_seed(cfg.seed, scene.seed))
+
+
+def episode_table_plane(cfg: RunConfig, scene: SceneSpec) -> tuple[float, float, float]:
+    """The table plane ``(a, b, c)`` (z = a·x + b·y + c) the mapper is given: the true top with the
+    episode's calibration error (``[table]``)."""
+    center = (float(scene.table.center[0]), float(scene.table.center[1]))
+    return draw_table_plane(cfg.table, arm_error_seed(cfg.seed, scene.seed), center)
 
 
 def algorithm_seeds(run_seed: int, scene_seed: int) -> dict[str, int]:
@@ -423,6 +444,7 @@ def run_episode(
     views_done = 0
     assignments: list[tuple[int, int | None]] = []
     view_counter = [0]
+    prior_errors: list[tuple[float, float]] = []
     move_paths: dict[str, int] = {"cartesian": 0, "joint": 0}
     accuracy_curve: list[dict[str, Any]] = []
     start = _status_start()
@@ -438,7 +460,8 @@ def run_episode(
         rec = _Recorder(run_dir / "run.rrd" if cfg.record.enabled else None, recording_options(cfg, scene))
         rng_sensor = np.random.default_rng([cfg.seed, 1])
         rng_detector = np.random.default_rng([cfg.seed, 2])
-        world = SimWorld(scene, cfg.camera, rng_sensor, textures=cfg.textures)
+        arm = episode_arm_errors(cfg, scene)
+        world = SimWorld(scene, cfg.camera, rng_sensor, textures=cfg.textures, arm_errors=arm)
         detector = SimulatedDetector(cfg.detector, rng_detector)
         rec.log_objects("world/ground_truth", json.dumps(gt_objects(scene, world.ground_truth())))
         init_views = mapper.initial_views()
@@ -454,11 +477,15 @@ def run_episode(
             t0 = time.perf_counter()
             dets: list[Detection] = detector.detect(frame.segmentation, world.actor_to_object, frame.detector_view)
             t1 = time.perf_counter()
+            # The prior: nominal forward kinematics of the joint readings (the robot's errors are in
+            # them), with the per-view / per-frame errors of [robot] (identity under realistic).
+            prior = arm.prior(frame.world_from_camera_fk, view_counter[0], frame.index)
+            prior_errors.append(pose_error(prior, frame.world_from_camera_gt))
             assigned = mapper.update(
                 index=frame.index,
                 intrinsics=frame.intrinsics,
                 depth=frame.depth_m,
-                world_from_camera=frame.world_from_camera_fk,
+                world_from_camera=prior,
                 detections=[d.as_tuple() for d in dets],
                 grey=grey_of(frame.rgb) if (cfg.parameterize or cfg.pose_source != "fk") else None,
                 world_from_camera_gt=frame.world_from_camera_gt,
@@ -518,13 +545,13 @@ def run_episode(
             accuracy_curve.append(
                 {
                     "views": views_done,
-                    **{k: ev["mean"][k] for k in ("iou3d", "iou2d", "cde_cm")},
+                    **{k: ev["mean"].get(k) for k in ("iou3d", "iou2d", "cde_cm", "precision_iou50", "recall_iou50")},
                     "n_objects_est": ev["n_objects_est"],
                     **offset_removed(gt_scene_file, json.loads(map_json), ev["objects"]),
                 }
             )
             # Evaluation against ground truth, on its own entity paths (the viewer plots it over time).
-            for k in ("iou3d", "cde_cm", "iou3d_aligned"):
+            for k in ("iou3d", "cde_cm", "iou3d_oracle_aligned"):
                 if accuracy_curve[-1][k] is not None:
                     rec.log_scalar(f"eval/{k}", accuracy_curve[-1][k])
 
@@ -638,6 +665,14 @@ def run_episode(
             "association_mode": cfg.association_mode,
             "pose_source": cfg.pose_source,
             **(mapper.pose_metrics() or {}),
+            "prior_error": prior_error_summary(prior_errors),
+            "arm_errors": {
+                "hand_eye_trans_mm": round(pose_error(arm.camera_from_true_camera, np.eye(4))[0] * 1e3, 3),
+                "hand_eye_rot_deg": round(pose_error(arm.camera_from_true_camera, np.eye(4))[1], 4),
+                "joint_offsets_deg": np.degrees(arm.joint_offsets_rad).round(4).tolist(),
+                "time_offset_ms": round(arm.time_offset_s * 1e3, 3),
+                "table_plane": list(episode_table_plane(cfg, scene)),
+            },
             "association": association,
             "stages": stages,
             "stop_reason": stop_reason,
@@ -736,6 +771,22 @@ def _stopped(e: BaseException, run_dir: Path) -> BaseException:
     if isinstance(e, _Terminated):
         return RunStopped(signal.SIGTERM, run_dir)
     return e
+
+
+def prior_error_summary(errors: list[tuple[float, float]]) -> dict[str, float | None]:
+    """The kinematic prior's error against the true camera pose over an episode's frames (evaluation
+    only): RMS and 90th percentile of the translation (mm) and rotation (deg) differences."""
+    if not errors:
+        return {"trans_rms_mm": None, "trans_p90_mm": None, "rot_rms_deg": None, "rot_p90_deg": None, "frames": 0}
+    t = np.array([e[0] for e in errors]) * 1e3
+    r = np.array([e[1] for e in errors])
+    return {
+        "trans_rms_mm": float(np.sqrt(np.mean(t**2))),
+        "trans_p90_mm": float(np.percentile(t, 90)),
+        "rot_rms_deg": float(np.sqrt(np.mean(r**2))),
+        "rot_p90_deg": float(np.percentile(r, 90)),
+        "frames": len(errors),
+    }
 
 
 def format_table(metrics: dict[str, Any]) -> str:

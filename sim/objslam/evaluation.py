@@ -1,11 +1,13 @@
 """Map evaluation helpers shared by the episode runner and the exploration benchmark.
 
-The world-frame metrics come from the core (``_native.evaluate_map``). This module adds the
-*offset-removed* evaluation: with the SLAM pose source the map's placement in the world is the
-average of the views' kinematic-prior biases (a draw shared by every object of an episode), so the
-whole map is moved by the median offset between matched true and estimated centres (translation
-only, objects whose world-frame 3D IoU is above ``min_iou``) and evaluated again. That isolates
-what the views did for the map's shape from where the SLAM gauge put it.
+The world-frame metrics come from the core (``_native.evaluate_map``: per-object rows, means over
+matched and over all objects, precision and recall at 3D IoU 0.25 and 0.5). This module adds the
+*oracle-aligned* evaluation: the map's placement in the world comes from the kinematic prior (the
+robot's calibration errors, shared by every object of an episode), so the whole map is moved by the
+median offset between matched true and estimated centres (translation only, objects whose
+world-frame 3D IoU is above ``min_iou``) and evaluated again. The offset is measured against the
+ground truth — an oracle no robot has — so these figures isolate what the views did for the map's
+shape from where the SLAM gauge put it; they are labelled ``oracle_aligned`` everywhere.
 """
 
 from __future__ import annotations
@@ -25,12 +27,12 @@ OFFSET_MIN_IOU = 0.3
 def offset_removed(
     gt: list[dict[str, Any]], map_dict: dict[str, Any], matched: list[dict[str, Any]], min_iou: float = OFFSET_MIN_IOU
 ) -> dict[str, float | None]:
-    """3D IoU and CDE of ``map_dict`` after removing its global translation offset.
+    """Oracle-aligned 3D IoU and CDE of ``map_dict``: after removing its global translation offset.
 
     ``gt``: ground truth in the core's ``GtObject`` layout; ``map_dict``: a parsed map JSON;
     ``matched``: the per-object rows of the world-frame evaluation (``evaluate_map``'s
     ``objects``: ``gt_id``, ``est_id``, ``iou3d``), whose matching is kept. Returns
-    ``iou3d_aligned``, ``cde_aligned_cm`` and ``map_offset_mm`` (all None when no matched object
+    ``iou3d_oracle_aligned``, ``cde_oracle_aligned_cm`` and ``map_offset_mm`` (all None when no matched object
     reaches ``min_iou``). ``map_dict`` is not modified."""
     centre = {g["id"]: np.array(g["geometry"]["center"], dtype=float) for g in gt}
     by_id = {o["id"]: o for o in map_dict["objects"]}
@@ -40,7 +42,7 @@ def offset_removed(
         if o.get("est_id") is not None and o["est_id"] in by_id and (o.get("iou3d") or 0.0) > min_iou
     ]
     if not offsets:
-        return {"iou3d_aligned": None, "cde_aligned_cm": None, "map_offset_mm": None}
+        return {"iou3d_oracle_aligned": None, "cde_oracle_aligned_cm": None, "map_offset_mm": None}
     off = np.median(np.array(offsets), axis=0)
     moved = copy.deepcopy(map_dict)
     for o in moved["objects"]:
@@ -48,7 +50,7 @@ def offset_removed(
         o["world_from_object"]["translation"] = [float(t[i] + off[i]) for i in range(3)]
     ev = json.loads(_native.evaluate_map(json.dumps(gt), json.dumps(moved)))
     return {
-        "iou3d_aligned": ev["mean"]["iou3d"],
-        "cde_aligned_cm": ev["mean"]["cde_cm"],
+        "iou3d_oracle_aligned": ev["mean"]["iou3d"],
+        "cde_oracle_aligned_cm": ev["mean"]["cde_cm"],
         "map_offset_mm": float(np.linalg.norm(off) * 1000.0),
     }

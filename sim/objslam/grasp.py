@@ -27,13 +27,27 @@ Choices (config fields of :class:`GraspRunConfig`):
   object is then skipped as ``already_grasped``). Success rows have cause ``"none"``.
 - Graspable in ground truth: narrowest horizontal width ≤ the gripper's 8 cm opening minus 4 mm.
   Map objects the planner finds too wide are attempts only when their true object is graspable.
-- Touches (``contact_retries``, beyond the paper): the hand feels an upward force on a finger
-  (:meth:`~objslam.world.SimWorld.finger_contacts`, what a Panda's external wrench estimate gives:
-  force and where along the fingers it acts, not what was touched). A finger that lands on the
-  target's rim during the approach (the map's centre off by more than the 3 mm a side a 7.4 cm cup
-  leaves the open fingers) stops the descent; the hand backs up, moves towards the touched side by
-  the planned clearance + 1 mm (the least the centre can be off for that finger to land on the
-  object) and descends again. The target's centre (for placing) moves with the hand.
+- Touches (``contact_retries``, beyond the paper): the hand senses only what a Panda senses — its
+  external wrench estimate (:meth:`~objslam.world.SimWorld.external_wrench`, from the joint
+  torques) and its joint readings, never the simulator's contact points. A finger that lands on
+  something during the approach (the target's rim when the map's centre is off by more than the
+  fingers' clearance) stalls the hand: its TCP lags the commanded one by ``contact_lag_m`` while the
+  upward force rises by ``contact_force_n`` within ``contact_window_s``; the rise's moment about the
+  TCP says on which side along the closing axis it pushes. The descent stops; the hand backs up,
+  moves towards the touched side by the planned clearance + 1 mm (the least the centre can be off
+  for that finger to land on the object) and descends again. The target's centre (for placing)
+  moves with the hand.
+- Ground truth only judges: the loop decides from the map and from what the hand senses. An
+  attempt the hand feels as a grasp (the closed fingers stopped at least ``min_held_gap_m`` apart
+  after the lift) removes its map object from the obstacles; a later map object whose centre lies
+  in the footprint of one grasped so (plus ``duplicate_margin_m``) is taken for the same object and
+  skipped (``already_grasped``; judged ``wrongly_skipped`` when its true object was never lifted).
+  What the hand holds is set aside (the simulator removes the objects that actually left the table
+  with it). The true poses enter only the outcome: success, cause, ``lifted``, ``not_in_map``, and
+  whether a too-wide map object counts as an attempt.
+- The simulated robot is the episode's (``[robot]``: hand-eye, joint offsets, timing errors drawn
+  from the run and scene seeds, :mod:`objslam.calibration`), and the objects' masses and friction are
+  those of ``[contact]``.
 - Re-observation (``reobserve``, off by default): before each attempt, close views of the target
   (``reobserve_views``: two top-down by default, or top-down and two obliques) are fused into a
   fresh local map by the core's pipeline (same settings as the exploration); the local object
@@ -53,6 +67,7 @@ from typing import Any
 import numpy as np
 
 from . import _native
+from .calibration import arm_error_seed, draw_arm_errors
 from .config import RunConfig
 from .detector import SimulatedDetector
 from .scene import SceneSpec, gt_objects
@@ -164,7 +179,22 @@ class GraspRunConfig:
     times per attempt; with no retry left, or no plan for the moved estimate, the hand goes on down as
     planned. 0 = the approach is executed blind, as before stop 30 (2026-12-04)."""
     contact_force_n: float = 5.0
-    """Upward force on a finger that stops the approach, newtons."""
+    """Rise of the upward external force within ``contact_window_s`` that, with the hand stalled,
+    stops the approach, newtons."""
+    contact_window_s: float = 0.05
+    """Window over which the force's rise is measured, seconds (a rise, not a level: the wrench
+    estimate carries the joints' friction, tens of newtons, drifting slowly; ``PlaceConfig.feel_support``)."""
+    contact_lag_m: float = 0.008
+    """The hand has stalled when its TCP (forward kinematics of the readings) is this far above the
+    commanded TCP (of the drive targets), metres. On scene03's 7.4 cm cup with the map centre 5 mm off
+    (``tests/test_grasp.py``), 4 mm also fired on the re-descent after the first shift (a second, false
+    touch: the hand ended 3 mm off); 8 and 15 mm felt the rim once and grasped 1 mm from the centre."""
+    min_held_gap_m: float = 0.005
+    """After the lift and hold, fingers stopped at least this far apart hold something: the attempt
+    is felt as a grasp, metres (the narrowest benchmark object is ~3 cm)."""
+    duplicate_margin_m: float = 0.01
+    """A map object whose centre lies within the footprint (plus this, metres) of a map object the
+    hand grasped earlier is taken for the same object and skipped."""
     contact_backoff_m: float = 0.015
     """How far the hand rises after a touch before it moves sideways, metres."""
     contact_extra_shift_m: float = 0.001
@@ -197,7 +227,16 @@ class GraspSession:
         self.cfg = cfg
         self.run_cfg = run_cfg
         seed = run_cfg.seed
-        self.world = SimWorld(scene, run_cfg.camera, np.random.default_rng([seed, 7]), grasp_physics=True)
+        # The same robot as the mapping episode of this run and scene (its calibration errors).
+        self.arm = draw_arm_errors(run_cfg.robot, arm_error_seed(seed, scene.seed))
+        self.world = SimWorld(
+            scene,
+            run_cfg.camera,
+            np.random.default_rng([seed, 7]),
+            grasp_physics=True,
+            arm_errors=self.arm,
+            contact=run_cfg.contact,
+        )
         self.detector = SimulatedDetector(run_cfg.detector, np.random.default_rng([seed, 8]))
         planner_cfg = {"rng_seed": int(seed) + 1, **cfg.planner}
         self.planner = _native.Planner(str(panda_urdf_path()), json.dumps(planner_cfg))
@@ -257,7 +296,7 @@ class GraspSession:
                 on_step()
 
     def gt_positions(self) -> dict[int, np.ndarray]:
-        """True object centres now (objects set aside excluded)."""
+        """True object centres now (objects set aside excluded). Judging only."""
         return {oid: p for oid, (p, _) in self.world.ground_truth().items() if oid not in self.removed}
 
     def set_aside(self, oid: int) -> None:
@@ -349,7 +388,7 @@ class GraspSession:
                     index=frames,
                     intrinsics=frame.intrinsics,
                     depth=frame.depth_m,
-                    world_from_camera=frame.world_from_camera_fk,
+                    world_from_camera=self.arm.prior(frame.world_from_camera_fk, vi, frame.index),
                     detections=[d.as_tuple() for d in dets],
                     grey=grey_of(frame.rgb) if (rc.parameterize or rc.pose_source != "fk") else None,
                     world_from_camera_gt=frame.world_from_camera_gt,
@@ -374,14 +413,31 @@ class GraspSession:
         return (best[1] if best else None), local, frames
 
     # ----- contact during the approach ---------------------------------------------------------------
-    def _touch(self) -> np.ndarray | None:
-        """Where the fingers feel an upward push of at least ``contact_force_n`` (the force-weighted
-        contact point, world) or None."""
-        pts = [(p, f) for p, f in self.world.finger_contacts() if f[2] > 0.0]
-        fz = sum(f[2] for _, f in pts)
-        if fz < self.cfg.contact_force_n:
-            return None
-        return sum(p * f[2] for p, f in pts) / fz
+    def touch_sensor(self) -> Callable[[], np.ndarray | None]:
+        """A fresh touch detector for one motion (call it after every physics step): where the hand
+        feels an upward push — the TCP lags the commanded TCP by ``contact_lag_m`` while the upward
+        external force has risen by ``contact_force_n`` within ``contact_window_s`` — as a world point
+        (the TCP moved by the rise's moment arm, ``r = (−Δm_y, Δm_x) / Δf_z``), else None."""
+        cfg, world = self.cfg, self.world
+        window = max(1, round(cfg.contact_window_s * PHYSICS_HZ))
+        history: list[np.ndarray] = []
+
+        def sense() -> np.ndarray | None:
+            w = world.external_wrench()
+            history.append(w)
+            if len(history) <= window:
+                return None
+            dw = w - history[-1 - window]
+            rise = float(dw[2])
+            if rise < cfg.contact_force_n:
+                return None
+            tcp = self.planner.forward_tcp(self.q_arm())
+            commanded = self.planner.forward_tcp(np.clip(world.arm_targets(), self.limits[:, 0], self.limits[:, 1]))
+            if float(tcp[2, 3] - commanded[2, 3]) < cfg.contact_lag_m:
+                return None
+            return np.array([tcp[0, 3] - float(dw[4]) / rise, tcp[1, 3] + float(dw[3]) / rise, tcp[2, 3]])
+
+        return sense
 
     def approach(
         self, plan: dict[str, Any], target: dict[str, Any], neighbours: list[dict[str, Any]], open_half: float
@@ -394,14 +450,19 @@ class GraspSession:
         cfg = self.cfg
         touched: list[np.ndarray] = []
 
-        def stop() -> bool:
-            p = self._touch()
-            if p is not None:
-                touched.append(p)
-                return True
-            return False
+        def stopper() -> Callable[[], bool]:
+            sense = self.touch_sensor()
 
-        err = self.execute(plan["approach"], open_half, stop=stop if cfg.contact_retries > 0 else None)
+            def stop() -> bool:
+                p = sense()
+                if p is not None:
+                    touched.append(p)
+                    return True
+                return False
+
+            return stop
+
+        err = self.execute(plan["approach"], open_half, stop=stopper() if cfg.contact_retries > 0 else None)
         shifts: list[float] = []
         obs = json.dumps([n["geometry"] for n in neighbours])
         while touched:
@@ -426,7 +487,7 @@ class GraspSession:
                     shifts.append(round(shift, 5))
                     plan, target = g, moved
                     self.execute(plan["to_pregrasp"], open_half)
-                    err = self.execute(plan["approach"], open_half, stop=stop)
+                    err = self.execute(plan["approach"], open_half, stop=stopper())
                     continue
             # No retry left (or none plannable): go on down as planned, as a blind approach would.
             r = self.planner.plan_linear(self.q_arm(), np.asarray(plan["world_from_tcp_grasp"], dtype=np.float64), obs)
@@ -437,7 +498,10 @@ class GraspSession:
 
     # ----- one attempt ------------------------------------------------------------------------------
     def attempt(self, k: int, target: dict[str, Any], neighbours: list[dict[str, Any]], gt_id: int | None) -> dict[str, Any]:
-        """Plan and execute one grasp of map object ``target``; returns the outcome record."""
+        """Plan and execute one grasp of map object ``target``; returns the outcome record: what the
+        hand sensed (``held``, ``closed_gap_m``, ``held_gap_m``, ``contact_shifts_m``) and, judged from
+        the ground truth (``gt_id``: the true object the judge matched to the target; it never steers
+        the attempt), ``success``, ``cause``, ``rise_m``, ``lifted``."""
         cfg = self.cfg
         out: dict[str, Any] = {"success": False, "cause": None, "gt_id": gt_id}
         if cfg.reobserve:
@@ -499,7 +563,10 @@ class GraspSession:
         now = self.gt_positions()
         rise = float(now[gt_id][2] - z0) if gt_id is not None else 0.0
         lifted = [oid for oid in now if oid in start and now[oid][2] - start[oid][2] >= cfg.lift_success_m]
-        out.update(rise_m=rise, max_rise_m=max_rise[0], held_gap_m=self.finger_gap_m(), lifted=lifted)
+        held_gap = self.finger_gap_m()
+        out.update(
+            rise_m=rise, max_rise_m=max_rise[0], held_gap_m=held_gap, held=held_gap >= cfg.min_held_gap_m, lifted=lifted
+        )
         if gt_id is not None and rise >= cfg.lift_success_m:
             out.update(success=True, cause="none")
         elif gt_id is None and len(lifted) == 1:
@@ -592,6 +659,19 @@ def combine(mapped: dict[str, Any], local: dict[str, Any], cfg: GraspRunConfig) 
     }
 
 
+def in_footprint(obj: dict[str, Any], other: dict[str, Any], margin_m: float) -> bool:
+    """Whether map object ``obj``'s centre lies in ``other``'s footprint grown by ``margin_m`` (x-y;
+    a box in its own yaw, a cylinder's disc)."""
+    g, c = other["geometry"], np.asarray(obj["geometry"]["center"][:2], dtype=float)
+    d = c - np.asarray(g["center"][:2], dtype=float)
+    h = g["half_extents"]
+    if g["shape"] == "cylinder":
+        return float(np.linalg.norm(d)) <= (h[0] + h[1]) / 2.0 + margin_m
+    ca, sa = math.cos(g["yaw_rad"]), math.sin(g["yaw_rad"])
+    local = (ca * d[0] + sa * d[1], -sa * d[0] + ca * d[1])
+    return abs(local[0]) <= h[0] + margin_m and abs(local[1]) <= h[1] + margin_m
+
+
 def match_gt(map_objects: list[dict[str, Any]], gt: list[dict[str, Any]], radius_m: float) -> dict[int, int | None]:
     """Map object id → the true object id it targets (nearest centre in x-y within ``radius_m``;
     each true object at most once, closest pairs first)."""
@@ -635,6 +715,7 @@ def run_grasp_session(
     # Objects the planner found no grasp for (nothing moved): retried after the next executed attempt.
     deferred: list[tuple[dict[str, Any], dict[str, Any]]] = []
     n_deferred: dict[int, int] = {}
+    grasped: list[dict[str, Any]] = []  # map objects the hand felt it grasped (as grasped)
     k = 0
     while queue or deferred:
         if not queue:
@@ -644,13 +725,17 @@ def run_grasp_session(
                 rows.append(_row(target, res, gt_by_id, n_deferred.get(target["id"], 0)))
             break
         target = queue.pop(0)
-        gt_id = match[target["id"]]
+        gt_id = match[target["id"]]  # the judge's; never steers the loop
         neighbours = [m for m in remaining if m["id"] != target["id"]]
-        if gt_id is not None and gt_id in session.removed:
-            # Already grasped through a duplicate map object: nothing left to do here.
-            rows.append({"map_id": target["id"], "map_label": target["label"], "object": f"gt{gt_id}",
-                         "class": gt_by_id[gt_id]["label"], "success": False, "cause": "already_grasped",
-                         "gt_id": gt_id, "skipped": True})
+        if any(in_footprint(target, g, cfg.duplicate_margin_m) for g in grasped):
+            # The hand already took the object here (through another map object of it): skip.
+            # Judged: right when its true object was lifted, else a wrongly skipped object.
+            right = gt_id is None or gt_id in session.removed
+            rows.append({"map_id": target["id"], "map_label": target["label"],
+                         "object": f"gt{gt_id}" if gt_id is not None else f"map{target['id']}",
+                         "class": gt_by_id[gt_id]["label"] if gt_id is not None else target["label"],
+                         "success": False, "cause": "already_grasped" if right else "wrongly_skipped",
+                         "gt_id": gt_id, "skipped": right})
             remaining = [m for m in remaining if m["id"] != target["id"]]
             continue
         res = session.attempt(k, target, neighbours, gt_id)
@@ -667,10 +752,13 @@ def run_grasp_session(
         rows.append(row)
         session._log("log_event", f"grasp {k} map {target['id']} ({target['label']}) → {row['object']}: "
                      f"{'success' if res['success'] else res['cause']}")
-        for oid in res.get("lifted", []):  # whatever is in the hand is set aside
-            if oid not in session.removed:
-                session.set_aside(oid)
-        if res["success"]:
+        if res.get("held"):
+            # The hand feels it holds something: it is set aside (the simulator removes whatever
+            # actually left the table with the hand), and the map object leaves the obstacles.
+            for oid in res.get("lifted", []):
+                if oid not in session.removed:
+                    session.set_aside(oid)
+            grasped.append(session.last_target or target)
             remaining = [m for m in remaining if m["id"] != target["id"]]
         if executed:
             session.go_ready([m["geometry"] for m in remaining])

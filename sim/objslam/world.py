@@ -34,6 +34,7 @@ import numpy as np
 import sapien
 
 from . import _native
+from .calibration import ArmErrors, ContactConfig
 from .camera import CV_FROM_GL, SAPIEN_FROM_CV, CameraConfig, RgbdSensor
 from .detector import DetectorView
 from .meshes import get_asset
@@ -103,11 +104,13 @@ class SensorFrame:
     intrinsics: np.ndarray
     """(3, 3) float64."""
     world_from_camera_fk: np.ndarray
-    """(4, 4) camera pose from forward kinematics of the measured joints, OpenCV axes."""
+    """(4, 4) camera pose from forward kinematics of the robot's nominal model (URDF, nominal hand-eye)
+    on the joint readings paired with the image (offset by the encoder errors, sampled the time offset
+    before it: :mod:`objslam.calibration`), OpenCV axes. What a real robot knows; not the true pose."""
     world_from_camera_gt: np.ndarray
     """(4, 4) true camera pose from the renderer (evaluation only)."""
     qpos: np.ndarray
-    """Measured joint positions (9,)."""
+    """Joint readings paired with the image (9,)."""
     detector_view: DetectorView | None = None
     """What the simulated detector may know of the frame's true geometry (simulator side only)."""
 
@@ -149,13 +152,25 @@ class SimWorld:
         *,
         grasp_physics: bool = False,
         textures: TextureConfig | None = None,
+        arm_errors: ArmErrors | None = None,
+        contact: ContactConfig | None = None,
     ) -> None:
         """``grasp_physics``: ManiSkill's settings for reliable grasps (contact offset 0.02 m, 25 solver
         position iterations, finger patch radius 0.1 m; see :data:`GRASP_PHYSICS`). Off for the
         mapping episodes, whose physics only settles objects. ``textures``: how surfaces are
         textured (default :class:`~objslam.textures.TextureConfig`). With the ``d435`` camera model
-        the sensor unit's seed is drawn from ``rng``."""
+        the sensor unit's seed is drawn from ``rng``. ``arm_errors``: how this robot differs
+        from its nominal model (:mod:`objslam.calibration`; ``None`` = not at all): the camera is mounted at
+        the true hand-eye pose, the encoders read the true angles plus their offsets, and each frame's
+        joint reading is the one sampled the time offset before the image. ``contact``: the objects'
+        masses and friction and the fingertips' friction (default: :class:`ContactConfig`'s)."""
         camera.validate()
+        self.contact = contact if contact is not None else ContactConfig()
+        self.contact.validate()
+        self.arm_errors = arm_errors if arm_errors is not None else ArmErrors.none()
+        self._offsets = np.concatenate([self.arm_errors.joint_offsets_rad, np.zeros(2)])
+        # (sim time, joint readings) of the last physics steps, for the time offset.
+        self._reading_history: list[tuple[float, np.ndarray]] = []
         self.spec = spec
         self.camera_config = camera
         self.textures = textures if textures is not None else TextureConfig()
@@ -200,12 +215,17 @@ class SimWorld:
         self._build_robot()
         mount = sapien.Pose(list(camera.mount_xyz), list(camera.mount_wxyz))
         self.hand_from_sapien_camera = pose_to_matrix(mount)
+        """The nominal camera mount (the model the estimator and the planner use)."""
         self._tcp_from_camera = np.linalg.inv(self._hand_from_tcp) @ self.hand_from_camera_cv()
         self._camera_from_tcp = np.linalg.inv(self._tcp_from_camera)
+        # The renderer's camera sits at the true mount: nominal · hand-eye error (in OpenCV axes).
+        cv = np.eye(4)
+        cv[:3, :3] = SAPIEN_FROM_CV
+        true_mount = self.hand_from_sapien_camera @ cv @ self.arm_errors.camera_from_true_camera @ np.linalg.inv(cv)
         self.camera = scene.add_mounted_camera(
             "hand_camera",
             self.hand.entity,
-            mount,
+            sapien.Pose(true_mount[:3, 3].tolist(), _quat_from_matrix(true_mount[:3, :3]).tolist()),
             camera.width,
             camera.height,
             math.radians(camera.fovy_deg),
@@ -268,15 +288,16 @@ class SimWorld:
             )
             mat.roughness = 0.8
             b = self.scene.create_actor_builder()
-            phys = self.scene.create_physical_material(1.0, 1.0, 0.0)
+            density, mu = self.contact.object_physics(o.cls)
+            phys = self.scene.create_physical_material(mu, mu, 0.0)
             if o.shape == "cuboid":
-                b.add_box_collision(half_size=list(o.half_extents), material=phys, density=300)
+                b.add_box_collision(half_size=list(o.half_extents), material=phys, density=density)
                 b.add_box_visual(half_size=list(o.half_extents), material=mat)
             else:
                 # SAPIEN cylinders lie along x: rotate them upright.
                 upright = sapien.Pose(q=[math.cos(math.pi / 4), 0.0, math.sin(math.pi / 4), 0.0])
                 r, hz = o.half_extents[0], o.half_extents[2]
-                b.add_cylinder_collision(pose=upright, radius=r, half_length=hz, material=phys, density=300)
+                b.add_cylinder_collision(pose=upright, radius=r, half_length=hz, material=phys, density=density)
                 b.add_cylinder_visual(pose=upright, radius=r, half_length=hz, material=mat)
             actor = b.build(name=f"obj{o.id}_{o.cls}")
             cz = o.half_extents[2] + 1e-4
@@ -312,7 +333,7 @@ class SimWorld:
         loader = self.scene.create_urdf_loader()
         loader.fix_root_link = True
         for finger in ("panda_leftfinger", "panda_rightfinger"):
-            loader.set_link_material(finger, 2.0, 2.0, 0.0)
+            loader.set_link_material(finger, self.contact.finger_friction, self.contact.finger_friction, 0.0)
         robot = loader.load(str(panda_urdf_path()))
         if self.grasp_physics:
             for link in robot.get_links():
@@ -344,19 +365,42 @@ class SimWorld:
 
     # ----- state ----------------------------------------------------------------------------------
     def set_qpos(self, q: np.ndarray) -> None:
-        """Teleport the arm (used once at start) and hold it there."""
-        self.robot.set_qpos(q)
-        self.robot.set_qvel(np.zeros_like(q))
+        """Teleport the arm to joint readings ``q`` (used once at start) and hold it there."""
+        q_true = np.asarray(q, dtype=np.float64) - self._offsets[: len(q)]
+        self.robot.set_qpos(q_true)
+        self.robot.set_qvel(np.zeros_like(q_true))
         self._set_targets(q)
+        self._reading_history = [(self.sim_time_s, self.qpos())]
 
     def _set_targets(self, q: np.ndarray) -> None:
-        for j, t in zip(self.joints, q):
-            j.set_drive_target(float(t))
+        for j, t, off in zip(self.joints, q, self._offsets):
+            j.set_drive_target(float(t - off))
             j.set_drive_velocity_target(0.0)
 
-    def qpos(self) -> np.ndarray:
-        """Measured joint positions."""
+    def _true_qpos(self) -> np.ndarray:
+        """The simulated joints' true positions (physics only; the robot senses :meth:`qpos`)."""
         return np.asarray(self.robot.get_qpos(), dtype=np.float64)
+
+    def qpos(self) -> np.ndarray:
+        """Joint readings now: the true positions plus the encoder offsets (``arm_errors``). Every
+        command is in readings: the joint controller servos them (:meth:`set_arm_targets`)."""
+        return self._true_qpos() + self._offsets
+
+    def qpos_delayed(self) -> np.ndarray:
+        """The joint readings sampled ``arm_errors.time_offset_s`` ago (linear between physics steps;
+        the oldest kept when the history is shorter): what a frame rendered now is paired with."""
+        dt = self.arm_errors.time_offset_s
+        if dt <= 0.0 or not self._reading_history:
+            return self.qpos()
+        t = self.sim_time_s - dt
+        hist = self._reading_history
+        if t <= hist[0][0]:
+            return hist[0][1].copy()
+        for (t0, q0), (t1, q1) in zip(reversed(hist[:-1]), reversed(hist[1:])):
+            if t0 <= t <= t1:
+                s = 0.0 if t1 <= t0 else (t - t0) / (t1 - t0)
+                return (1.0 - s) * q0 + s * q1
+        return hist[-1][1].copy()
 
     def _step(self) -> None:
         self.robot.set_qf(self.robot.compute_passive_force(gravity=True, coriolis_and_centrifugal=True))
@@ -365,34 +409,20 @@ class SimWorld:
         self._arm_velocity = (np.asarray(self.robot.get_qpos(), dtype=np.float64)[:7] - before[:7]) * PHYSICS_HZ
         self.sim_time_s += 1.0 / PHYSICS_HZ
         self._steps += 1
+        if self.arm_errors.time_offset_s > 0.0:
+            self._reading_history.append((self.sim_time_s, self.qpos()))
+            keep = int(self.arm_errors.time_offset_s * PHYSICS_HZ) + 3
+            if len(self._reading_history) > keep:
+                del self._reading_history[: len(self._reading_history) - keep]
         if self._steps % PATH_SAMPLE_STEPS == 0:
             xyz = self.world_from_camera_fk(self.qpos())[:3, 3]
             if self._last_camera_xyz is not None:
                 self.camera_path_length_m += float(np.linalg.norm(xyz - self._last_camera_xyz))
             self._last_camera_xyz = xyz
 
-    def finger_contacts(self) -> list[tuple[np.ndarray, np.ndarray]]:
-        """What the fingers feel after the last physics step: one ``(position, force)`` per contact
-        point between a finger and anything but the robot (world frame; force on the finger,
-        newtons: impulse over the step). A force-sensing hand's information (a real Panda's
-        external wrench estimate gives a contact's force and moment arm); it does not say what was
-        touched. PhysX reports the normal impulse only, no friction: a finger landing on a rim is
-        felt (vertical normal), an object held by friction pressing on its support is not."""
-        fingers = self.finger_actor_ids
-        out: list[tuple[np.ndarray, np.ndarray]] = []
-        for c in self.scene.get_contacts():
-            a, b = (x.entity.per_scene_id for x in c.bodies)
-            if a in fingers and b not in self.robot_actor_ids:
-                sign = 1.0
-            elif b in fingers and a not in self.robot_actor_ids:
-                sign = -1.0
-            else:
-                continue
-            for p in c.points:
-                f = sign * PHYSICS_HZ * np.asarray(p.impulse, dtype=np.float64)
-                if np.any(f != 0.0):
-                    out.append((np.asarray(p.position, dtype=np.float64), f))
-        return out
+    def arm_targets(self) -> np.ndarray:
+        """The arm's seven commanded joint positions, in readings (what the controller was told)."""
+        return np.array([float(np.ravel(j.get_drive_target())[0]) for j in self.joints[:7]]) + self._offsets[:7]
 
     def arm_drive_torques(self) -> np.ndarray:
         """The arm's seven joint torques from its PD drives now, N·m: stiffness × position error +
@@ -404,7 +434,7 @@ class SimWorld:
         arm = self.joints[:7]
         target = np.array([float(np.ravel(j.get_drive_target())[0]) for j in arm])
         velocity_target = np.array([float(np.ravel(j.get_drive_velocity_target())[0]) for j in arm])
-        tau = ARM_STIFFNESS * (target - self.qpos()[:7]) + ARM_DAMPING * (velocity_target - self._arm_velocity)
+        tau = ARM_STIFFNESS * (target - self._true_qpos()[:7]) + ARM_DAMPING * (velocity_target - self._arm_velocity)
         return np.clip(tau, -ARM_FORCE_LIMIT, ARM_FORCE_LIMIT)
 
     def external_wrench(self) -> np.ndarray:
@@ -424,14 +454,14 @@ class SimWorld:
 
     # ----- kinematics -----------------------------------------------------------------------------
     def hand_from_camera_cv(self) -> np.ndarray:
-        """``panda_hand_from_camera`` in OpenCV camera axes."""
+        """``panda_hand_from_camera`` of the nominal model (hand-eye calibration), OpenCV camera axes."""
         m = self.hand_from_sapien_camera.copy()
         m[:3, :3] = m[:3, :3] @ SAPIEN_FROM_CV
         return m
 
     def world_from_camera_fk(self, q: np.ndarray) -> np.ndarray:
-        """Camera pose (OpenCV axes) from forward kinematics of joint positions ``q`` (the core's
-        chain from the URDF)."""
+        """Camera pose (OpenCV axes) from forward kinematics of joint readings ``q`` on the nominal
+        model (the core's chain from the URDF and the nominal hand-eye transform)."""
         q7 = np.clip(np.asarray(q, dtype=np.float64)[:7], self.qlimits[:7, 0], self.qlimits[:7, 1])
         return self.planner.forward_tcp(q7) @ self._tcp_from_camera
 
@@ -610,7 +640,7 @@ class SimWorld:
         seg = self.camera.get_picture("Segmentation")[..., 1].astype(np.uint32)
         rgb = (np.clip(rgba[..., :3], 0, 1) * 255 + 0.5).astype(np.uint8)
         robot = np.isin(seg, list(self.robot_actor_ids)) if self.camera_config.mask_robot_depth else None
-        q = self.qpos()
+        q = self.qpos_delayed()
         if self.sensor is None:
             depth = np.where(pos[..., 3] < 1, -pos[..., 2], 0.0).astype(np.float32)
             depth[depth > self.camera_config.far_m] = 0.0
@@ -627,7 +657,7 @@ class SimWorld:
             points[gone] = 0.0
             normals = self.camera.get_picture("Normal")[..., :3] * CV_FROM_GL
             rgb, depth = self.sensor.apply(
-                points, normals, rgb, frame_index=self.frame_index, camera_end_from_start=self._exposure_motion(q)
+                points, normals, rgb, frame_index=self.frame_index, camera_end_from_start=self._exposure_motion(self.qpos())
             )
         world_from_camera_gt = self.world_from_camera_gt()
         frame = SensorFrame(
@@ -722,11 +752,11 @@ class SimWorld:
         )
 
     def set_arm_targets(self, q_arm: np.ndarray, finger_m: float, dq_arm: np.ndarray | None = None) -> None:
-        """PD drive targets: arm joints ``q_arm`` (7) with velocity feed-forward ``dq_arm`` (zero when
-        ``None``), both fingers at ``finger_m``."""
+        """PD drive targets: arm joint readings ``q_arm`` (7) with velocity feed-forward ``dq_arm`` (zero
+        when ``None``), both fingers at ``finger_m``."""
         for i, j in enumerate(self.joints):
             if i < 7:
-                j.set_drive_target(float(q_arm[i]))
+                j.set_drive_target(float(q_arm[i] - self._offsets[i]))
                 j.set_drive_velocity_target(float(dq_arm[i]) if dq_arm is not None else 0.0)
             else:
                 j.set_drive_target(float(finger_m))

@@ -67,8 +67,13 @@ pub struct LocalCloudConfig {
     /// depth image is sampled every 8 pixels, samples within this band of z = 0 are fitted with a
     /// plane z = a·x + b·y + c (least squares, twice re-fitted on the samples within 5 mm), and
     /// `min_height_m` is measured from that plane; fewer than 200 samples or a tilt above 5°
-    /// fall back to z = 0. Metres; 0 disables (default 0.03).
+    /// fall back to [`Self::table_prior`]. The band and the first fit are taken around that
+    /// plane. Metres; 0 disables (default 0.03).
     pub table_fit_band_m: f64,
+    /// The table plane `[a, b, c]` (z = a·x + b·y + c) the mapper is given by the cell's
+    /// calibration (default `[0, 0, 0]`: the world frame's z = 0); where a frame's fit fails, and
+    /// with the fit off, `min_height_m` is measured from it.
+    pub table_prior: [f64; 3],
 }
 
 impl Default for LocalCloudConfig {
@@ -84,6 +89,7 @@ impl Default for LocalCloudConfig {
             claim_share: 0.5,
             claim_outside_share: 0.25,
             table_fit_band_m: 0.03,
+            table_prior: [0.0; 3],
         }
     }
 }
@@ -155,11 +161,13 @@ pub fn local_objects_from_frame(frame: &Frame, config: &LocalCloudConfig) -> Vec
 }
 
 /// The table top seen by a frame, `z = a·x + b·y + c` in the world (see
-/// [`LocalCloudConfig::table_fit_band_m`]); `[0, 0, 0]` when not measured.
+/// [`LocalCloudConfig::table_fit_band_m`]); [`LocalCloudConfig::table_prior`] when not measured.
 pub fn table_plane(frame: &Frame, config: &LocalCloudConfig) -> [f64; 3] {
     let band = config.table_fit_band_m;
+    let prior = config.table_prior;
+    let prior_z = |p: &Point3<f64>| prior[0] * p.x + prior[1] * p.y + prior[2];
     if !(band.is_finite() && band > 0.0) {
-        return [0.0; 3];
+        return prior;
     }
     let mut pts: Vec<Point3<f64>> = Vec::new();
     for v in (0..frame.camera.height).step_by(8) {
@@ -170,18 +178,18 @@ pub fn table_plane(frame: &Frame, config: &LocalCloudConfig) -> [f64; 3] {
                 continue;
             }
             let p: Point3<f64> = frame.world_from_camera * frame.camera.unproject_pixel(u, v, d);
-            if p.z.abs() <= band {
+            if (p.z - prior_z(&p)).abs() <= band {
                 pts.push(p);
             }
         }
     }
-    let mut plane = [0.0, 0.0, 0.0];
+    let mut plane = prior;
     let mut gate = band;
     for _ in 0..3 {
         let used: Vec<&Point3<f64>> =
             pts.iter().filter(|p| (p.z - (plane[0] * p.x + plane[1] * p.y + plane[2])).abs() <= gate).collect();
         if used.len() < 200 {
-            return [0.0; 3];
+            return prior;
         }
         let mut ata = nalgebra::Matrix3::<f64>::zeros();
         let mut atb = nalgebra::Vector3::<f64>::zeros();
@@ -190,13 +198,13 @@ pub fn table_plane(frame: &Frame, config: &LocalCloudConfig) -> [f64; 3] {
             ata += a * a.transpose();
             atb += a * p.z;
         }
-        let Some(x) = ata.lu().solve(&atb) else { return [0.0; 3] };
+        let Some(x) = ata.lu().solve(&atb) else { return prior };
         plane = [x[0], x[1], x[2]];
         gate = 0.005;
     }
     let tilt = (plane[0] * plane[0] + plane[1] * plane[1]).sqrt().atan();
     if !plane.iter().all(|v| v.is_finite()) || tilt > 5f64.to_radians() {
-        return [0.0; 3];
+        return prior;
     }
     plane
 }

@@ -16,7 +16,17 @@
 //!
 //! Means: IoUs average over *all* GT objects, an unmatched GT object counting 0 (a missed object is
 //! a mapping failure); CDE averages over matched objects, YAE over matched cuboids. Both choices are
-//! stated in [`Means`] so a reader of `metrics.json` knows what was averaged.
+//! stated in [`Means`] so a reader of `metrics.json` knows what was averaged. Beside them:
+//! - `cde_all_cm` / `yae_all_deg`: over *all* GT objects (cuboids for yaw), a miss counting as the
+//!   worst a match can be ([`MISS_CDE`]: `max_match_distance_m`; [`MISS_YAE`]: the largest yaw
+//!   error under the object's symmetry, 90° for a rectangle, 45° for a square);
+//! - precision and recall at 3D IoU 0.25 and 0.5: a GT object is found when its matched estimate
+//!   overlaps it by at least the threshold; precision divides the found objects by *every* map
+//!   object (phantoms, duplicates and poorly placed estimates count against it), recall by every GT
+//!   object. `None` when the denominator is 0.
+//!
+//! [`MISS_CDE`]: EvalConfig::max_match_distance_m
+//! [`MISS_YAE`]: miss_yaw_error_deg
 
 mod input;
 
@@ -24,7 +34,7 @@ pub use input::{config_from_json, ground_truth_from_json, EvalError, MAX_MATCH_D
 use pathfinding::prelude::{kuhn_munkres, Matrix};
 use serde::{Deserialize, Serialize};
 
-use crate::geometry::{iou3d, iou_top, yaw_error_deg, ObjectGeometry};
+use crate::geometry::{iou3d, iou_top, yaw_error_deg, ObjectGeometry, Shape};
 use crate::map::{Label, ObjectMap};
 
 /// Configuration of the evaluation.
@@ -97,6 +107,31 @@ pub struct Means {
     pub cde_cm: Option<f64>,
     /// Mean YAE (deg) over matched cuboids; `None` if none.
     pub yae_deg: Option<f64>,
+    /// Mean CDE (cm) over all GT objects, a miss counting `max_match_distance_m`; `None` without
+    /// GT objects.
+    pub cde_all_cm: Option<f64>,
+    /// Mean YAE (deg) over all GT cuboids, a miss counting [`miss_yaw_error_deg`]; `None` without
+    /// GT cuboids.
+    pub yae_all_deg: Option<f64>,
+    /// Found GT objects (matched, 3D IoU ≥ 0.25) over all map objects; `None` for an empty map.
+    pub precision_iou25: Option<f64>,
+    /// Found GT objects (3D IoU ≥ 0.25) over all GT objects; `None` without GT objects.
+    pub recall_iou25: Option<f64>,
+    /// As `precision_iou25` at 3D IoU ≥ 0.5.
+    pub precision_iou50: Option<f64>,
+    /// As `recall_iou25` at 3D IoU ≥ 0.5.
+    pub recall_iou50: Option<f64>,
+}
+
+/// The yaw error a missed cuboid counts in `yae_all_deg`: the largest yaw error under its
+/// symmetry (45° when its horizontal sides differ by less than `square_tolerance`, else 90°).
+pub fn miss_yaw_error_deg(geometry: &ObjectGeometry, square_tolerance: f64) -> f64 {
+    let (a, b) = (geometry.half_extents.x, geometry.half_extents.y);
+    if (a - b).abs() <= square_tolerance * a.max(b) {
+        45.0
+    } else {
+        90.0
+    }
 }
 
 /// The evaluation of one map.
@@ -179,11 +214,29 @@ pub fn evaluate(gt: &[GtObject], est: &[EstObject], config: &EvalConfig) -> Eval
         })
         .collect();
     let mean_of = |v: Vec<f64>| (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64);
+    let miss_cde_cm = config.max_match_distance_m * 100.0;
+    let yaw_all: Vec<f64> = gt
+        .iter()
+        .zip(&objects)
+        .filter(|(g, _)| g.geometry.shape == Shape::Cuboid)
+        .map(|(g, o)| match o.est_id {
+            Some(_) => o.yae_deg.unwrap_or(0.0),
+            None => miss_yaw_error_deg(&g.geometry, config.square_tolerance),
+        })
+        .collect();
+    let found = |t: f64| objects.iter().filter(|o| o.est_id.is_some() && o.iou3d >= t).count() as f64;
+    let ratio = |n: f64, d: usize| (d > 0).then(|| n / d as f64);
     let mean = Means {
         iou3d: mean_of(objects.iter().map(|o| o.iou3d).collect()).unwrap_or(0.0),
         iou2d: mean_of(objects.iter().map(|o| o.iou2d).collect()).unwrap_or(0.0),
         cde_cm: mean_of(objects.iter().filter_map(|o| o.cde_cm).collect()),
         yae_deg: mean_of(objects.iter().filter_map(|o| o.yae_deg).collect()),
+        cde_all_cm: mean_of(objects.iter().map(|o| o.cde_cm.unwrap_or(miss_cde_cm)).collect()),
+        yae_all_deg: mean_of(yaw_all),
+        precision_iou25: ratio(found(0.25), est.len()),
+        recall_iou25: ratio(found(0.25), gt.len()),
+        precision_iou50: ratio(found(0.5), est.len()),
+        recall_iou50: ratio(found(0.5), gt.len()),
     };
     Evaluation {
         n_matched: matches.iter().filter(|m| m.is_some()).count(),
@@ -197,7 +250,6 @@ pub fn evaluate(gt: &[GtObject], est: &[EstObject], config: &EvalConfig) -> Eval
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::geometry::Shape;
     use nalgebra::Vector3;
 
     fn obj(id: u32, label: Label, c: [f64; 3], yaw: f64) -> (GtObject, EstObject) {
@@ -258,5 +310,51 @@ mod tests {
         let (g0, _) = obj(0, Label::Block, [0.0, 0.0, 0.0], 0.0);
         let (_, e0) = obj(1, Label::Block, [0.5, 0.0, 0.0], 0.0);
         assert_eq!(evaluate(&[g0], &[e0], &EvalConfig::default()).n_matched, 0);
+    }
+
+    #[test]
+    fn precision_recall_and_all_object_errors_by_hand() {
+        // GT: block A at the origin, block B at x = 0.5 (rectangular 8 x 6 cm), cup C at y = 0.5.
+        // Map: A exactly (IoU 1); B shifted 2 cm along x (IoU = (8 - 2) / (8 + 2) = 0.6 with equal
+        // y and z extents: 0.06·0.06·0.1 over 2·0.08·0.06·0.1 − 0.06·0.06·0.1); a duplicate of A
+        // 5 mm off (unmatched: A has its estimate); a phantom block far away. C is missed.
+        let (ga, ea) = obj(0, Label::Block, [0.0, 0.0, 0.05], 0.0);
+        let (gb, mut eb) = obj(1, Label::Block, [0.5, 0.0, 0.05], 0.0);
+        let (gc, _) = obj(2, Label::Cup, [0.0, 0.5, 0.05], 0.0);
+        eb.id = 11;
+        eb.geometry.center.x += 0.02;
+        let (_, mut dup) = obj(12, Label::Block, [0.005, 0.0, 0.05], 0.0);
+        dup.id = 12;
+        let (_, phantom) = obj(13, Label::Block, [2.0, 2.0, 0.05], 0.0);
+        let cfg = EvalConfig::default();
+        let ev = evaluate(&[ga, gb, gc], &[ea, eb, dup, phantom], &cfg);
+        let iou_b = ev.objects[1].iou3d;
+        assert!((iou_b - 0.6).abs() < 1e-9, "IoU {iou_b}");
+        let m = ev.mean;
+        let close = |a: Option<f64>, b: f64| a.is_some_and(|a| (a - b).abs() < 1e-9);
+        // Found at 0.25 and 0.5: A and B (2 of 4 map objects, 2 of 3 GT objects).
+        assert!(close(m.precision_iou25, 0.5) && close(m.recall_iou25, 2.0 / 3.0), "{m:?}");
+        assert!(close(m.precision_iou50, 0.5) && close(m.recall_iou50, 2.0 / 3.0), "{m:?}");
+        // Matched-only CDE: (0 + 2) / 2 cm; all objects: (0 + 2 + 10) / 3 cm (the miss counts 10).
+        assert!(close(m.cde_cm, 1.0) && close(m.cde_all_cm, 4.0), "{m:?}");
+        // Yaw: cuboids A and B matched at 0°; the cup has no yaw: 0 either way.
+        assert!(close(m.yae_deg, 0.0) && close(m.yae_all_deg, 0.0), "{m:?}");
+        // Missing B instead: it counts 90° (rectangle); a square block would count 45°.
+        let ev = evaluate(&[ga, gb], &[ea], &cfg);
+        assert!(close(ev.mean.yae_all_deg, 45.0) && close(ev.mean.yae_deg, 0.0), "{:?}", ev.mean);
+        let mut square = ga.geometry;
+        square.half_extents.y = square.half_extents.x;
+        assert_eq!(miss_yaw_error_deg(&square, cfg.square_tolerance), 45.0);
+        // At IoU 0.5 a 0.4-overlap estimate is not found: B shifted 3.43 cm → IoU ≈ 0.4.
+        eb.geometry.center.x = 0.5 + 0.08 * (1.0 - 0.4) / 1.4;
+        let ev = evaluate(&[ga, gb], &[ea, eb], &cfg);
+        assert!((ev.objects[1].iou3d - 0.4).abs() < 1e-9);
+        assert!(close(ev.mean.precision_iou25, 1.0) && close(ev.mean.precision_iou50, 0.5), "{:?}", ev.mean);
+        // Empty map: precision undefined, recall 0; no GT: recall undefined.
+        let empty = evaluate(&[ga], &[], &cfg);
+        assert_eq!(empty.mean.precision_iou50, None);
+        assert!(close(empty.mean.recall_iou50, 0.0) && close(empty.mean.cde_all_cm, 10.0));
+        let no_gt = evaluate(&[], &[ea], &cfg);
+        assert!(no_gt.mean.recall_iou25.is_none() && close(no_gt.mean.precision_iou25, 0.0));
     }
 }

@@ -177,8 +177,12 @@ pub struct ParamConfig {
     /// ~3 mm above the table and its height is short by as much (exploration benchmark, 9 seeds:
     /// bottom +3.0 mm, height −2.2 mm, every strategy). When set, an estimate whose bottom is
     /// within [`ParamConfig::support_snap_m`] of this height is extended down to it, its top kept
-    /// (every stage from `iforest` on; `raw` stays the points' extent).
+    /// (every stage from `iforest` on; `raw` stays the points' extent). With
+    /// [`ParamConfig::support_slope`] this is the plane's height at x = y = 0.
     pub support_z_m: Option<f64>,
+    /// Slope `[a, b]` of the support plane `z = a·x + b·y + support_z_m` (a table known only up to
+    /// its calibration's tilt), evaluated at the estimate's centre; default `[0, 0]` (level).
+    pub support_slope: [f64; 2],
     /// Largest gap between an estimate's bottom and the support surface that is closed, metres
     /// (default 0.015; an object resting on another one stays where its points are).
     pub support_snap_m: f64,
@@ -213,6 +217,7 @@ impl Default for ParamConfig {
             table_z_m: None,
             table_margin_m: 0.005,
             support_z_m: None,
+            support_slope: [0.0, 0.0],
             support_snap_m: 0.015,
             components_voxel_m: 0.01,
             components_reach: 2,
@@ -442,8 +447,12 @@ impl ObjectEstimator {
         let result = self.estimate_inner(points_in_world);
         match result {
             Ok(mut est) => {
-                if let Some(z) = self.config.support_z_m {
-                    let snap = |g: &mut ObjectGeometry| snap_to_support(g, z, self.config.support_snap_m);
+                if let Some(z0) = self.config.support_z_m {
+                    let [a, b] = self.config.support_slope;
+                    let snap = |g: &mut ObjectGeometry| {
+                        let z = z0 + a * g.center.x + b * g.center.y;
+                        snap_to_support(g, z, self.config.support_snap_m)
+                    };
                     snap(&mut est.geometry);
                     for g in
                         [&mut est.stages.iforest, &mut est.stages.lines, &mut est.stages.refined].into_iter().flatten()

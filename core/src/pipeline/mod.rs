@@ -254,7 +254,10 @@ fn local_objects_from_map_points(
                     !config.depth_gate_m.is_finite() || median.is_none_or(|m| (z - m).abs() <= config.depth_gate_m)
                 })
                 .map(|(p, _)| *p)
-                .filter(|p| p.z > config.min_height_m)
+                .filter(|p| {
+                    let t = config.table_prior;
+                    p.z - (t[0] * p.x + t[1] * p.y + t[2]) > config.min_height_m
+                })
                 .collect();
             LocalObject { detection: *det, points_in_world }
         })

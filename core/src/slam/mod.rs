@@ -10,10 +10,11 @@
 //! # Entry points
 //! - [`Tracker::new`] with a [`TrackerConfig`], then **one [`Tracker::track`] call per frame**
 //!   with a [`TrackInput`] (grey image, depth in metres, [`PinholeCamera`](crate::geometry::PinholeCamera),
-//!   the clean forward-kinematics pose `world_from_camera_fk` in OpenCV camera axes, the view
-//!   index, and the ground-truth pose if the pose source needs it). It returns a [`TrackOutput`]:
-//!   `world_from_camera`, the [`TrackingState`] (ok, or lost with a [`LostReason`] — lost frames
-//!   output the noisy prior, nothing panics), and the map points observed in the frame with
+//!   the kinematic prior `world_from_camera_prior` in OpenCV camera axes — forward kinematics of
+//!   the robot's nominal model on its joint readings, with whatever error the robot has — the
+//!   view index, and an oracle pose only under the `ground_truth` ablation). It returns a
+//!   [`TrackOutput`]: `world_from_camera`, the [`TrackingState`] (ok, or lost with a
+//!   [`LostReason`] — lost frames output the prior, nothing panics), and the map points observed in the frame with
 //!   their pixels and world positions.
 //! - [`TrackOutput::points_in_box`]: the local object point cloud for one detection box.
 //! - [`Tracker::trajectory`], [`Tracker::map_points_in_world`], [`Tracker::n_lost`] for
@@ -21,15 +22,23 @@
 //! - Building blocks, usable alone: [`OrbExtractor`] (features), [`match_brute_force`] and
 //!   [`KeypointGrid`] (matching), [`solve_pnp_ransac`] / [`refine_pose`] (pose),
 //!   [`BundleProblem`] (Schur-complement LM bundle adjustment),
-//!   [`KinematicNoiseConfig`] (seeded prior noise), [`synthetic`] (seeded textures and a ray-cast
-//!   RGB-D renderer for tests and benchmarks).
+//!   [`PriorNoiseConfig`] (the estimator's assumed prior error), [`synthetic`] (seeded textures
+//!   and a ray-cast RGB-D renderer for tests and benchmarks) and [`SyntheticPriorError`] (a
+//!   seeded noisy prior for them).
+//!
+//! # The prior and the true pose
+//! The tracker takes the prior as given and never perturbs it: the robot's error model lives in
+//! whatever produces the prior (the simulator's `[robot]` model in `objslam.calibration`: a hand-eye
+//! error constant over the episode, joint offsets, a time offset between image and joint state).
+//! [`PriorNoiseConfig`] is only the estimator's *belief* about that error (gauge weights, gates),
+//! set in its own config. A true pose enters only as [`TrackInput::world_from_camera_oracle`]
+//! under the `ground_truth` pose source; every other source rejects one
+//! ([`SlamError::OracleNotAllowed`]). Trajectory metrics take the true poses separately.
 //!
 //! # Pose source ([`PoseSource`], a config field)
 //! - `slam` (default): visual tracking; the kinematic prior seeds it.
-//! - `kinematics`: the prior `world_from_camera_fk · bias(view) · jitter(frame)` from
-//!   [`KinematicNoiseConfig`] (issue 3: 1 cm / 1° per view; the simulator passes the clean FK pose
-//!   and the view index, the noise lives here so it is seeded and deterministic).
-//! - `ground_truth`: the oracle pose from the input.
+//! - `kinematics`: the prior as given, no visual correction.
+//! - `ground_truth`: the oracle pose from the input (an ablation).
 //!
 //! In every mode the same prior is computed, features are extracted and map points are created
 //! from depth and associated by projection, so object point clouds exist for every ablation;
@@ -46,8 +55,8 @@
 //!    pre-rotated to 256 angles. Depth is read at each keypoint's (rounded) pixel.
 //! 2. Empty map: the frame initialises it (map points from every keypoint with depth) at the
 //!    prior; it needs [`TrackerConfig::min_init_points`] keypoints with depth.
-//! 3. Seed: the last pose times the prior's motion since the last frame (exact within a view,
-//!    where the bias is constant); if that fails, the prior expressed in the map frame.
+//! 3. Seed: the last pose times the prior's motion since the last frame (nearly exact within a
+//!    view, where the calibration error changes little); if that fails, the prior expressed in the map frame.
 //! 4. Coarse projection search of every map point around the seed
 //!    ([`TrackerConfig::coarse_radius_px`] = 40 px, ratio test 0.9, Hamming ≤ 80, level within
 //!    ±2, each keypoint keeps its closest point), RANSAC over prior-seeded 3-point minimal sets ([`pnp`] explains the
@@ -83,12 +92,13 @@
 //!    ([`TrackerConfig::anchor_to_prior_mean`]). The bias is per view, so the fit has one
 //!    6-DoF residual per view — the view's mean prior camera centre against `world ← map` times
 //!    the view's mean SLAM centre, and the view's mean prior rotation against `world ← map` times
-//!    the SLAM rotation — whitened by the stated noise of [`KinematicNoiseConfig`]
+//!    the SLAM rotation — whitened by the assumed noise of [`PriorNoiseConfig`]
 //!    (per-axis σ = size / √3 of the bias, plus jitter), Huber-weighted
 //!    ([`TrackerConfig::anchor_huber`]) and solved by Gauss-Newton from the chordal mean /
 //!    centroid. Weighting views (not frames) equally matters: a long move has many frames but
-//!    one bias. With a consistent map the gauge error shrinks like 1 cm / √(views); the SLAM's
-//!    relative accuracy does the rest. The estimate is causal: a frame is output with the gauge
+//!    one bias. With a consistent map and independent per-view errors the gauge error shrinks
+//!    like the per-view error / √(views); an error shared by every view (a hand-eye calibration
+//!    error, constant over the episode) does not average out and moves the whole map. The estimate is causal: a frame is output with the gauge
 //!    of the views seen so far (during the first view that is its own prior), and
 //!    [`Tracker::trajectory`] re-expresses all frames with the latest gauge. This is our choice
 //!    where the paper (whose ORB-SLAM2 has no prior) says nothing.
@@ -118,12 +128,13 @@
 //! [`TrackOutput::world_from_camera`], what the object map used at that time) and
 //! [`Tracker::trajectory`] (each frame's map-frame pose as estimated when it was tracked,
 //! re-expressed with the latest world ← map anchor; lost frames keep their prior).
-//! On the test sequence (`core/tests/slam_tracking.rs`: 40 frames, 20 views, 1 cm / 1° bias)
+//! On the test sequence (`core/tests/slam_tracking.rs`: 40 frames, 20 views, a synthetic prior
+//! with an independent 1 cm / 1° bias per view)
 //! the online ATE is 3.0 mm, the trajectory ATE 1.3 mm, the prior's 9.9 mm.
 //!
 //! Frames and units: `world_from_camera` in OpenCV camera axes, metres, pixels of level 0.
 //! Determinism: every random choice is seeded ([`RansacConfig::seed`] mixed with the frame index,
-//! [`KinematicNoiseConfig::seed`], [`OrbConfig::pattern_seed`]); map points live in a `BTreeMap`.
+//! [`OrbConfig::pattern_seed`]); map points live in a `BTreeMap`.
 
 pub mod ba;
 pub mod features;
@@ -138,7 +149,7 @@ pub use ba::{BundleConfig, BundleObservation, BundleProblem};
 pub use features::{hamming, Descriptor, Features, Keypoint, OrbConfig, OrbExtractor};
 pub use matcher::{match_brute_force, FeatureMatch, KeypointGrid, MatchConfig};
 pub use metrics::{ate_rmse_m, rpe, Rpe};
-pub use noise::KinematicNoiseConfig;
+pub use noise::{PriorNoiseConfig, SyntheticPriorError};
 pub use pnp::{refine_pose, solve_pnp_ransac, Correspondence, PoseEstimate, PoseRefineConfig, RansacConfig};
 pub use tracker::{
     LostReason, ObservedPoint, PoseSource, TrackInput, TrackOutput, Tracker, TrackerConfig, TrackingState,
@@ -196,9 +207,15 @@ pub enum SlamError {
         /// What failed.
         reason: String,
     },
-    /// The pose source is `ground_truth` but the frame has no ground-truth pose.
-    #[error("pose source ground_truth needs world_from_camera_gt")]
+    /// The pose source is `ground_truth` but the frame has no oracle pose.
+    #[error("pose source ground_truth needs world_from_camera_oracle")]
     MissingGroundTruth,
+    /// An oracle pose was given under a pose source that must not see one.
+    #[error("world_from_camera_oracle: given under pose source {pose_source:?}; only ground_truth takes one")]
+    OracleNotAllowed {
+        /// The configured pose source.
+        pose_source: PoseSource,
+    },
     /// Too few correspondences for pose estimation.
     #[error("pose: {actual} correspondences, need {required}")]
     TooFewCorrespondences {

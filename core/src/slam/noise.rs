@@ -1,5 +1,14 @@
-//! Seeded kinematic pose-prior noise: a per-view bias (standing for hand-eye / kinematic
-//! calibration error that changes with the arm configuration) plus per-frame jitter.
+//! The estimator's assumed error of the kinematic camera-pose prior.
+//!
+//! The tracker receives the prior as it is (forward kinematics of the robot's nominal model on
+//! its joint readings: whatever error the real robot has is already in it) and never perturbs it.
+//! [`PriorNoiseConfig`] is what the estimator *believes* about that error: it sets the weights of
+//! the world ← map gauge fit ([`super::TrackerConfig::anchor_to_prior_mean`]) and the sizes of the
+//! prior and motion gates. It is a tuning choice of the estimator and need not equal the error of
+//! the robot it runs on (in the simulator that error is the `[robot]` model of `objslam.calibration`).
+//!
+//! [`SyntheticPriorError`] makes a noisy prior for the core's own tests and benchmarks (a seeded
+//! per-view bias and per-frame jitter); the tracker never uses it.
 
 use nalgebra::{Translation3, UnitQuaternion, Vector3};
 use rand::{Rng, SeedableRng};
@@ -8,58 +17,90 @@ use serde::{Deserialize, Serialize};
 
 use crate::geometry::Se3;
 
-/// Configuration of the kinematic noise model. All perturbations act in the camera frame
-/// (`world_from_camera_noisy = world_from_camera_fk · bias(view) · jitter(frame)`).
+/// The estimator's assumed size of the kinematic prior's error, in the camera frame. The model
+/// behind it: a part that is constant over a view (calibration error of the arm's configuration
+/// during one move) and a part drawn per frame.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
-pub struct KinematicNoiseConfig {
-    /// Per-view translation bias magnitude, metres (issue 3: 0.01). Direction uniform on the
-    /// sphere, drawn per view.
+pub struct PriorNoiseConfig {
+    /// Assumed translation error constant over a view, metres (its magnitude; default 0.01).
+    /// Sets the gauge fit's per-view weight (per-axis σ = size / √3) and the prior gate.
     pub bias_trans_m: f64,
-    /// Per-view rotation bias angle, degrees (issue 3: 1.0). Axis uniform on the sphere.
+    /// Assumed rotation error constant over a view, degrees (its angle; default 1.0).
     pub bias_rot_deg: f64,
-    /// Per-frame translation jitter, standard deviation per axis, metres (default 0.0005).
+    /// Assumed per-frame translation error, standard deviation per axis, metres (default 0.0005).
     pub jitter_trans_m: f64,
-    /// Per-frame rotation jitter, standard deviation per axis of the rotation vector, degrees
-    /// (default 0.05).
+    /// Assumed per-frame rotation error, standard deviation per axis of the rotation vector,
+    /// degrees (default 0.05).
     pub jitter_rot_deg: f64,
+}
+
+impl Default for PriorNoiseConfig {
+    fn default() -> Self {
+        Self { bias_trans_m: 0.01, bias_rot_deg: 1.0, jitter_trans_m: 0.0005, jitter_rot_deg: 0.05 }
+    }
+}
+
+impl PriorNoiseConfig {
+    /// No error assumed (the gates fall back to their floors, the gauge weights to 1e-5).
+    pub fn none() -> Self {
+        Self { bias_trans_m: 0.0, bias_rot_deg: 0.0, jitter_trans_m: 0.0, jitter_rot_deg: 0.0 }
+    }
+
+    /// A config error naming the first negative or non-finite field (`prefix` + field name).
+    pub(crate) fn validate(&self) -> Result<(), (&'static str, f64)> {
+        for (field, v) in [
+            ("prior_noise.bias_trans_m", self.bias_trans_m),
+            ("prior_noise.bias_rot_deg", self.bias_rot_deg),
+            ("prior_noise.jitter_trans_m", self.jitter_trans_m),
+            ("prior_noise.jitter_rot_deg", self.jitter_rot_deg),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err((field, v));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// A seeded stand-in for a robot's prior error, for the core's tests and benchmarks only: the
+/// prior of frame `f` in view `v` is `world_from_camera_true · bias(v) · jitter(f)`, the bias of
+/// fixed size in a direction uniform on the sphere, the jitter Gaussian per axis.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SyntheticPriorError {
+    /// Sizes of the bias and jitter (same meaning as for the estimator's assumption).
+    pub size: PriorNoiseConfig,
     /// Seed; the bias of view `v` and the jitter of frame `f` depend only on (seed, v) and
     /// (seed, f), never on call order.
     pub seed: u64,
 }
 
-impl Default for KinematicNoiseConfig {
-    fn default() -> Self {
-        Self { bias_trans_m: 0.01, bias_rot_deg: 1.0, jitter_trans_m: 0.0005, jitter_rot_deg: 0.05, seed: 1 }
-    }
-}
-
-impl KinematicNoiseConfig {
-    /// No noise at all.
-    pub fn none() -> Self {
-        Self { bias_trans_m: 0.0, bias_rot_deg: 0.0, jitter_trans_m: 0.0, jitter_rot_deg: 0.0, seed: 0 }
+impl SyntheticPriorError {
+    /// Errors of `size`, seeded.
+    pub fn new(size: PriorNoiseConfig, seed: u64) -> Self {
+        Self { size, seed }
     }
 
     /// The camera-frame bias of view `view_index`.
     pub fn bias(&self, view_index: u64) -> Se3 {
         let mut rng = stream(self.seed, 0xB1A5, view_index);
-        let t = unit_vector(&mut rng) * self.bias_trans_m;
+        let t = unit_vector(&mut rng) * self.size.bias_trans_m;
         let axis = unit_vector(&mut rng);
-        let r = UnitQuaternion::from_scaled_axis(axis * self.bias_rot_deg.to_radians());
+        let r = UnitQuaternion::from_scaled_axis(axis * self.size.bias_rot_deg.to_radians());
         Se3::from_parts(Translation3::from(t), r)
     }
 
     /// The camera-frame jitter of frame `frame_index`.
     pub fn jitter(&self, frame_index: u64) -> Se3 {
         let mut rng = stream(self.seed, 0x7177, frame_index);
-        let t = Vector3::new(gauss(&mut rng), gauss(&mut rng), gauss(&mut rng)) * self.jitter_trans_m;
-        let w = Vector3::new(gauss(&mut rng), gauss(&mut rng), gauss(&mut rng)) * self.jitter_rot_deg.to_radians();
+        let t = Vector3::new(gauss(&mut rng), gauss(&mut rng), gauss(&mut rng)) * self.size.jitter_trans_m;
+        let w = Vector3::new(gauss(&mut rng), gauss(&mut rng), gauss(&mut rng)) * self.size.jitter_rot_deg.to_radians();
         Se3::from_parts(Translation3::from(t), UnitQuaternion::from_scaled_axis(w))
     }
 
-    /// The noisy prior: `world_from_camera_fk · bias(view) · jitter(frame)`.
-    pub fn perturb(&self, world_from_camera_fk: &Se3, view_index: u64, frame_index: u64) -> Se3 {
-        world_from_camera_fk * self.bias(view_index) * self.jitter(frame_index)
+    /// The noisy prior: `world_from_camera_true · bias(view) · jitter(frame)`.
+    pub fn perturb(&self, world_from_camera_true: &Se3, view_index: u64, frame_index: u64) -> Se3 {
+        world_from_camera_true * self.bias(view_index) * self.jitter(frame_index)
     }
 }
 
@@ -92,7 +133,7 @@ mod tests {
 
     #[test]
     fn bias_has_the_configured_size_and_is_order_independent() {
-        let c = KinematicNoiseConfig::default();
+        let c = SyntheticPriorError::new(PriorNoiseConfig::default(), 1);
         for v in 0..20 {
             let b = c.bias(v);
             assert!((b.translation.vector.norm() - 0.01).abs() < 1e-12);
@@ -100,17 +141,24 @@ mod tests {
         }
         assert_eq!(c.bias(3), c.bias(3));
         assert_ne!(c.bias(3), c.bias(4));
-        let none = KinematicNoiseConfig::none();
+        let none = SyntheticPriorError::new(PriorNoiseConfig::none(), 0);
         let p = crate::geometry::se3_from_yaw(Vector3::new(0.1, 0.2, 0.3), 0.4);
         assert!((none.perturb(&p, 5, 9).to_homogeneous() - p.to_homogeneous()).norm() < 1e-12);
     }
 
     #[test]
     fn jitter_statistics_match_the_configured_sigma() {
-        let c = KinematicNoiseConfig { jitter_trans_m: 0.001, ..KinematicNoiseConfig::default() };
+        let size = PriorNoiseConfig { jitter_trans_m: 0.001, ..PriorNoiseConfig::default() };
+        let c = SyntheticPriorError::new(size, 1);
         let n = 4000;
         let var: f64 = (0..n).map(|f| c.jitter(f).translation.vector.norm_squared()).sum::<f64>() / (3 * n) as f64;
         // Per-axis standard deviation within 5 % of 1 mm (4000 x 3 samples).
         assert!((var.sqrt() - 0.001).abs() < 5e-5, "sigma {}", var.sqrt());
+    }
+
+    #[test]
+    fn a_negative_size_names_its_field() {
+        let bad = PriorNoiseConfig { bias_rot_deg: -1.0, ..PriorNoiseConfig::default() };
+        assert_eq!(bad.validate().map_err(|e| e.0), Err("prior_noise.bias_rot_deg"));
     }
 }

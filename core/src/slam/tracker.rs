@@ -9,7 +9,7 @@ use serde::{Deserialize, Serialize};
 use super::ba::{BundleConfig, BundleObservation, BundleProblem};
 use super::features::{hamming, Descriptor, Features, OrbConfig, OrbExtractor};
 use super::matcher::KeypointGrid;
-use super::noise::KinematicNoiseConfig;
+use super::noise::PriorNoiseConfig;
 use super::pnp::{refine_pose, solve_pnp_ransac, Correspondence, PoseRefineConfig, RansacConfig};
 use super::SlamError;
 use crate::frame::{DepthImage, GreyImage};
@@ -19,12 +19,13 @@ use crate::geometry::{Box2, PinholeCamera, Se3};
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum PoseSource {
-    /// Visual tracking seeded by the (noisy) kinematic prior (default; the paper's system).
+    /// Visual tracking seeded by the kinematic prior (default; the paper's system).
     #[default]
     Slam,
-    /// The kinematic prior with [`TrackerConfig::kinematic_noise`] applied, no visual correction.
+    /// The kinematic prior as given, no visual correction.
     Kinematics,
-    /// The ground-truth pose given with the frame (oracle, for ablations).
+    /// The oracle pose given with the frame ([`TrackInput::world_from_camera_oracle`]; an
+    /// ablation, the only source that accepts one).
     GroundTruth,
 }
 
@@ -36,9 +37,10 @@ pub struct TrackerConfig {
     pub pose_source: PoseSource,
     /// Feature extraction.
     pub orb: OrbConfig,
-    /// Noise model turning the clean forward-kinematics pose into the prior (used by `slam` as its
-    /// seed and by `kinematics` as its output). Issue 3: 1 cm / 1° per view.
-    pub kinematic_noise: KinematicNoiseConfig,
+    /// The estimator's assumed error of the kinematic prior (gauge-fit weights, prior and motion
+    /// gates); its own tuning, independent of the robot's actual error (default 1 cm / 1° per
+    /// view, 0.5 mm / 0.05° per frame).
+    pub prior_noise: PriorNoiseConfig,
     /// RANSAC of the coarse pose.
     pub ransac: RansacConfig,
     /// Motion-only refinement.
@@ -86,7 +88,7 @@ pub struct TrackerConfig {
     /// Express the SLAM map in the world by the rigid transform that best explains all kinematic
     /// priors so far, so that per-view biases average out: one residual per view (the view's mean
     /// prior camera centre and rotation against the SLAM's), whitened by the stated noise of
-    /// [`Self::kinematic_noise`] and Huber-weighted ([`Self::anchor_huber`]), solved by
+    /// [`Self::prior_noise`] and Huber-weighted ([`Self::anchor_huber`]), solved by
     /// Gauss-Newton from the chordal mean. If false, the map frame is the first frame's prior.
     pub anchor_to_prior_mean: bool,
     /// Huber width of the gauge fit, on a view's whitened 6-DoF residual norm (a view whose
@@ -158,7 +160,7 @@ impl Default for TrackerConfig {
         Self {
             pose_source: PoseSource::Slam,
             orb: OrbConfig::default(),
-            kinematic_noise: KinematicNoiseConfig::default(),
+            prior_noise: PriorNoiseConfig::default(),
             ransac: RansacConfig::default(),
             refine: PoseRefineConfig::default(),
             bundle: BundleConfig::default(),
@@ -199,12 +201,16 @@ pub struct TrackInput<'a> {
     pub depth: &'a DepthImage,
     /// Intrinsics.
     pub camera: &'a PinholeCamera,
-    /// Clean forward-kinematics camera pose (OpenCV axes); the tracker applies the noise model.
-    pub world_from_camera_fk: Se3,
-    /// Index of the view (arm configuration) this frame belongs to: selects the per-view bias.
+    /// The kinematic prior (OpenCV axes): forward kinematics of the robot's nominal model (URDF
+    /// and hand-eye calibration) on the joint readings paired with the image. Used as given: its
+    /// error is the robot's (calibration, joint offsets, timing), never added here.
+    pub world_from_camera_prior: Se3,
+    /// Index of the view (one arm move) this frame belongs to: the gauge fit has one term per
+    /// view and the motion gate predicts within a view.
     pub view_index: u64,
-    /// Ground-truth pose; required for [`PoseSource::GroundTruth`], ignored otherwise.
-    pub world_from_camera_gt: Option<Se3>,
+    /// The oracle pose, only for [`PoseSource::GroundTruth`] (required there); any other pose
+    /// source rejects it ([`SlamError::OracleNotAllowed`]), so a true pose cannot reach an estimate.
+    pub world_from_camera_oracle: Option<Se3>,
 }
 
 /// Why a frame was lost.
@@ -264,7 +270,7 @@ pub enum LostReason {
 pub enum TrackingState {
     /// Pose estimated (or taken from the configured pose source).
     Ok,
-    /// Lost: the output pose is the (noisy) kinematic prior.
+    /// Lost: the output pose is the kinematic prior (or dead-reckoned from it).
     Lost {
         /// Why.
         reason: LostReason,
@@ -289,7 +295,7 @@ pub struct TrackOutput {
     pub frame_index: u64,
     /// Output camera pose (depends on the pose source; the prior when lost).
     pub world_from_camera: Se3,
-    /// The noisy kinematic prior used for this frame.
+    /// The kinematic prior given with this frame.
     pub world_from_camera_prior: Se3,
     /// Ok or lost (with reason).
     pub state: TrackingState,
@@ -384,7 +390,7 @@ struct Anchor {
 }
 
 impl Anchor {
-    fn new(noise: &KinematicNoiseConfig, huber: f64) -> Self {
+    fn new(noise: &PriorNoiseConfig, huber: f64) -> Self {
         // A view's mean prior is off by the view's bias (uniform direction, fixed size: per-axis
         // variance size² / 3) plus averaged jitter; the floor keeps the weights finite.
         let sigma_t = (noise.bias_trans_m.powi(2) / 3.0 + noise.jitter_trans_m.powi(2)).sqrt().max(1e-5);
@@ -570,12 +576,10 @@ impl Tracker {
         if config.max_depth_m.partial_cmp(&config.min_depth_m) != Some(std::cmp::Ordering::Greater) {
             return Err(SlamError::Config { field: "max_depth_m", reason: "must exceed min_depth_m".into() });
         }
-        let n = config.kinematic_noise;
+        if let Err((field, v)) = config.prior_noise.validate() {
+            return Err(SlamError::Config { field, reason: format!("{v} must be finite and ≥ 0") });
+        }
         for (field, v) in [
-            ("kinematic_noise.bias_trans_m", n.bias_trans_m),
-            ("kinematic_noise.bias_rot_deg", n.bias_rot_deg),
-            ("kinematic_noise.jitter_trans_m", n.jitter_trans_m),
-            ("kinematic_noise.jitter_rot_deg", n.jitter_rot_deg),
             ("refine.depth_baseline_m", config.refine.depth_baseline_m),
             ("bundle.depth_baseline_m", config.bundle.depth_baseline_m),
         ] {
@@ -598,7 +602,7 @@ impl Tracker {
             next_point_id: 0,
             frame_index: 0,
             n_resets: 0,
-            anchor: Anchor::new(&config.kinematic_noise, config.anchor_huber),
+            anchor: Anchor::new(&config.prior_noise, config.anchor_huber),
             last: None,
             view_tracked: VecDeque::new(),
             frames_since_keyframe: 0,
@@ -694,15 +698,15 @@ impl Tracker {
     /// support (no texture, no depth, no consensus) is a reported lost frame.
     pub fn track(&mut self, input: &TrackInput<'_>) -> Result<TrackOutput, SlamError> {
         validate(input)?;
-        if self.config.pose_source == PoseSource::GroundTruth {
-            match input.world_from_camera_gt {
-                Some(gt) => check_pose(&gt, "world_from_camera_gt")?,
-                None => return Err(SlamError::MissingGroundTruth),
-            }
+        match (self.config.pose_source, input.world_from_camera_oracle) {
+            (PoseSource::GroundTruth, Some(oracle)) => check_pose(&oracle, "world_from_camera_oracle")?,
+            (PoseSource::GroundTruth, None) => return Err(SlamError::MissingGroundTruth),
+            (source, Some(_)) => return Err(SlamError::OracleNotAllowed { pose_source: source }),
+            (_, None) => {}
         }
         let frame_index = self.frame_index;
         self.frame_index += 1;
-        let prior = self.config.kinematic_noise.perturb(&input.world_from_camera_fk, input.view_index, frame_index);
+        let prior = input.world_from_camera_prior;
         let features = self.orb.extract(input.grey)?;
         let depth_m: Vec<Option<f64>> = features
             .keypoints
@@ -733,7 +737,7 @@ impl Tracker {
         let known = match self.config.pose_source {
             PoseSource::Slam => None,
             PoseSource::Kinematics => Some(prior),
-            PoseSource::GroundTruth => input.world_from_camera_gt,
+            PoseSource::GroundTruth => input.world_from_camera_oracle,
         };
         let min_features = self.config.min_tracked_inliers.max(self.config.ransac.min_inliers);
         let result = if frame.features.keypoints.len() < min_features {
@@ -965,7 +969,7 @@ impl Tracker {
         if k <= 0.0 {
             return None;
         }
-        let n = &self.config.kinematic_noise;
+        let n = &self.config.prior_noise;
         let gate_t = k * (n.bias_trans_m + 3.0 * n.jitter_trans_m).max(0.002);
         let gate_r = k * (n.bias_rot_deg + 3.0 * n.jitter_rot_deg).max(0.2);
         let dt = (map_from_camera.translation.vector - prior_in_map.translation.vector).norm();
@@ -992,7 +996,7 @@ impl Tracker {
         if floor_t <= 0.0 && floor_r <= 0.0 {
             return None;
         }
-        let n = &self.config.kinematic_noise;
+        let n = &self.config.prior_noise;
         let (theta, d) = (motion.rotation.angle(), motion.translation.vector.norm());
         let bias_rot = n.bias_rot_deg.to_radians();
         let gate_t = floor_t + theta * n.bias_trans_m + bias_rot * d;
@@ -1405,7 +1409,7 @@ fn validate(input: &TrackInput<'_>) -> Result<(), SlamError> {
             return Err(SlamError::BufferLength { field, expected, actual: len });
         }
     }
-    check_pose(&input.world_from_camera_fk, "world_from_camera_fk")
+    check_pose(&input.world_from_camera_prior, "world_from_camera_prior")
 }
 
 #[cfg(test)]
@@ -1416,7 +1420,8 @@ mod tests {
     /// A perfectly consistent SLAM map (`map_from_camera = map_from_world · gt`) seen through
     /// per-view biased priors, views with very unequal frame counts.
     fn fit(n_views: u64, outlier: Option<u64>) -> (Se3, Se3, Vec<(Se3, u64)>) {
-        let noise = KinematicNoiseConfig::default(); // 1 cm / 1° per view
+        let noise = PriorNoiseConfig::default(); // 1 cm / 1° per view
+        let robot = super::super::noise::SyntheticPriorError::new(noise, 1);
         let mut anchor = Anchor::new(&noise, TrackerConfig::default().anchor_huber);
         let map_from_world = se3_from_yaw(Vector3::new(0.3, -0.2, 0.1), 0.7);
         let mut frames = Vec::new();
@@ -1426,7 +1431,7 @@ mod tests {
                 let a = 0.3 * v as f64 + 0.01 * f as f64;
                 let eye = nalgebra::Point3::new(0.45 + 0.25 * a.cos(), 0.25 * a.sin(), 0.4 + 0.05 * (a * 3.0).sin());
                 let gt = super::super::synthetic::look_at(eye, nalgebra::Point3::new(0.5, 0.0, 0.0));
-                let mut prior = noise.perturb(&gt, v, v * 100 + f);
+                let mut prior = robot.perturb(&gt, v, v * 100 + f);
                 if outlier == Some(v) {
                     // A view whose SLAM poses are 8 cm off its prior (e.g. a bad re-localisation).
                     prior = Se3::translation(0.08, 0.0, 0.0) * prior;

@@ -13,7 +13,8 @@
 //!
 //! One frame (`process_frame`):
 //! 1. With a tracker, the frame's camera pose is tracked from the grey image and depth, starting
-//!    from the kinematic prior the frame carries; the tracked pose replaces it.
+//!    from the kinematic prior the frame carries (used as given: its error is the robot's); the
+//!    tracked pose replaces it.
 //! 2. When the tracker's world ← map gauge moved since the last frame and
 //!    `PipelineConfig::follow_slam_gauge` is set, the object map is moved with it (a change of
 //!    world frame, not of the objects).
@@ -39,7 +40,7 @@ use crate::frame::{Frame, GreyImage};
 use crate::geometry::{PinholeCamera, Se3};
 use crate::map::ObjectMap;
 use crate::pipeline::{MapPointObservation, ObjectPipeline, PipelineConfig, PipelineError};
-use crate::slam::{ate_rmse_m, rpe, SlamError, TrackInput, Tracker, TrackerConfig};
+use crate::slam::{ate_rmse_m, rpe, PoseSource, SlamError, TrackInput, Tracker, TrackerConfig};
 
 /// Errors of the system loop, by the subsystem that raised them.
 #[derive(Debug, Error)]
@@ -151,13 +152,15 @@ impl System {
         let mut map_points: Option<Vec<MapPointObservation>> = None;
         if let Some(tracker) = self.tracker.as_mut() {
             let g = grey.ok_or(SystemError::MissingGrey)?;
+            // The true pose reaches the tracker only as the oracle of the `ground_truth` ablation.
+            let oracle = world_from_camera_gt.filter(|_| tracker.config().pose_source == PoseSource::GroundTruth);
             let out = tracker.track(&TrackInput {
                 grey: g,
                 depth: &frame.depth,
                 camera: &frame.camera,
-                world_from_camera_fk: frame.world_from_camera,
+                world_from_camera_prior: frame.world_from_camera,
                 view_index,
-                world_from_camera_gt,
+                world_from_camera_oracle: oracle,
             })?;
             frame.world_from_camera = out.world_from_camera;
             if self.pipeline.config().follow_slam_gauge {
