@@ -11,7 +11,7 @@
 //! a single block seen in several partial views (parts hidden by the image border) stay one map
 //! object.
 
-use nalgebra::{Matrix3, Point3, Rotation3, UnitQuaternion, Vector3};
+use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
 use objslam_core::frame::{DepthImage, Detection, Frame};
 use objslam_core::geometry::{iou3d, Box2, ObjectGeometry, PinholeCamera, Se3, Shape};
 use objslam_core::map::{Label, ObjectMap};
@@ -273,13 +273,12 @@ fn one_can_seen_from_all_sides_stays_one_object() {
 fn one_block_in_partial_views_stays_one_object() {
     // Close views aimed beside the block: each shows a different part, cut by the image border.
     let scene = [block(0.5, 0.0, 0.06)];
-    let views: Vec<Se3> = [[0.30, -0.12, 0.22, 0.03], [0.30, 0.12, 0.22, -0.03], [0.5, -0.25, 0.25, 0.0], [
-        0.30, 0.0, 0.30, 0.0,
-    ]]
-    .iter()
-    .chain([[0.70, 0.15, 0.25, 0.02], [0.32, -0.05, 0.20, 0.04]].iter())
-    .map(|e| look_at(Vector3::new(e[0], e[1], e[2]), Vector3::new(0.5, e[3], 0.03)))
-    .collect();
+    let views: Vec<Se3> =
+        [[0.30, -0.12, 0.22, 0.03], [0.30, 0.12, 0.22, -0.03], [0.5, -0.25, 0.25, 0.0], [0.30, 0.0, 0.30, 0.0]]
+            .iter()
+            .chain([[0.70, 0.15, 0.25, 0.02], [0.32, -0.05, 0.20, 0.04]].iter())
+            .map(|e| look_at(Vector3::new(e[0], e[1], e[2]), Vector3::new(0.5, e[3], 0.03)))
+            .collect();
     let map = map_of(&scene, &views, PipelineConfig::default());
     let ious = report("partial block", &scene, &map);
     assert_eq!(map.len(), 1);
