@@ -74,6 +74,17 @@ pub struct LocalCloudConfig {
     /// calibration (default `[0, 0, 0]`: the world frame's z = 0); where a frame's fit fails, and
     /// with the fit off, `min_height_m` is measured from it.
     pub table_prior: [f64; 3],
+    /// Beyond the paper: look-alike split. The detector boxes each object on its own, so where the
+    /// boxes of two same-label detections of about the same size (areas within
+    /// `lookalike_area_ratio`) overlap, a sample goes only to the box whose centre is nearer
+    /// (distance in units of each box's half-width and half-height). Side by side, look-alikes
+    /// (a row of identical cans, two blocks millimetres apart) show one continuous depth surface
+    /// that no depth cut separates; the boxes do. Default true.
+    pub lookalike_split: bool,
+    /// Largest area ratio of two same-label boxes for the look-alike split (default 2.0; a
+    /// smaller box over a larger one is a different-sized object, occluded or not, and keeps its
+    /// whole box).
+    pub lookalike_area_ratio: f64,
 }
 
 impl Default for LocalCloudConfig {
@@ -90,6 +101,8 @@ impl Default for LocalCloudConfig {
             claim_outside_share: 0.25,
             table_fit_band_m: 0.03,
             table_prior: [0.0; 3],
+            lookalike_split: true,
+            lookalike_area_ratio: 2.0,
         }
     }
 }
@@ -149,9 +162,22 @@ pub fn local_objects_from_frame(frame: &Frame, config: &LocalCloudConfig) -> Vec
                     } else {
                         None
                     };
-                    match claimed {
-                        Some(mask) => own.recut(&mask, frame, config),
-                        None => own.points(),
+                    let lookalike = if config.lookalike_split {
+                        nearer_lookalike(i, own, &frame.detections, config.lookalike_area_ratio)
+                    } else {
+                        None
+                    };
+                    match (claimed, lookalike) {
+                        (Some(mut mask), Some(near)) => {
+                            mask.iter_mut().zip(near).for_each(|(m, n)| *m |= n);
+                            own.recut(&mask, frame, config)
+                        }
+                        (Some(mask), None) => own.recut(&mask, frame, config),
+                        (None, Some(near)) => {
+                            let keep: Vec<bool> = own.keep.iter().zip(near).map(|(k, n)| *k && !n).collect();
+                            own.points_where(&keep)
+                        }
+                        (None, None) => own.points(),
                     }
                 }
             };
@@ -363,6 +389,45 @@ impl BoxSurface {
         }
         false
     }
+}
+
+/// The samples of detection `i`'s surface that lie in the box of a same-label detection of about
+/// the same size (areas within `area_ratio`) whose centre is nearer, in units of each box's
+/// half-sizes (see [`LocalCloudConfig::lookalike_split`]). `None` when no such box overlaps.
+fn nearer_lookalike(
+    i: usize,
+    own: &BoxSurface,
+    detections: &[crate::frame::Detection],
+    area_ratio: f64,
+) -> Option<Vec<bool>> {
+    let di = detections.get(i)?;
+    let bi = &di.bbox;
+    let scaled = |b: &crate::geometry::Box2, u: f64, v: f64| {
+        let c = b.center();
+        let (hw, hh) = ((b.width() / 2.0).max(1.0), (b.height() / 2.0).max(1.0));
+        ((u - c[0]) / hw).powi(2) + ((v - c[1]) / hh).powi(2)
+    };
+    let ratio_ok = |a: f64, b: f64| a > 0.0 && b > 0.0 && a.max(b) <= area_ratio * a.min(b);
+    let rivals: Vec<&crate::geometry::Box2> = detections
+        .iter()
+        .enumerate()
+        .filter(|(j, d)| *j != i && d.label == di.label && ratio_ok(bi.area(), d.bbox.area()))
+        .map(|(_, d)| &d.bbox)
+        .filter(|b| bi.intersection(b).is_some())
+        .collect();
+    if rivals.is_empty() {
+        return None;
+    }
+    Some(
+        (0..own.grid.len())
+            .map(|k| {
+                let (u, v) = own.pixel(k);
+                let (u, v) = (f64::from(u), f64::from(v));
+                let mine = scaled(bi, u, v);
+                rivals.iter().any(|b| b.contains(u, v) && scaled(b, u, v) < mine)
+            })
+            .collect(),
+    )
 }
 
 /// The samples of detection `i`'s surface that belong to a neighbouring detection `j` when `i`'s

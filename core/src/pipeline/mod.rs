@@ -142,9 +142,10 @@ pub struct PipelineConfig {
     pub segment_box_margin_px: f64,
     /// Beyond the paper: after each refresh, fold same-label objects whose raw boxes overlap
     /// (3D IoU ≥ `consolidate_iou` or centres within `consolidate_distance_m`) or whose clouds
-    /// share a surface (see `consolidate_cloud_overlap`) into the older one. The statistical tests
-    /// split objects seen from very different viewpoints during active exploration; this geometric
-    /// check repairs it. Off reproduces the paper's pipeline.
+    /// share a surface (see `consolidate_cloud_overlap`) into the older one, unless the detector
+    /// boxed them apart (`consolidate_co_observed_frames`). The statistical tests split objects
+    /// seen from very different viewpoints during active exploration; this geometric check
+    /// repairs it. Off reproduces the paper's pipeline.
     pub consolidate: bool,
     /// 3D IoU of the raw axis-aligned boxes above which two same-label objects are one.
     pub consolidate_iou: f64,
@@ -165,6 +166,14 @@ pub struct PipelineConfig {
     pub relabel_vote_ratio: f64,
     /// Share of the smaller raw box's volume inside the other's for the label-confusion fold.
     pub relabel_containment: f64,
+    /// Two objects that the detector boxed separately in at least this many common frames are
+    /// never folded by the consolidation (nor by the label-confusion fold): the detector gives one
+    /// box per object, so two boxes of one frame are two objects, however close, overlapping or
+    /// alike they are (look-alikes a few millimetres apart, rows of identical cans). Fragments of
+    /// one object that the statistical tests split are seen in different frames, never boxed twice
+    /// in one. Default 1 (one common frame separates them); a larger value tolerates stray boxes
+    /// (false positives of the same label); 0 disables the guard.
+    pub consolidate_co_observed_frames: usize,
     /// Neighbour radius of the cloud-overlap test, metres (about the depth noise at 0.5 m plus
     /// the sampling step of the local clouds).
     pub consolidate_cloud_radius_m: f64,
@@ -197,6 +206,7 @@ impl Default for PipelineConfig {
             consolidate_cloud_overlap: 0.5,
             relabel_vote_ratio: 4.0,
             relabel_containment: 0.5,
+            consolidate_co_observed_frames: 1,
             consolidate_cloud_radius_m: 0.01,
             min_observations: 3,
             follow_slam_gauge: true,
@@ -487,9 +497,14 @@ impl ObjectPipeline {
     fn consolidate(&mut self) {
         loop {
             let map = self.raw_map();
+            let frames: Vec<BTreeSet<u32>> =
+                map.objects.iter().map(|o| o.observations.iter().map(|ob| ob.frame).collect()).collect();
             let mut fold: Option<(u32, u32, bool)> = None;
             'pairs: for (i, a) in map.objects.iter().enumerate() {
-                for b in &map.objects[i + 1..] {
+                for (j, b) in map.objects.iter().enumerate().skip(i + 1) {
+                    if self.boxed_apart(&frames[i], &frames[j]) {
+                        continue;
+                    }
                     let (ga, gb) = (a.geometry(), b.geometry());
                     if a.label != b.label {
                         if let Some((minor, major)) = self.label_confusion(a, b, &ga, &gb) {
@@ -518,6 +533,13 @@ impl ObjectPipeline {
             self.dirty.remove(&young);
             self.dirty.insert(old);
         }
+    }
+
+    /// Whether two objects were boxed separately in at least `consolidate_co_observed_frames`
+    /// common frames (their observation frames).
+    fn boxed_apart(&self, a: &BTreeSet<u32>, b: &BTreeSet<u32>) -> bool {
+        let need = self.config.consolidate_co_observed_frames;
+        need > 0 && a.intersection(b).nth(need - 1).is_some()
     }
 
     /// The label-confusion fold of `relabel_vote_ratio`: `(minority id, majority id)` when `a` and
