@@ -253,8 +253,8 @@ class RecordConfig:
     (for evaluation only), for offline replay with ``cargo run --release -p objslam-core
     --example param_replay``."""
     map_points: bool = True
-    """Log the SLAM map points (``world/map/points``, world frame) every ``every_n_frames`` frames
-    (pose sources other than ``fk``, which has no tracker)."""
+    """Log the SLAM map points (``world/map/points``, world frame) after every view (pose sources
+    other than ``fk``, which has no tracker)."""
     jpeg_quality: int = 85
     """JPEG quality (1-100) of the colour frames in ``run.rrd``; depth frames are then lossless
     16-bit PNG in millimetres (the simulated depth is quantised to 1 mm). 0 stores both raw (RGB24

@@ -384,12 +384,6 @@ def run_episode(
                 if cfg.record.depth:
                     rec.log_depth(frame.depth_m)
             rec.log_detections([d.as_tuple() for d in dets])
-            if cfg.record.map_points and frame.index % cfg.record.every_n_frames == 0:
-                pts = mapper.map_points()
-                if pts is not None and len(pts):
-                    rec.log_colored_points(
-                        "world/map/points", pts, np.tile(MAP_POINT_COLOR, (len(pts), 1)), 0.002
-                    )
             rec.log_trajectory("estimated", np.array(est_positions))
             rec.log_trajectory("ground_truth", np.array(gt_positions))
             rec.log_objects("world/map", mapper.objects_json())
@@ -455,6 +449,12 @@ def run_episode(
                 rec.log_event(f"{what} skipped: {e}")
                 ok = False
             view_counter[0] += 1
+            if cfg.record.map_points:
+                pts = mapper.map_points()
+                if pts is not None and len(pts):
+                    rec.log_colored_points(
+                        "world/map/points", pts, np.tile(MAP_POINT_COLOR, (len(pts), 1)), 0.002
+                    )
             if bar is not None:
                 bar.update(1)
             (run_dir / "map.json.partial").write_text(mapper.map_json())
