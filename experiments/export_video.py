@@ -11,10 +11,10 @@ from __future__ import annotations
 
 import argparse
 import sys
-import tomllib
 from pathlib import Path
 
 import numpy as np
+import tomllib
 from objslam.cli import HelpFormatter
 
 REPO = Path(__file__).resolve().parents[1]

@@ -10,7 +10,7 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "experiments"))
 
-import figures  # noqa: E402
+import figures
 
 STRATEGIES = ["object-driven", "random", "init"]
 
