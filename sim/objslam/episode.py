@@ -381,7 +381,8 @@ def run_episode(
             if frame.index % cfg.record.every_n_frames == 0:
                 if cfg.record.rgb:
                     rec.log_rgb(frame.rgb)
-                if cfg.record.depth:
+                depth_every = cfg.record.every_n_frames * cfg.record.depth_every_n_frames
+                if cfg.record.depth and frame.index % depth_every == 0:
                     rec.log_depth(frame.depth_m)
             rec.log_detections([d.as_tuple() for d in dets])
             rec.log_trajectory("estimated", np.array(est_positions))
