@@ -340,7 +340,11 @@ def run_episode(
         rng_detector = np.random.default_rng([cfg.seed, 2])
         world = SimWorld(scene, cfg.camera, rng_sensor)
         detector = SimulatedDetector(cfg.detector, rng_detector)
+        # The truth and the arm's start pose at the first frame's time, so the viewer shows them from the start.
+        rec.set_frame(0, 0.0)
         rec.log_objects("world/ground_truth", json.dumps(gt_objects(scene, world.ground_truth())))
+        if cfg.record.robot:
+            _log_robot(rec, world)
         init_views = mapper.initial_views()
         budget = len(init_views) + (0 if cfg.strategy == "init" else cfg.explore.max_views)
         bar = None
