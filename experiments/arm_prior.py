@@ -10,7 +10,7 @@ view's bias and the frame's jitter) is compared with the renderer's true camera 
 ``{"preset", "scene", "seed", "frames", "trans_rms_mm", "trans_p90_mm", "rot_rms_deg",
 "rot_p90_deg", "moving_trans_rms_mm", "still_trans_rms_mm"}`` (moving: the frames streamed during a
 move; still: the settled frame at each view's end). Writes ``<out>/arm_prior.json`` (with commit,
-command, machine and the resolved robot configs) and ``<out>/arm_prior.md``. One simulator at a time.
+command, machine and the resolved robot configs) and ``<out>/pages/arm_prior.md``. One simulator at a time.
 
 ``realistic`` is ``experiments/configs/default.toml``; ``ideal`` is that overlaid with the
 ``[robot]`` table of ``experiments/configs/presets/ideal.toml``.
@@ -174,8 +174,9 @@ def main(argv: list[str] | None = None) -> int:
     doc, md = report(rows, command.strip(), configs)
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "arm_prior.json").write_text(json.dumps(doc, indent=2) + "\n")
-    (out / "arm_prior.md").write_text(md)
+    json_path, md_path = report_files(out, "arm_prior")
+    json_path.write_text(json.dumps(doc, indent=2) + "\n")
+    md_path.write_text(md)
     return 0
 
 

@@ -250,4 +250,5 @@ def wilson(successes: int, n: int, level: float = CI_LEVEL) -> tuple[float, floa
     p = successes / n
     centre = (p + z * z / (2 * n)) / (1 + z * z / n)
     half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
-    return p, max(0.0, centre - half), min(1.0, centre + half)
+    # The interval contains p; clamping removes rounding at p = 0 or 1.
+    return p, max(0.0, min(p, centre - half)), min(1.0, max(p, centre + half))

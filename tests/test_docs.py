@@ -41,7 +41,7 @@ def test_python_quick_start_runs(tmp_path, ci_overlay, monkeypatch, capsys) -> N
     assert len(blocks) >= 4
     namespace: dict = {}
     for block in blocks:
-        exec(compile(block, "docs/python.md", "exec"), namespace)
+        exec(compile(block, "docs/python.md", "exec"), namespace)  # noqa: S102 - the page is the test
     result = namespace["result"]
     assert result.run_dir.parent.parent == tmp_path
     assert 0.3 < result.metrics["mean"]["iou3d"] <= 1.0

@@ -60,6 +60,8 @@ def test_wilson_interval_matches_the_closed_form() -> None:
     rate, lo, hi = figures.wilson(8, 10)
     assert rate == 0.8
     assert (lo, hi) == pytest.approx((0.4902, 0.9433), abs=1e-4)
+    rate, lo, hi = figures.wilson(470, 470)
+    assert rate == hi == 1.0 and lo == pytest.approx(0.99190, abs=1e-4)
 
 
 def test_exploration_figures_are_written_as_png_and_pdf(tmp_path: Path) -> None:

@@ -109,3 +109,36 @@ def test_bad_options_are_named(tmp_path: Path) -> None:
         _native.Recorder(str(tmp_path / "b.rrd"), "objslam", json.dumps({"jpg": 50}))
     with pytest.raises(_native.RecordingError, match="robot model"):
         _native.Recorder(str(tmp_path / "c.rrd"), "objslam", json.dumps({"robot_urdf": str(tmp_path / "x.urdf")}))
+
+
+@pytest.mark.filterwarnings("ignore:RRD file has no footer")  # the server is stopped, not closed
+def test_live_stream_reaches_a_viewer(tmp_path: Path) -> None:
+    """``live_url`` streams the recording (blueprint included) to a viewer's gRPC proxy as well."""
+    import socket
+    import subprocess
+    import time
+
+    from objslam.cli import rerun_executable
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    received = tmp_path / "received.rrd"
+    server = subprocess.Popen(
+        [rerun_executable(), "--port", str(port), "--save", str(received)],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    try:
+        deadline = time.monotonic() + 20
+        while socket.socket().connect_ex(("127.0.0.1", port)) != 0:
+            assert time.monotonic() < deadline, "the rerun server did not start"
+            time.sleep(0.1)
+        record(tmp_path / "run.rrd", live_url=f"rerun+http://127.0.0.1:{port}/proxy")
+        time.sleep(1.0)
+    finally:
+        server.terminate()
+        server.wait(timeout=10)
+    reader = rr_experimental.RrdReader(received)
+    assert [s.application_id for s in reader.blueprints()] == ["objslam"]
+    assert any(c.startswith("EncodedImage:") for c in entities(received)["/world/camera/image/rgb"])

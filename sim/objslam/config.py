@@ -264,12 +264,16 @@ class RecordConfig:
     (for evaluation only), for offline replay with ``cargo run --release -p objslam-core
     --example param_replay``."""
     map_points: bool = True
-    """Log the SLAM map points (``world/map/points``, world frame) every ``every_n_frames`` frames
-    (pose sources other than ``fk``, which has no tracker)."""
+    """Log the SLAM map points (``world/map/points``, world frame) after every view (pose sources
+    other than ``fk``, which has no tracker)."""
     jpeg_quality: int = 85
     """JPEG quality (1-100) of the colour frames in ``run.rrd``; depth frames are then lossless
     16-bit PNG in millimetres (the simulated depth is quantised to 1 mm). 0 stores both raw (RGB24
     and float32 metres: 2.1 MB per 640×480 frame)."""
+    depth_every_n_frames: int = 2
+    """Log depth on every n-th logged colour frame: a lossless depth PNG is about 140 kB, four
+    times a JPEG colour frame, so every 2nd (default) keeps a recording near a quarter of the raw
+    size; 1 logs depth with every colour frame."""
     robot: bool = True
     """Draw the Panda (``world/robot``): its URDF collision meshes (0.15 MB, logged once) moved to
     the simulated links' poses every frame."""
@@ -470,6 +474,8 @@ class RunConfig:
             raise ConfigError("explore.max_views: must be ≥ 0")
         if self.record.every_n_frames < 1:
             raise ConfigError("record.every_n_frames: must be ≥ 1")
+        if self.record.depth_every_n_frames < 1:
+            raise ConfigError("record.depth_every_n_frames: must be ≥ 1")
         if not 0 <= self.record.jpeg_quality <= 100:
             raise ConfigError(f"record.jpeg_quality: expected 0 (raw) to 100, got {self.record.jpeg_quality}")
         try:

@@ -463,7 +463,11 @@ def run_episode(
         arm = episode_arm_errors(cfg, scene)
         world = SimWorld(scene, cfg.camera, rng_sensor, textures=cfg.textures, arm_errors=arm)
         detector = SimulatedDetector(cfg.detector, rng_detector)
+        # The truth and the arm's start pose at the first frame's time, so the viewer shows them from the start.
+        rec.set_frame(0, 0.0)
         rec.log_objects("world/ground_truth", json.dumps(gt_objects(scene, world.ground_truth())))
+        if cfg.record.robot:
+            _log_robot(rec, world)
         init_views = mapper.initial_views()
         budget = len(init_views) + (0 if cfg.strategy == "init" else cfg.explore.max_views)
         bar = None
@@ -508,15 +512,10 @@ def run_episode(
             if frame.index % cfg.record.every_n_frames == 0:
                 if cfg.record.rgb:
                     rec.log_rgb(frame.rgb)
-                if cfg.record.depth:
+                depth_every = cfg.record.every_n_frames * cfg.record.depth_every_n_frames
+                if cfg.record.depth and frame.index % depth_every == 0:
                     rec.log_depth(frame.depth_m)
             rec.log_detections([d.as_tuple() for d in dets])
-            if cfg.record.map_points and frame.index % cfg.record.every_n_frames == 0:
-                pts = mapper.map_points()
-                if pts is not None and len(pts):
-                    rec.log_colored_points(
-                        "world/map/points", pts, np.tile(MAP_POINT_COLOR, (len(pts), 1)), 0.002
-                    )
             rec.log_trajectory("estimated", np.array(est_positions))
             rec.log_trajectory("ground_truth", np.array(gt_positions))
             rec.log_objects("world/map", mapper.objects_json())
@@ -582,6 +581,12 @@ def run_episode(
                 rec.log_event(f"{what} skipped: {e}")
                 ok = False
             view_counter[0] += 1
+            if cfg.record.map_points:
+                pts = mapper.map_points()
+                if pts is not None and len(pts):
+                    rec.log_colored_points(
+                        "world/map/points", pts, np.tile(MAP_POINT_COLOR, (len(pts), 1)), 0.002
+                    )
             if bar is not None:
                 bar.update(1)
             _write_atomic(run_dir / "map.json.partial", mapper.map_json())

@@ -3,7 +3,7 @@
 //!
 //! Layout (tab "Run", active):
 //! - left, two thirds of the width: the 3D world (`world/**`), its eye orbiting the table centre
-//!   from the front-left, above the table; the depth image's point cloud is hidden in it (one click
+//!   from the table's far side, above it; the depth image's point cloud is hidden in it (one click
 //!   on its eye icon in the blueprint panel shows it);
 //! - right column: the camera image with the detection boxes, the depth image, and the map's
 //!   metrics over time (`eval/**`: accuracy against ground truth after each view; `explore/**`:
@@ -105,14 +105,15 @@ fn id(n: u128) -> Uuid {
     Uuid::from_u128(0x0b5a_0000_0000_4000_8000_0000_0000_0000 | n)
 }
 
-/// The eye of the 3D view: it orbits the table centre, seen from the front-left (−x, −y of the
-/// centre), 35° above the table, far enough to frame the table's larger side.
+/// The eye of the 3D view: it orbits the table centre, seen from the table's far side to the right
+/// (+x, −y of the centre, facing the robot at the origin so the arm does not hide the table),
+/// 40° above the table, far enough to frame the table's larger side.
 pub fn eye_position(table: &TableTop) -> ([f32; 3], [f32; 3]) {
     let [cx, cy] = table.center;
     let reach = 0.5 * table.size[0].max(table.size[1]) + 0.25;
-    let distance = 1.6 * reach;
-    let elevation = 35f64.to_radians();
-    let azimuth = (-135f64).to_radians();
+    let distance = 2.0 * reach;
+    let elevation = 40f64.to_radians();
+    let azimuth = (-45f64).to_radians();
     let horizontal = distance * elevation.cos();
     let eye = [
         (cx + horizontal * azimuth.cos()) as f32,
@@ -238,10 +239,10 @@ mod tests {
         let t = TableTop { center: [0.55, 0.0], size: [0.8, 1.0] };
         let (eye, target) = eye_position(&t);
         assert_eq!(target, [0.55, 0.0, 0.0]);
-        assert!(eye[2] > 0.3 && eye[0] < 0.55 && eye[1] < 0.0, "{eye:?}");
+        assert!(eye[2] > 0.3 && eye[0] > 0.55 && eye[1] < 0.0, "{eye:?}");
         let d = ((eye[0] - 0.55).powi(2) + eye[1].powi(2) + eye[2].powi(2)).sqrt();
-        // 1.6 × (half the larger side + 0.25 m)
-        assert!((d - 1.6 * 0.75).abs() < 1e-5, "{d}");
+        // 2 × (half the larger side + 0.25 m)
+        assert!((d - 2.0 * 0.75).abs() < 1e-5, "{d}");
     }
 
     #[test]
