@@ -22,13 +22,13 @@ import argparse
 import json
 import math
 import shlex
-import subprocess
 import sys
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import tomllib
+from objslam.provenance import commit, report_files
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "experiments"))
@@ -36,13 +36,6 @@ sys.path.insert(0, str(REPO / "experiments"))
 from bench import machine
 
 PRESETS = ("realistic", "ideal")
-
-
-def commit() -> str:
-    """The checked-out commit, ``-dirty`` when the tree has changes."""
-    rev = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=REPO, capture_output=True, text=True, check=False).stdout
-    dirty = subprocess.run(["git", "status", "--porcelain"], cwd=REPO, capture_output=True, text=True, check=False).stdout
-    return rev.strip() + ("-dirty" if dirty.strip() else "")
 
 
 def robot_overrides(preset: str) -> list[str]:
