@@ -80,7 +80,7 @@ fn render(camera: &PinholeCamera, pose: &Se3, boxes: &[GtBox], rng: &mut ChaCha8
             }
         }
     }
-    DepthImage::new(camera.width, camera.height, data).unwrap_or_else(|e| panic!("{e}"))
+    DepthImage::new(camera.width, camera.height, data).unwrap()
 }
 
 /// Detector noise: box jitter (fraction of the box size, uniform ±) and miss rate.
@@ -95,13 +95,13 @@ const CLEAN: Noise = Noise { jitter: 0.0, miss_rate: 0.0 };
 /// Run the pan with one mode; returns the metrics and the number of new objects per frame.
 fn run(mode: AssociationMode, noise: Noise) -> (AssociationMetrics, Vec<usize>) {
     let boxes = scene();
-    let camera = PinholeCamera::from_fovy(160, 120, 0.9).unwrap_or_else(|e| panic!("{e}"));
+    let camera = PinholeCamera::from_fovy(160, 120, 0.9).unwrap();
     let mut rng = ChaCha8Rng::seed_from_u64(11);
     let mut mapper = EnsembleMapper::new(EnsembleMapperConfig {
         association: AssociationConfig { mode, ..AssociationConfig::default() },
         ..EnsembleMapperConfig::default()
     })
-    .unwrap_or_else(|e| panic!("{e}"));
+    .unwrap();
     // Pan x: 0.25 → 0.90 → 0.25 in 5 cm steps, slight y drift.
     let mut xs: Vec<f64> = (0..=13).map(|i| 0.25 + 0.05 * f64::from(i)).collect();
     let back: Vec<f64> = xs.iter().rev().skip(1).copied().collect();
@@ -138,7 +138,7 @@ fn run(mode: AssociationMode, noise: Noise) -> (AssociationMetrics, Vec<usize>) 
             detections.push(Detection { bbox, label: b.label, score: 0.9 });
         }
         let frame = Frame { index: f as u32, camera, depth, world_from_camera: pose, detections };
-        let r = mapper.update(&frame).unwrap_or_else(|e| panic!("frame {f}: {e}"));
+        let r = mapper.update(&frame).unwrap();
         created.push(r.detections.iter().filter(|d| matches!(d.decision, Decision::New { .. })).count());
     }
     let objects = observation_gt_ids(mapper.associator(), |frame, det| gt_of.get(&(frame, det)).copied());

@@ -43,7 +43,7 @@ fn table() -> TableRect {
 }
 
 fn camera() -> PinholeCamera {
-    PinholeCamera::from_fovy(96, 72, 1.0).unwrap_or_else(|e| panic!("{e}"))
+    PinholeCamera::from_fovy(96, 72, 1.0).unwrap()
 }
 
 /// Render depth and per-object points of `map` seen from `pose` (perfect sensor).
@@ -66,7 +66,7 @@ fn render(map: &ObjectMap, occ: &Occluders, cam: &PinholeCamera, pose: &Se3) -> 
             }
         }
     }
-    (DepthImage::new(cam.width, cam.height, depth).unwrap_or_else(|e| panic!("{e}")), points)
+    (DepthImage::new(cam.width, cam.height, depth).unwrap(), points)
 }
 
 struct Episode {
@@ -102,10 +102,10 @@ fn run(strategy: Strategy, seed: u64, cfg: &ExploreConfig) -> Episode {
     let mut hist = HistoryBook::default();
     let observe = |pose: &Se3, grids: &mut ExplorationGrids, hist: &mut HistoryBook| {
         let (depth, pts) = render(&map, &occ, &cam, pose);
-        grids.integrate_frame(&map, &cam, pose, &pts, Some(&depth), &cfg.grid).unwrap_or_else(|e| panic!("{e}"));
+        grids.integrate_frame(&map, &cam, pose, &pts, Some(&depth), &cfg.grid).unwrap();
         hist.record(&map);
     };
-    let init = init_views(&table(), &cc).unwrap_or_else(|e| panic!("{e}"));
+    let init = init_views(&table(), &cc).unwrap();
     for v in &init {
         observe(v, &mut grids, &mut hist);
     }
@@ -124,15 +124,15 @@ fn run(strategy: Strategy, seed: u64, cfg: &ExploreConfig) -> Episode {
         let next = match strategy {
             Strategy::ObjectDriven | Strategy::ExpectedGain => {
                 let cands = sample_candidates(&map, &cc, &cfg.grid, &AlwaysReachable, seed * 1000 + step as u64)
-                    .unwrap_or_else(|e| panic!("{e}"));
+                    .unwrap();
                 let views: Vec<Se3> = cands.iter().map(|c| c.world_from_camera).collect();
-                let ctx = UtilityContext::new(&map, &grids, &hist, &cam, cfg).unwrap_or_else(|e| panic!("{e}"));
-                let scores = ctx.score_all(&views, strategy, Some(&current)).unwrap_or_else(|e| panic!("{e}"));
+                let ctx = UtilityContext::new(&map, &grids, &hist, &cam, cfg).unwrap();
+                let scores = ctx.score_all(&views, strategy, Some(&current)).unwrap();
                 next_best_view(&scores).and_then(|i| views.get(i).copied())
             }
             Strategy::Random => {
                 random_views(&table(), &map, &cc, &cfg.grid, &AlwaysReachable, 1, seed * 1000 + step as u64)
-                    .unwrap_or_else(|e| panic!("{e}"))
+                    .unwrap()
                     .first()
                     .copied()
             }

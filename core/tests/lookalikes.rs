@@ -149,7 +149,7 @@ fn render(index: u32, camera: &PinholeCamera, pose: &Se3, scene: &[Truth], rng: 
     Frame {
         index,
         camera: *camera,
-        depth: DepthImage::new(w, h, data).unwrap_or_else(|e| panic!("{e}")),
+        depth: DepthImage::new(w, h, data).unwrap(),
         world_from_camera: *pose,
         detections,
     }
@@ -157,12 +157,12 @@ fn render(index: u32, camera: &PinholeCamera, pose: &Se3, scene: &[Truth], rng: 
 
 /// Fuse the views with the default pipeline (refresh after each view) and return the map.
 fn map_of(scene: &[Truth], views: &[Se3], config: PipelineConfig) -> ObjectMap {
-    let camera = PinholeCamera::from_fovy(640, 480, 58f64.to_radians()).unwrap_or_else(|e| panic!("{e}"));
+    let camera = PinholeCamera::from_fovy(640, 480, 58f64.to_radians()).unwrap();
     let mut rng = ChaCha8Rng::seed_from_u64(5);
-    let mut pipeline = ObjectPipeline::new(config).unwrap_or_else(|e| panic!("{e}"));
+    let mut pipeline = ObjectPipeline::new(config).unwrap();
     for (i, pose) in views.iter().enumerate() {
         let frame = render(i as u32, &camera, pose, scene, &mut rng);
-        pipeline.update(&frame, None).unwrap_or_else(|e| panic!("view {i}: {e}"));
+        pipeline.update(&frame, None).unwrap();
         pipeline.refresh_estimates();
     }
     pipeline.map()

@@ -13,26 +13,26 @@ use objslam_core::objects::iforest::{IForestConfig, IsolationForest};
 fn scores_match_sklearn() {
     let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/iforest_sklearn.json");
     let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-    let json: serde_json::Value = serde_json::from_str(&text).unwrap_or_else(|e| panic!("{e}"));
+    let json: serde_json::Value = serde_json::from_str(&text).unwrap();
     let points: Vec<Point3<f64>> = json["points"]
         .as_array()
-        .unwrap_or_else(|| panic!("points"))
+        .expect("points")
         .iter()
         .map(|p| {
             let v: Vec<f64> =
-                p.as_array().unwrap_or_else(|| panic!("point")).iter().filter_map(|x| x.as_f64()).collect();
+                p.as_array().expect("point").iter().filter_map(|x| x.as_f64()).collect();
             Point3::new(v[0], v[1], v[2])
         })
         .collect();
     let reference: Vec<f64> =
-        json["mean_score"].as_array().unwrap_or_else(|| panic!("scores")).iter().filter_map(|x| x.as_f64()).collect();
+        json["mean_score"].as_array().expect("scores").iter().filter_map(|x| x.as_f64()).collect();
     assert_eq!(points.len(), 500);
     assert_eq!(reference.len(), 500);
     let seeds = 20u64;
     let mut ours = vec![0.0; points.len()];
     for seed in 0..seeds {
         let forest = IsolationForest::fit(&points, &IForestConfig { seed, ..Default::default() })
-            .unwrap_or_else(|e| panic!("{e}"));
+            .unwrap();
         for (o, p) in ours.iter_mut().zip(&points) {
             *o += forest.score(p) / seeds as f64;
         }

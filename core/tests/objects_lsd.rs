@@ -31,10 +31,10 @@ pub fn read_pgm(path: &std::path::Path) -> GreyImage {
         fields.push(String::from_utf8_lossy(&bytes[start..pos]).to_string());
     }
     assert_eq!(fields[0], "P5");
-    let w: u32 = fields[1].parse().unwrap_or_else(|e| panic!("{e}"));
-    let h: u32 = fields[2].parse().unwrap_or_else(|e| panic!("{e}"));
+    let w: u32 = fields[1].parse().unwrap();
+    let h: u32 = fields[2].parse().unwrap();
     let data = bytes[pos + 1..].to_vec();
-    GreyImage::new(w, h, data).unwrap_or_else(|e| panic!("{e}"))
+    GreyImage::new(w, h, data).unwrap()
 }
 
 fn close(p: [f64; 2], q: [f64; 2]) -> bool {
@@ -47,21 +47,21 @@ fn matches(r: &LineSegment, s: &LineSegment) -> bool {
 
 #[test]
 fn lsd_finds_cv2_long_segments() {
-    let text = std::fs::read_to_string(fixture_dir().join("lsd_cv2.json")).unwrap_or_else(|e| panic!("{e}"));
-    let json: serde_json::Value = serde_json::from_str(&text).unwrap_or_else(|e| panic!("{e}"));
-    let frames = json["frames"].as_array().unwrap_or_else(|| panic!("frames"));
+    let text = std::fs::read_to_string(fixture_dir().join("lsd_cv2.json")).unwrap();
+    let json: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let frames = json["frames"].as_array().expect("frames");
     let (mut total, mut found) = (0usize, 0usize);
     for f in frames {
-        let file = f["file"].as_str().unwrap_or_else(|| panic!("file"));
+        let file = f["file"].as_str().expect("file");
         let image = read_pgm(&fixture_dir().join(file));
-        let ours = detect_segments(&image, &LsdConfig::default()).unwrap_or_else(|e| panic!("{e}"));
+        let ours = detect_segments(&image, &LsdConfig::default()).unwrap();
         let reference: Vec<LineSegment> = f["segments_x1y1x2y2"]
             .as_array()
-            .unwrap_or_else(|| panic!("segments"))
+            .expect("segments")
             .iter()
             .map(|s| {
                 let v: Vec<f64> =
-                    s.as_array().unwrap_or_else(|| panic!("seg")).iter().filter_map(|x| x.as_f64()).collect();
+                    s.as_array().expect("seg").iter().filter_map(|x| x.as_f64()).collect();
                 LineSegment::new([v[0], v[1]], [v[2], v[3]])
             })
             .filter(|s| s.length_px() >= LONG_PX)

@@ -14,11 +14,11 @@ use rand_chacha::ChaCha8Rng;
 /// A camera at `eye` looking at `target` (OpenCV axes; world z up).
 fn look_at(eye: Vector3<f64>, target: Vector3<f64>) -> Se3 {
     objslam_core::geometry::look_at_with_up(&eye.into(), &target.into(), &Vector3::z())
-        .unwrap_or_else(|e| panic!("{e}"))
+        .unwrap()
 }
 
 fn camera() -> PinholeCamera {
-    PinholeCamera::from_fovy(640, 480, 55f64.to_radians()).unwrap_or_else(|e| panic!("{e}"))
+    PinholeCamera::from_fovy(640, 480, 55f64.to_radians()).unwrap()
 }
 
 fn truth() -> ObjectGeometry {
@@ -44,7 +44,7 @@ fn line_frame(rng: &mut ChaCha8Rng, index: u32, eye: Vector3<f64>, clutter: f64)
     let pose = look_at(eye, g.center);
     let edges = project_edges(&g, &cam, &pose);
     let corners: Vec<[f64; 2]> = edges.iter().flat_map(|e| [e.a, e.b]).collect();
-    let bbox = Box2::from_points(corners.iter()).unwrap_or_else(|| panic!("no box"));
+    let bbox = Box2::from_points(corners.iter()).expect("no box");
     let mut segments = Vec::new();
     let jitter = |rng: &mut ChaCha8Rng| rng.random_range(-1.2..1.2);
     for e in &edges {
@@ -110,12 +110,12 @@ fn yaw_within_two_degrees_with_clutter() {
             assert!(matches!(est.add_frame(f), FrameUse::Added { .. }));
         }
         let pts = points(&mut rng);
-        let out = est.estimate(&pts).unwrap_or_else(|e| panic!("{e}"));
+        let out = est.estimate(&pts).unwrap();
         assert_eq!(out.stage, EstimateStage::Refined, "seed {seed}");
         let t = truth();
         let yae = yaw_error_deg(&out.geometry, &t, 0.05).unwrap_or(f64::NAN);
         assert!(yae <= 2.0, "seed {seed}: refined yaw error {yae:.2}°");
-        let lines = out.stages.lines.unwrap_or_else(|| panic!("no lines stage"));
+        let lines = out.stages.lines.expect("no lines stage");
         let yae_lines = yaw_error_deg(&lines, &t, 0.05).unwrap_or(f64::NAN);
         eprintln!("seed {seed}: lines {lines:?} refined {:?}", out.stages.refined);
         // Alg. 2 samples every 6°, so its answer is within 3° (+ noise) of the truth.
@@ -140,7 +140,7 @@ fn alg2_alone_finds_the_sampled_yaw_on_exact_geometry() {
     let t = truth();
     // Candidate cube: true centre and extents, candidate yaw.
     let a = align_yaw(&frames, |yaw| cuboid(t.center, yaw, t.half_extents), &YawConfig::default())
-        .unwrap_or_else(|| panic!("no alignment"));
+        .expect("no alignment");
     let err = yaw_error_deg(&cuboid(t.center, a.yaw_rad, t.half_extents), &t, 0.05).unwrap_or(f64::NAN);
     assert!(err <= 3.0 + 1e-9, "Alg. 2 yaw error {err:.2}° > half the 6° sampling step");
     assert_eq!(a.samples.len(), 30);
@@ -154,7 +154,7 @@ fn oriented_extent_recovers_the_box() {
     let mut rng = ChaCha8Rng::seed_from_u64(4);
     let t = truth();
     let pts: Vec<_> = points(&mut rng).into_iter().take(600).collect(); // surface points only
-    let (c, s) = oriented_extent(&pts, t.yaw_rad).unwrap_or_else(|| panic!("empty"));
+    let (c, s) = oriented_extent(&pts, t.yaw_rad).expect("empty");
     assert!((c - t.center).norm() < 0.004, "{c:?}");
     assert!((s - t.half_extents).abs().max() < 0.004, "{s:?}");
     assert!(oriented_extent(&[], 0.3).is_none());
@@ -169,26 +169,26 @@ fn fallbacks() {
     assert!(est.estimate(&[]).is_err());
     // Fewer points than min_points: raw extent, low confidence.
     let few: Vec<_> = points(&mut rng).into_iter().take(10).collect();
-    let out = est.estimate(&few).unwrap_or_else(|e| panic!("{e}"));
+    let out = est.estimate(&few).unwrap();
     assert_eq!((out.stage, out.confidence), (EstimateStage::Raw, Confidence::Low));
     // No segments: the iforest stage is final, normal confidence, yaw 0.
     let pts = points(&mut rng);
-    let out = est.estimate(&pts).unwrap_or_else(|e| panic!("{e}"));
+    let out = est.estimate(&pts).unwrap();
     assert_eq!((out.stage, out.confidence), (EstimateStage::Iforest, Confidence::Normal));
     assert_eq!(out.geometry.yaw_rad, 0.0);
     assert!(out.stages.lines.is_none());
     let good = out.geometry;
     // All points identical afterwards: the previous estimate is kept, low confidence.
     let same = vec![Point3::new(0.5, 0.1, 0.04); 100];
-    let out = est.estimate(&same).unwrap_or_else(|e| panic!("{e}"));
+    let out = est.estimate(&same).unwrap();
     assert_eq!(out.confidence, Confidence::Low);
     assert_eq!(out.geometry, good);
     // No points afterwards: previous estimate, low confidence.
-    let out = est.estimate(&[]).unwrap_or_else(|e| panic!("{e}"));
+    let out = est.estimate(&[]).unwrap();
     assert_eq!((out.geometry, out.confidence), (good, Confidence::Low));
     // All identical with no history: degenerate iforest estimate, low confidence.
     let mut fresh = ObjectEstimator::new(Shape::Cuboid, cfg);
-    let out = fresh.estimate(&same).unwrap_or_else(|e| panic!("{e}"));
+    let out = fresh.estimate(&same).unwrap();
     assert_eq!(out.confidence, Confidence::Low);
     assert_eq!(out.geometry.half_extents, Vector3::zeros());
     // NaN point: typed error without history.
@@ -203,7 +203,7 @@ fn fallbacks() {
     // Cylinders: no yaw, equal horizontal half-extents, iforest stage even with segments.
     let mut cyl = ObjectEstimator::new(Shape::Cylinder, cfg);
     cyl.add_frame(line_frame(&mut rng, 0, eyes()[0], 0.3));
-    let out = cyl.estimate(&pts).unwrap_or_else(|e| panic!("{e}"));
+    let out = cyl.estimate(&pts).unwrap();
     assert_eq!(out.geometry.shape, Shape::Cylinder);
     assert_eq!(out.stage, EstimateStage::Iforest);
     assert_eq!(out.geometry.half_extents.x, out.geometry.half_extents.y);
@@ -227,7 +227,7 @@ fn decoy_frame(index: u32, eye: Vector3<f64>) -> LineFrame {
     let decoy = cuboid(t.center, t.yaw_rad + 45f64.to_radians(), t.half_extents);
     let pose = look_at(eye, t.center);
     let corners: Vec<[f64; 2]> = project_edges(&t, &cam, &pose).iter().flat_map(|e| [e.a, e.b]).collect();
-    let bbox = Box2::from_points(corners.iter()).unwrap_or_else(|| panic!("no box"));
+    let bbox = Box2::from_points(corners.iter()).expect("no box");
     let mut edges = project_edges(&decoy, &cam, &pose);
     edges.sort_by(|a, b| (b.b[0] - b.a[0]).hypot(b.b[1] - b.a[1]).total_cmp(&(a.b[0] - a.a[0]).hypot(a.b[1] - a.a[1])));
     let segments = edges.iter().take(3).map(|e| LineSegment::new(e.a, e.b)).collect();
@@ -252,15 +252,15 @@ fn window_keeping_most_segments_outlasts_weak_frames() {
         let held: Vec<u32> = est.held_frames().iter().map(|f| f.frame).collect();
         let voting: Vec<u32> = est.yaw_frames().map(|f| f.frame).collect();
         let pts = points(&mut rng);
-        let out = est.estimate(&pts).unwrap_or_else(|e| panic!("{e}"));
-        let lines = out.stages.lines.unwrap_or_else(|| panic!("no lines stage"));
+        let out = est.estimate(&pts).unwrap();
+        let lines = out.stages.lines.expect("no lines stage");
         // Replaying the held frames into a fresh estimator gives the same line-stage yaw.
         let mut replay = ObjectEstimator::new(Shape::Cuboid, ParamConfig { window_keep: keep, ..Default::default() });
         for f in est.held_frames() {
             replay.add_frame(f);
         }
-        let again = replay.estimate(&pts).unwrap_or_else(|e| panic!("{e}"));
-        let again_lines = again.stages.lines.unwrap_or_else(|| panic!("no lines stage in the replay"));
+        let again = replay.estimate(&pts).unwrap();
+        let again_lines = again.stages.lines.expect("no lines stage in the replay");
         assert!((again_lines.yaw_rad - lines.yaw_rad).abs() < 1e-12, "replay of {held:?} changed the yaw");
         (kept, held, voting, yaw_error_deg(&lines, &truth(), 0.05).unwrap_or(f64::NAN))
     };
@@ -298,13 +298,13 @@ fn table_filter_drops_support_points() {
         pts.push(Point3::new(0.5 + 0.12 * a.cos() * (i as f64 / 300.0), 0.1 + 0.12 * a.sin(), 0.0));
     }
     let cfg = ParamConfig { table_z_m: Some(0.0), ..Default::default() };
-    let out = ObjectEstimator::new(Shape::Cuboid, cfg).estimate(&pts).unwrap_or_else(|e| panic!("{e}"));
-    let ifo = out.stages.iforest.unwrap_or_else(|| panic!("no iforest stage"));
+    let out = ObjectEstimator::new(Shape::Cuboid, cfg).estimate(&pts).unwrap();
+    let ifo = out.stages.iforest.expect("no iforest stage");
     let bottom = ifo.center.z - ifo.half_extents.z;
     assert!(bottom > 0.004, "bottom {bottom}");
     let plain =
-        ObjectEstimator::new(Shape::Cuboid, ParamConfig::default()).estimate(&pts).unwrap_or_else(|e| panic!("{e}"));
-    let g = plain.stages.iforest.unwrap_or_else(|| panic!("no iforest stage"));
+        ObjectEstimator::new(Shape::Cuboid, ParamConfig::default()).estimate(&pts).unwrap();
+    let g = plain.stages.iforest.expect("no iforest stage");
     assert!(g.center.z < ifo.center.z, "table points pull the plain centre down");
 }
 
@@ -370,7 +370,7 @@ fn render(pose: &Se3) -> objslam_core::frame::GreyImage {
             data[y * w + x] = acc.round().clamp(0.0, 255.0) as u8;
         }
     }
-    objslam_core::frame::GreyImage::new(cam.width, cam.height, data).unwrap_or_else(|e| panic!("{e}"))
+    objslam_core::frame::GreyImage::new(cam.width, cam.height, data).unwrap()
 }
 
 #[test]
@@ -382,17 +382,17 @@ fn rendered_frames_through_lsd_give_the_yaw() {
     for (i, eye) in eyes().into_iter().enumerate() {
         let pose = look_at(eye, g.center);
         let image = render(&pose);
-        let all = detect_segments(&image, &LsdConfig::default()).unwrap_or_else(|e| panic!("{e}"));
+        let all = detect_segments(&image, &LsdConfig::default()).unwrap();
         let edges = project_edges(&g, &cam, &pose);
         let corners: Vec<[f64; 2]> = edges.iter().flat_map(|e| [e.a, e.b]).collect();
-        let bbox = Box2::from_points(corners.iter()).unwrap_or_else(|| panic!("no box"));
+        let bbox = Box2::from_points(corners.iter()).expect("no box");
         let segments = segments_in_box(&all, &bbox, 4.0);
         assert!(segments.len() >= 4, "frame {i}: {} segments in the box", segments.len());
         let frame = LineFrame { frame: i as u32, camera: cam, world_from_camera: pose, bbox, segments };
         assert!(matches!(est.add_frame(frame), FrameUse::Added { .. }));
     }
     let mut rng = ChaCha8Rng::seed_from_u64(31);
-    let out = est.estimate(&points(&mut rng)).unwrap_or_else(|e| panic!("{e}"));
+    let out = est.estimate(&points(&mut rng)).unwrap();
     let yae = yaw_error_deg(&out.geometry, &g, 0.05).unwrap_or(f64::NAN);
     let iou = iou3d(&out.geometry, &g);
     eprintln!("rendered: stage {:?}, yaw error {yae:.2}°, iou3d {iou:.3}", out.stage);

@@ -28,8 +28,8 @@ struct Record {
 
 fn records() -> Vec<Record> {
     let path = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/fixtures/param_books.json");
-    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{path}: {e}"));
-    serde_json::from_str(&text).unwrap_or_else(|e| panic!("{path}: {e}"))
+    let text = std::fs::read_to_string(path).unwrap();
+    serde_json::from_str(&text).unwrap()
 }
 
 /// The refinement as it was before hidden-edge removal, the robust segment residuals and the
@@ -50,7 +50,7 @@ fn run(r: &Record, refine: RefineConfig) -> ObjectEstimate {
     for f in &r.frames {
         est.add_frame(f.clone());
     }
-    est.estimate(&r.points_in_world).unwrap_or_else(|e| panic!("{}: {e}", r.scene))
+    est.estimate(&r.points_in_world).unwrap()
 }
 
 #[test]
@@ -84,12 +84,12 @@ fn real_books_refinement_no_longer_loses_iou() {
 fn estimator_keeps_the_refinement_only_when_it_lowers_the_cost() {
     for r in &records() {
         let new = run(r, RefineConfig::default());
-        let lines = new.stages.lines.unwrap_or_else(|| panic!("no lines stage"));
+        let lines = new.stages.lines.expect("no lines stage");
         let frames = r.frames.clone();
         // The estimator's inliers are not exposed; the refinement with all points agrees on the
         // decision here (the cost falls by more than 3 %).
         let res = refine_yaw_scale(&lines, &frames, &r.points_in_world, &RefineConfig::default())
-            .unwrap_or_else(|| panic!("no refinement"));
+            .expect("no refinement");
         assert!(res.rms_after_px < 0.97 * res.rms_before_px, "{:?}", (res.rms_before_px, res.rms_after_px));
         assert_eq!(new.stage, EstimateStage::Refined);
     }
@@ -120,11 +120,11 @@ fn estimator_keeps_the_refinement_only_when_it_lowers_the_cost() {
 
 fn look_at(eye: Vector3<f64>, target: Vector3<f64>) -> Se3 {
     objslam_core::geometry::look_at_with_up(&eye.into(), &target.into(), &Vector3::z())
-        .unwrap_or_else(|e| panic!("{e}"))
+        .unwrap()
 }
 
 fn camera() -> PinholeCamera {
-    PinholeCamera::from_fovy(640, 480, 55f64.to_radians()).unwrap_or_else(|e| panic!("{e}"))
+    PinholeCamera::from_fovy(640, 480, 55f64.to_radians()).unwrap()
 }
 
 /// A thin book on the table (top at 3 cm).
@@ -147,7 +147,7 @@ fn exact_frame(index: u32, eye: Vector3<f64>, cam: &PinholeCamera, g: &ObjectGeo
     let vis = visible_edges(g, &Point3::from(eye));
     let edges = project_edges(g, cam, &pose);
     let corners: Vec<[f64; 2]> = edges.iter().flat_map(|e| [e.a, e.b]).collect();
-    let bbox = Box2::from_points(corners.iter()).unwrap_or_else(|| panic!("no box"));
+    let bbox = Box2::from_points(corners.iter()).expect("no box");
     let segments = edges.iter().filter(|e| vis[e.edge]).map(|e| LineSegment::new(e.a, e.b)).collect();
     LineFrame { frame: index, camera: *cam, world_from_camera: pose, bbox, segments }
 }
@@ -246,7 +246,7 @@ fn synthetic_thin_book_with_streaks() {
             for f in &frames {
                 est.add_frame(f.clone());
             }
-            est.estimate(&pts).unwrap_or_else(|e| panic!("{e}"))
+            est.estimate(&pts).unwrap()
         };
         let old = run_with(previous_refinement());
         let new = run_with(RefineConfig::default());

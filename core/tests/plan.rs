@@ -52,13 +52,13 @@ fn panda_urdf() -> PathBuf {
 }
 
 fn planner() -> Planner {
-    Planner::new(panda_urdf(), PlannerConfig::default()).unwrap_or_else(|e| panic!("planner: {e}"))
+    Planner::new(panda_urdf(), PlannerConfig::default()).unwrap()
 }
 
 fn fixture() -> Value {
     let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/panda_kinematics.json");
     let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-    serde_json::from_str(&text).unwrap_or_else(|e| panic!("fixture: {e}"))
+    serde_json::from_str(&text).unwrap()
 }
 
 fn floats(v: &Value) -> Vec<f64> {
@@ -91,13 +91,13 @@ fn fk_matches_pinocchio() {
     let planner = planner();
     let chain = planner.chain();
     let fx = fixture();
-    let cases = fx["fk"].as_array().unwrap_or_else(|| panic!("fk"));
+    let cases = fx["fk"].as_array().expect("fk");
     assert!(cases.len() >= 20);
     let mut worst = (0.0f64, 0.0f64);
     for case in cases {
         let q = joint_vector(&case["q"]);
         let links = chain.forward_all(&q);
-        let links_obj = case["links"].as_object().unwrap_or_else(|| panic!("links"));
+        let links_obj = case["links"].as_object().expect("links");
         for (name, p) in links_obj {
             let expected = pose(p);
             let i = chain.link_index(name).unwrap_or_else(|| panic!("link {name} not in chain"));
@@ -119,7 +119,7 @@ fn ik_reaches_every_target_pinocchio_reaches() {
     let fx = fixture();
     let q_init = joint_vector(&fx["q_init"]);
     let mut reached = 0;
-    for case in fx["ik"].as_array().unwrap_or_else(|| panic!("ik")) {
+    for case in fx["ik"].as_array().expect("ik") {
         if !case["pinocchio_success"].as_bool().unwrap_or(false) {
             continue;
         }
@@ -127,7 +127,7 @@ fn ik_reaches_every_target_pinocchio_reaches() {
         let target = pose(&case["target"]);
         let sol = chain
             .inverse(&target, &q_init, &IkConfig::default())
-            .unwrap_or_else(|e| panic!("IK failed for {} target {target}: {e}", case["kind"]));
+            .unwrap();
         assert!(chain.within_limits(&sol.q));
         let got = chain.forward(&sol.q);
         let dp = (got.translation.vector - target.translation.vector).norm();
@@ -190,7 +190,7 @@ fn twelve_objects() -> Vec<ObjectGeometry> {
 #[test]
 fn ready_configuration_is_free_and_table_collision_detected() {
     let planner = planner();
-    let scene = planner.scene(&[]).unwrap_or_else(|e| panic!("{e}"));
+    let scene = planner.scene(&[]).unwrap();
     assert_eq!(planner.first_contact(&Q_READY, &scene), None);
     assert_eq!(planner.first_contact(&[0.0; ARM_DOF], &scene), None);
     // Arm folded down into the table.
@@ -200,7 +200,7 @@ fn ready_configuration_is_free_and_table_collision_detected() {
 
 /// Checks a trajectory's samples against the objects WITHOUT margin, finely interpolated.
 fn assert_never_hits(planner: &Planner, positions: &[JointVector], objects: &[ObjectGeometry]) {
-    let exact = CollisionScene::new(objects, 0.0, 0.0).unwrap_or_else(|e| panic!("{e}"));
+    let exact = CollisionScene::new(objects, 0.0, 0.0).unwrap();
     for w in positions.windows(2) {
         let steps = (joint_max_abs_diff(&w[0], &w[1]) / 0.002).ceil().max(1.0) as usize;
         for k in 0..=steps {
@@ -232,7 +232,7 @@ fn distance_to_polyline(q: &JointVector, waypoints: &[JointVector]) -> f64 {
 fn planned_paths_never_intersect_the_objects() {
     let planner = planner();
     let objects = twelve_objects();
-    let scene = planner.scene(&objects).unwrap_or_else(|e| panic!("{e}"));
+    let scene = planner.scene(&objects).unwrap();
     // Goals: top-down poses 25 cm above random table points (reached by collision-free IK).
     let mut rng = ChaCha8Rng::seed_from_u64(3);
     let mut planned = 0;
@@ -251,7 +251,7 @@ fn planned_paths_never_intersect_the_objects() {
         let off = traj.positions.iter().map(|q| distance_to_polyline(q, &traj.waypoints)).fold(0.0, f64::max);
         assert!(off < 1e-6, "trajectory leaves the planned segments by {off} rad");
         assert!(planner.path_is_free(&traj.waypoints, &scene), "waypoints with margin");
-        let goal = *traj.goal().unwrap_or_else(|| panic!("empty trajectory"));
+        let goal = *traj.goal().expect("empty trajectory");
         let reached = planner.forward_tcp(&goal);
         assert!((reached.translation.vector - target.translation.vector).norm() < 1e-3);
         q = goal;
@@ -268,13 +268,13 @@ fn a_held_bottle_is_carried_around_a_standing_one() {
     let held_geometry = ObjectGeometry { center: Vector3::new(0.5, 0.25, 0.09), ..cylinder(0.5, 0.25, 0.03, 0.18) };
     let grasp = objslam_core::plan::grasp::top_down_pose(Vector3::new(0.5, 0.25, 0.14), 0.0);
     let held = HeldObject { geometry: held_geometry, world_from_tcp_at_grasp: grasp };
-    let holding = planner.holding(&held).unwrap_or_else(|e| panic!("{e}"));
-    let scene = planner.scene(&standing).unwrap_or_else(|e| panic!("{e}"));
+    let holding = planner.holding(&held).unwrap();
+    let scene = planner.scene(&standing).unwrap();
     let high = |y: f64| objslam_core::plan::grasp::top_down_pose(Vector3::new(0.5, y, 0.26), 0.0);
-    let start = holding.inverse_tcp_free(&high(0.25), &Q_READY, &scene).unwrap_or_else(|e| panic!("{e}")).q;
-    let goal = holding.inverse_tcp_free(&high(-0.25), &start, &scene).unwrap_or_else(|e| panic!("{e}")).q;
+    let start = holding.inverse_tcp_free(&high(0.25), &Q_READY, &scene).unwrap().q;
+    let goal = holding.inverse_tcp_free(&high(-0.25), &start, &scene).unwrap().q;
     // Without the held object the straight line is free; with it, the held bottle hits the standing one.
-    let bare = planner.plan_path(&start, &goal, &scene).unwrap_or_else(|e| panic!("{e}"));
+    let bare = planner.plan_path(&start, &goal, &scene).unwrap();
     assert_eq!(bare.len(), 2, "the bare arm should go straight");
     let hit = (0..=100).any(|k| {
         let mut q = start;
@@ -284,13 +284,13 @@ fn a_held_bottle_is_carried_around_a_standing_one() {
         matches!(holding.first_contact(&q, &scene), Some(Contact::HeldObject { object: 0 }))
     });
     assert!(hit, "the held bottle should cross the standing one on the straight line");
-    let traj = holding.plan_to_joints(&start, &goal, &standing).unwrap_or_else(|e| panic!("{e}"));
+    let traj = holding.plan_to_joints(&start, &goal, &standing).unwrap();
     assert!(traj.waypoints.len() >= 3);
     assert_never_hits(&holding, &traj.positions, &standing);
     // The held object is not tested against the table (it is put down on it): a pose whose held
     // bottle reaches 2 cm below the table top is free, while the bare hand there is far above it.
     let low = objslam_core::plan::grasp::top_down_pose(Vector3::new(0.5, 0.25, 0.12), 0.0);
-    let q_low = holding.inverse_tcp_free(&low, &start, &planner.scene(&[]).unwrap_or_else(|e| panic!("{e}")));
+    let q_low = holding.inverse_tcp_free(&low, &start, &planner.scene(&[]).unwrap());
     assert!(q_low.is_ok(), "{q_low:?}");
     // Bad held geometry is a typed error.
     let mut bad = held.clone();
@@ -302,9 +302,9 @@ fn a_held_bottle_is_carried_around_a_standing_one() {
 fn linear_motions_follow_the_line_or_report_where_they_break() {
     let planner = planner();
     let top = |z: f64| objslam_core::plan::grasp::top_down_pose(Vector3::new(0.45, 0.1, z), 0.3);
-    let scene = planner.scene(&[]).unwrap_or_else(|e| panic!("{e}"));
-    let start = planner.inverse_tcp_free(&top(0.30), &Q_READY, &scene).unwrap_or_else(|e| panic!("{e}")).q;
-    let traj = planner.plan_linear(&start, &top(0.08), &[]).unwrap_or_else(|e| panic!("{e}"));
+    let scene = planner.scene(&[]).unwrap();
+    let start = planner.inverse_tcp_free(&top(0.30), &Q_READY, &scene).unwrap().q;
+    let traj = planner.plan_linear(&start, &top(0.08), &[]).unwrap();
     // Every sample's TCP stays on the vertical line, pointing down, within 1 mm / 0.1°.
     for q in &traj.positions {
         let p = planner.forward_tcp(q);
@@ -313,7 +313,7 @@ fn linear_motions_follow_the_line_or_report_where_they_break() {
         assert!((0.08 - 1e-3..=0.30 + 1e-3).contains(&v.z), "outside the segment at {v:?}");
         assert!(p.rotation.angle_to(&top(v.z).rotation) < 0.1f64.to_radians());
     }
-    let goal = *traj.goal().unwrap_or_else(|| panic!("empty trajectory"));
+    let goal = *traj.goal().expect("empty trajectory");
     assert!((planner.forward_tcp(&goal).translation.vector - top(0.08).translation.vector).norm() < 1e-3);
     // A box wider than the open gripper standing on the line (12 cm tall, 13 cm with the margin):
     // the finger tips (about 1 cm below the TCP) reach it with the TCP near 14 cm, 73 % of the way.
@@ -333,7 +333,7 @@ fn a_speed_cap_slows_a_timed_path_and_bad_caps_are_typed() {
     far[3] += 0.4;
     let path = [Q_READY, far];
     let peak = |cap: Option<f64>| {
-        let t = planner.time_parameterize_path(&path, cap).unwrap_or_else(|e| panic!("{e}"));
+        let t = planner.time_parameterize_path(&path, cap).unwrap();
         let v = t.velocities.iter().flat_map(|v| v.iter()).fold(0.0f64, |m, x| m.max(x.abs()));
         (v, t.duration_s)
     };
@@ -348,10 +348,10 @@ fn a_speed_cap_slows_a_timed_path_and_bad_caps_are_typed() {
 }
 
 fn wall_sides(planner: &Planner, wall: &[ObjectGeometry]) -> (JointVector, JointVector) {
-    let scene = planner.scene(wall).unwrap_or_else(|e| panic!("{e}"));
+    let scene = planner.scene(wall).unwrap();
     let pose = |y: f64| objslam_core::plan::grasp::top_down_pose(Vector3::new(0.5, y, 0.15), 0.0);
-    let left = planner.inverse_tcp_free(&pose(0.2), &Q_READY, &scene).unwrap_or_else(|e| panic!("{e}")).q;
-    let right = planner.inverse_tcp_free(&pose(-0.2), &left, &scene).unwrap_or_else(|e| panic!("{e}")).q;
+    let left = planner.inverse_tcp_free(&pose(0.2), &Q_READY, &scene).unwrap().q;
+    let right = planner.inverse_tcp_free(&pose(-0.2), &left, &scene).unwrap().q;
     (left, right)
 }
 
@@ -360,21 +360,21 @@ fn rrt_connect_goes_around_a_wall() {
     let planner = planner();
     // A tall thin wall between two low configurations left and right of it.
     let wall = vec![cuboid(0.5, 0.0, 0.0, [0.3, 0.04, 0.5])];
-    let scene = planner.scene(&wall).unwrap_or_else(|e| panic!("{e}"));
+    let scene = planner.scene(&wall).unwrap();
     let (left, right) = wall_sides(&planner, &wall);
-    let path = planner.plan_path(&left, &right, &scene).unwrap_or_else(|e| panic!("{e}"));
+    let path = planner.plan_path(&left, &right, &scene).unwrap();
     assert!(path.len() >= 3, "straight line should be blocked by the wall");
-    let traj = planner.time_parameterize(&path).unwrap_or_else(|e| panic!("{e}"));
+    let traj = planner.time_parameterize(&path).unwrap();
     assert_never_hits(&planner, &traj.positions, &wall);
     // Determinism: same inputs, same path.
-    let again = planner.plan_path(&left, &right, &scene).unwrap_or_else(|e| panic!("{e}"));
+    let again = planner.plan_path(&left, &right, &scene).unwrap();
     assert_eq!(path, again);
 }
 
 #[test]
 fn planner_failures_are_typed() {
     let planner = planner();
-    let scene = planner.scene(&[]).unwrap_or_else(|e| panic!("{e}"));
+    let scene = planner.scene(&[]).unwrap();
     let down: JointVector = [0.0, 1.7, 0.0, -0.5, 0.0, 1.5, 0.0];
     assert!(matches!(planner.plan_path(&down, &Q_READY, &scene), Err(PlanError::StartInCollision { .. })));
     assert!(matches!(planner.plan_path(&Q_READY, &down, &scene), Err(PlanError::GoalInCollision { .. })));
@@ -385,11 +385,11 @@ fn planner_failures_are_typed() {
     let wall = vec![cuboid(0.5, 0.0, 0.0, [0.3, 0.04, 0.5])];
     let (left, right) = wall_sides(&planner, &wall);
     let cfg = PlannerConfig { rrt_max_iterations: 0, ..PlannerConfig::default() };
-    let small = Planner::new(panda_urdf(), cfg).unwrap_or_else(|e| panic!("{e}"));
-    let scene = small.scene(&wall).unwrap_or_else(|e| panic!("{e}"));
+    let small = Planner::new(panda_urdf(), cfg).unwrap();
+    let scene = small.scene(&wall).unwrap();
     assert!(matches!(small.plan_path(&left, &right, &scene), Err(PlanError::PlannerExhausted { iterations: 0 })));
     let cfg = PlannerConfig { timeout_s: Some(0.0), ..PlannerConfig::default() };
-    let hurried = Planner::new(panda_urdf(), cfg).unwrap_or_else(|e| panic!("{e}"));
+    let hurried = Planner::new(panda_urdf(), cfg).unwrap();
     assert!(matches!(hurried.plan_path(&left, &right, &scene), Err(PlanError::Timeout { .. })));
     // A TCP pose inside a box: IK converges but every solution collides.
     let boxed = vec![cuboid(0.5, 0.0, 0.0, [0.2, 0.2, 0.3])];
@@ -408,7 +408,7 @@ fn grasp_on_known_box_closes_across_its_short_side() {
     let yaw = 30f64.to_radians();
     let block = cuboid(0.5, 0.1, yaw, [0.04, 0.10, 0.06]);
     let neighbour = cylinder(0.5, -0.1, 0.03, 0.1);
-    let cands = planner.grasp_candidates(&block, &[neighbour], &Q_READY).unwrap_or_else(|e| panic!("{e}"));
+    let cands = planner.grasp_candidates(&block, &[neighbour], &Q_READY).unwrap();
     // Short side only (the 10 cm side does not fit), two yaws × deep / shallow.
     assert_eq!(cands.len(), 4);
     assert!(cands.iter().all(|c| c.short_side));
@@ -428,11 +428,11 @@ fn grasp_on_known_box_closes_across_its_short_side() {
     assert!(best.world_from_tcp_pregrasp.translation.z > g.translation.z + 0.09);
     assert!(best.clearance_m > 0.0);
     // IK solutions land on the poses.
-    let q = best.q_grasp.unwrap_or_else(|| panic!("q_grasp"));
+    let q = best.q_grasp.expect("q_grasp");
     assert!((planner.forward_tcp(&q).translation.vector - g.translation.vector).norm() < 1e-3);
 
     // Whole grasp motion plans, and the approach stays near-vertical.
-    let motion = planner.plan_grasp(&Q_READY, &block, &[neighbour]).unwrap_or_else(|e| panic!("{e}"));
+    let motion = planner.plan_grasp(&Q_READY, &block, &[neighbour]).unwrap();
     let mut max_dev = 0.0f64;
     for q in &motion.approach.positions {
         let p = planner.forward_tcp(q).translation.vector;
@@ -450,12 +450,12 @@ fn grasp_bad_inputs() {
     assert!(matches!(planner.grasp_candidates(&wide, &[], &Q_READY), Err(PlanError::TooWide { .. })));
     // Out of reach: candidates exist but none is reachable.
     let far = cylinder(1.5, 0.0, 0.03, 0.1);
-    let cands = planner.grasp_candidates(&far, &[], &Q_READY).unwrap_or_else(|e| panic!("{e}"));
+    let cands = planner.grasp_candidates(&far, &[], &Q_READY).unwrap();
     assert!(cands.iter().all(|c| !c.reachable()));
     assert!(matches!(planner.plan_grasp(&Q_READY, &far, &[]), Err(PlanError::NoReachableGrasp { .. })));
     // Cylinder: the first candidate keeps the current hand yaw.
     let can = cylinder(0.45, 0.0, 0.033, 0.12);
-    let cands = planner.grasp_candidates(&can, &[], &Q_READY).unwrap_or_else(|e| panic!("{e}"));
+    let cands = planner.grasp_candidates(&can, &[], &Q_READY).unwrap();
     let yaw_now = objslam_core::plan::grasp::hand_yaw_of(&planner.forward_tcp(&Q_READY));
     assert!(objslam_core::geometry::wrap_angle(cands[0].hand_yaw_rad - yaw_now).abs() < 1e-9);
     assert!((cands[0].expected_closed_width_m - 0.066).abs() < 1e-9);
@@ -470,9 +470,9 @@ fn capsules_cover_the_collision_meshes() {
     use objslam_core::plan::collision::{panda_capsules, CAPSULE_COVERAGE_TOLERANCE_M};
     let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/panda_collision_samples.json");
     let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-    let fx: Value = serde_json::from_str(&text).unwrap_or_else(|e| panic!("{e}"));
+    let fx: Value = serde_json::from_str(&text).unwrap();
     let capsules = panda_capsules();
-    let links = fx["points_in_link"].as_object().unwrap_or_else(|| panic!("points_in_link"));
+    let links = fx["points_in_link"].as_object().expect("points_in_link");
     assert_eq!(links.len(), 9);
     for (link, points) in links {
         let caps: Vec<_> = capsules.iter().filter(|c| &c.link == link).collect();

@@ -15,7 +15,7 @@ const N_FRAMES: usize = 40;
 const FRAMES_PER_VIEW: usize = 2;
 
 fn camera() -> PinholeCamera {
-    PinholeCamera::from_fovy(640, 480, 50f64.to_radians()).unwrap_or_else(|e| panic!("{e}"))
+    PinholeCamera::from_fovy(640, 480, 50f64.to_radians()).unwrap()
 }
 
 /// Ground-truth pose of frame `i`: an arc of radius 0.25 m around (0.5, 0) at 0.45 m height,
@@ -56,7 +56,7 @@ fn run_with_robot(
     robot: &SyntheticPriorError,
 ) -> (Vec<Se3>, Vec<Se3>, usize, Tracker) {
     let cam = camera();
-    let mut tracker = Tracker::new(config).unwrap_or_else(|e| panic!("{e}"));
+    let mut tracker = Tracker::new(config).unwrap();
     let mut online = Vec::new();
     for (i, ((grey, depth), gt)) in seq.frames.iter().zip(&seq.gt).enumerate() {
         let view = (i / FRAMES_PER_VIEW) as u64;
@@ -68,7 +68,7 @@ fn run_with_robot(
             view_index: view,
             world_from_camera_oracle: (config.pose_source == PoseSource::GroundTruth).then_some(*gt),
         };
-        let out = tracker.track(&input).unwrap_or_else(|e| panic!("frame {i}: {e}"));
+        let out = tracker.track(&input).unwrap();
         online.push(out.world_from_camera);
     }
     let lost = tracker.n_lost();
@@ -94,7 +94,7 @@ fn track_at(
         view_index: view,
         world_from_camera_oracle: None,
     };
-    tracker.track(&input).unwrap_or_else(|e| panic!("{e}"))
+    tracker.track(&input).unwrap()
 }
 
 #[test]
@@ -105,11 +105,11 @@ fn slam_beats_the_kinematic_prior_on_a_synthetic_sequence() {
     let (online, traj, lost, tracker) = run(&seq, slam_cfg);
     let kin_cfg = TrackerConfig { pose_source: PoseSource::Kinematics, prior_noise: noise, ..TrackerConfig::default() };
     let (kin, _, kin_lost, _) = run(&seq, kin_cfg);
-    let ate_online = ate_rmse_m(&online, &seq.gt).unwrap_or_else(|e| panic!("{e}"));
-    let ate_traj = ate_rmse_m(&traj, &seq.gt).unwrap_or_else(|e| panic!("{e}"));
-    let ate_kin = ate_rmse_m(&kin, &seq.gt).unwrap_or_else(|e| panic!("{e}"));
-    let rpe_slam = rpe(&traj, &seq.gt).unwrap_or_else(|e| panic!("{e}"));
-    let rpe_kin = rpe(&kin, &seq.gt).unwrap_or_else(|e| panic!("{e}"));
+    let ate_online = ate_rmse_m(&online, &seq.gt).unwrap();
+    let ate_traj = ate_rmse_m(&traj, &seq.gt).unwrap();
+    let ate_kin = ate_rmse_m(&kin, &seq.gt).unwrap();
+    let rpe_slam = rpe(&traj, &seq.gt).unwrap();
+    let rpe_kin = rpe(&kin, &seq.gt).unwrap();
     eprintln!(
         "ATE slam online {ate_online:.4} m, slam trajectory {ate_traj:.4} m, kinematics {ate_kin:.4} m; \
          RPE slam {:.5} m / {:.4}°, kinematics {:.5} m / {:.4}°; lost {lost}; map points {}, keyframes {}",
@@ -129,7 +129,7 @@ fn slam_beats_the_kinematic_prior_on_a_synthetic_sequence() {
     // Without the prior-mean anchor the map inherits the first view's bias (≈ 9 mm here).
     let fixed_cfg = TrackerConfig { prior_noise: noise, anchor_to_prior_mean: false, ..TrackerConfig::default() };
     let (fixed_online, _, _, _) = run(&seq, fixed_cfg);
-    let ate_fixed = ate_rmse_m(&fixed_online, &seq.gt).unwrap_or_else(|e| panic!("{e}"));
+    let ate_fixed = ate_rmse_m(&fixed_online, &seq.gt).unwrap();
     eprintln!("ATE slam without anchor {ate_fixed:.4} m");
     assert!(ate_fixed > 2.0 * ate_online);
 }
@@ -148,7 +148,7 @@ fn the_estimator_runs_when_its_assumed_noise_differs_from_the_robots() {
     struct SameEveryView(SyntheticPriorError);
     let hand_eye = SameEveryView(SyntheticPriorError::new(shared, 7));
     let cam = camera();
-    let mut tracker = Tracker::new(TrackerConfig::default()).unwrap_or_else(|e| panic!("{e}"));
+    let mut tracker = Tracker::new(TrackerConfig::default()).unwrap();
     let mut online = Vec::new();
     for (i, ((grey, depth), gt)) in seq.frames.iter().zip(&seq.gt).enumerate() {
         let input = TrackInput {
@@ -159,9 +159,9 @@ fn the_estimator_runs_when_its_assumed_noise_differs_from_the_robots() {
             view_index: (i / FRAMES_PER_VIEW) as u64,
             world_from_camera_oracle: None,
         };
-        online.push(tracker.track(&input).unwrap_or_else(|e| panic!("frame {i}: {e}")).world_from_camera);
+        online.push(tracker.track(&input).unwrap().world_from_camera);
     }
-    let ate_shared = ate_rmse_m(&online, &seq.gt).unwrap_or_else(|e| panic!("{e}"));
+    let ate_shared = ate_rmse_m(&online, &seq.gt).unwrap();
     eprintln!(
         "shared 4 mm / 0.4° robot error, default assumption: ATE {:.2} mm, lost {}",
         ate_shared * 1e3,
@@ -172,10 +172,10 @@ fn the_estimator_runs_when_its_assumed_noise_differs_from_the_robots() {
 
     let tight = PriorNoiseConfig { bias_trans_m: 0.003, bias_rot_deg: 0.3, ..PriorNoiseConfig::default() };
     let (online, _, lost, _) = run(&seq, TrackerConfig { prior_noise: tight, ..TrackerConfig::default() });
-    let ate_tight = ate_rmse_m(&online, &seq.gt).unwrap_or_else(|e| panic!("{e}"));
+    let ate_tight = ate_rmse_m(&online, &seq.gt).unwrap();
     let prior: Vec<Se3> =
         seq.gt.iter().enumerate().map(|(i, gt)| robot().perturb(gt, (i / FRAMES_PER_VIEW) as u64, i as u64)).collect();
-    let ate_prior = ate_rmse_m(&prior, &seq.gt).unwrap_or_else(|e| panic!("{e}"));
+    let ate_prior = ate_rmse_m(&prior, &seq.gt).unwrap();
     eprintln!(
         "default robot, 3 mm / 0.3° assumption: ATE {:.2} mm (prior {:.2} mm), lost {lost}",
         ate_tight * 1e3,
@@ -191,7 +191,7 @@ fn local_object_points_lie_on_the_boxed_object() {
     let scene = TabletopScene::tabletop(3);
     let cam = camera();
     let cfg = TrackerConfig { pose_source: PoseSource::GroundTruth, ..TrackerConfig::default() };
-    let mut tracker = Tracker::new(cfg).unwrap_or_else(|e| panic!("{e}"));
+    let mut tracker = Tracker::new(cfg).unwrap();
     let b = scene.boxes[0];
     let mut last = None;
     for i in 0..3 {
@@ -205,7 +205,7 @@ fn local_object_points_lie_on_the_boxed_object() {
             view_index: 0,
             world_from_camera_oracle: Some(gt),
         };
-        let out = tracker.track(&input).unwrap_or_else(|e| panic!("{e}"));
+        let out = tracker.track(&input).unwrap();
         assert!(out.is_ok());
         last = Some((out, gt));
     }
@@ -221,7 +221,7 @@ fn local_object_points_lie_on_the_boxed_object() {
             cam.project(&(gt.inverse() * p))
         })
         .collect();
-    let bbox = Box2::from_points(corners.iter()).unwrap_or_else(|| panic!("box not visible"));
+    let bbox = Box2::from_points(corners.iter()).expect("box not visible");
     let local = out.points_in_box(&bbox);
     assert!(local.len() >= 20, "{} points in box", local.len());
     let on_box = local
@@ -251,7 +251,7 @@ fn bad_input_is_a_typed_error_or_a_lost_frame() {
     let cam = camera();
     let gt = gt_pose(0);
     let (grey, depth) = scene.render(&cam, &gt);
-    let mut tracker = Tracker::new(TrackerConfig::default()).unwrap_or_else(|e| panic!("{e}"));
+    let mut tracker = Tracker::new(TrackerConfig::default()).unwrap();
 
     // Wrong image size / buffer length.
     let small = GreyImage { width: 320, height: 240, data: vec![0; 320 * 240] };
@@ -275,12 +275,12 @@ fn bad_input_is_a_typed_error_or_a_lost_frame() {
 
     // Ground truth requested but missing.
     let mut oracle = Tracker::new(TrackerConfig { pose_source: PoseSource::GroundTruth, ..TrackerConfig::default() })
-        .unwrap_or_else(|e| panic!("{e}"));
+        .unwrap();
     assert_eq!(oracle.track(&input_for(&grey, &depth, &cam, gt)), Err(SlamError::MissingGroundTruth));
     // A true pose offered to any other pose source is refused: it cannot reach an estimate.
     for source in [PoseSource::Slam, PoseSource::Kinematics] {
         let mut t = Tracker::new(TrackerConfig { pose_source: source, ..TrackerConfig::default() })
-            .unwrap_or_else(|e| panic!("{e}"));
+            .unwrap();
         let with_truth = TrackInput { world_from_camera_oracle: Some(gt), ..input_for(&grey, &depth, &cam, gt) };
         assert_eq!(t.track(&with_truth), Err(SlamError::OracleNotAllowed { pose_source: source }));
     }
@@ -289,26 +289,26 @@ fn bad_input_is_a_typed_error_or_a_lost_frame() {
     let mut no_depth = DepthImage { width: 640, height: 480, data: vec![0.0; 640 * 480] };
     no_depth.data[0] = f32::NAN;
     no_depth.data[1] = -1.0;
-    let out = tracker.track(&input_for(&grey, &no_depth, &cam, gt)).unwrap_or_else(|e| panic!("{e}"));
+    let out = tracker.track(&input_for(&grey, &no_depth, &cam, gt)).unwrap();
     assert!(matches!(out.state, TrackingState::Lost { reason: LostReason::NoDepth { valid: 0, .. } }));
     assert_eq!(out.world_from_camera, out.world_from_camera_prior);
 
     // Textureless image: lost for lack of features.
     let flat = GreyImage { width: 640, height: 480, data: vec![128; 640 * 480] };
-    let out = tracker.track(&input_for(&flat, &depth, &cam, gt)).unwrap_or_else(|e| panic!("{e}"));
+    let out = tracker.track(&input_for(&flat, &depth, &cam, gt)).unwrap();
     assert!(matches!(out.state, TrackingState::Lost { reason: LostReason::TooFewFeatures { found: 0, .. } }));
 
     // A good frame initialises; then a textureless frame is lost; then tracking resumes.
-    assert!(tracker.track(&input_for(&grey, &depth, &cam, gt)).unwrap_or_else(|e| panic!("{e}")).is_ok());
-    assert!(!tracker.track(&input_for(&flat, &depth, &cam, gt)).unwrap_or_else(|e| panic!("{e}")).is_ok());
+    assert!(tracker.track(&input_for(&grey, &depth, &cam, gt)).unwrap().is_ok());
+    assert!(!tracker.track(&input_for(&flat, &depth, &cam, gt)).unwrap().is_ok());
     let (g1, d1) = scene.render(&cam, &gt_pose(1));
-    let out = tracker.track(&input_for(&g1, &d1, &cam, gt_pose(1))).unwrap_or_else(|e| panic!("{e}"));
+    let out = tracker.track(&input_for(&g1, &d1, &cam, gt_pose(1))).unwrap();
     assert!(out.is_ok(), "{:?}", out.state);
     assert_eq!(tracker.n_lost(), 3);
     // A frame of another scene under the same prior: no consensus, lost, never a panic.
     let other = TabletopScene::tabletop(99);
     let (g2, d2) = other.render(&cam, &gt_pose(2));
-    let out = tracker.track(&input_for(&g2, &d2, &cam, gt_pose(2))).unwrap_or_else(|e| panic!("{e}"));
+    let out = tracker.track(&input_for(&g2, &d2, &cam, gt_pose(2))).unwrap();
     assert!(matches!(out.state, TrackingState::Lost { reason: LostReason::TooFewInliers { .. } }), "{:?}", out.state);
 }
 
@@ -319,10 +319,10 @@ fn garbage_frames_never_panic() {
     let mut state = 17u64;
     let mut next = move || objslam_core::slam::synthetic::splitmix64(&mut state);
     for (w, h) in [(640u32, 480u32), (64, 48), (37, 41), (8, 8)] {
-        let cam = PinholeCamera::from_fovy(w, h, 1.0).unwrap_or_else(|e| panic!("{e}"));
+        let cam = PinholeCamera::from_fovy(w, h, 1.0).unwrap();
         for source in [PoseSource::Slam, PoseSource::Kinematics, PoseSource::GroundTruth] {
             let mut tracker = Tracker::new(TrackerConfig { pose_source: source, ..TrackerConfig::default() })
-                .unwrap_or_else(|e| panic!("{e}"));
+                .unwrap();
             for f in 0..3 {
                 let n = (w * h) as usize;
                 let grey = GreyImage { width: w, height: h, data: (0..n).map(|_| (next() % 256) as u8).collect() };
@@ -350,7 +350,7 @@ fn garbage_frames_never_panic() {
                     view_index: f as u64,
                     world_from_camera_oracle: (source == PoseSource::GroundTruth).then_some(pose),
                 };
-                let out = tracker.track(&input).unwrap_or_else(|e| panic!("{w}x{h} {source:?} frame {f}: {e}"));
+                let out = tracker.track(&input).unwrap();
                 assert!(out.world_from_camera.translation.vector.iter().all(|v| v.is_finite()));
                 assert!(out.observed.iter().all(|p| p.p_in_world.coords.iter().all(|v| v.is_finite())));
             }
@@ -366,7 +366,7 @@ fn tracking_is_deterministic_and_the_tracker_is_send() {
     let cam = camera();
     let frames: Vec<_> = (0..6).map(|i| (gt_pose(3 * i), scene.render(&cam, &gt_pose(3 * i)))).collect();
     let run = || {
-        let mut tracker = Tracker::new(TrackerConfig::default()).unwrap_or_else(|e| panic!("{e}"));
+        let mut tracker = Tracker::new(TrackerConfig::default()).unwrap();
         frames
             .iter()
             .enumerate()
@@ -379,7 +379,7 @@ fn tracking_is_deterministic_and_the_tracker_is_send() {
                     view_index: i as u64,
                     world_from_camera_oracle: None,
                 };
-                tracker.track(&input).unwrap_or_else(|e| panic!("{e}"))
+                tracker.track(&input).unwrap()
             })
             .collect::<Vec<_>>()
     };
@@ -398,7 +398,7 @@ fn frames_that_hide_the_scene_keep_the_map_and_tracking_resumes() {
     let cam = camera();
     let noise = PriorNoiseConfig::default();
     let mut tracker = Tracker::new(TrackerConfig { prior_noise: noise, ..TrackerConfig::default() })
-        .unwrap_or_else(|e| panic!("{e}"));
+        .unwrap();
     let other = TabletopScene::tabletop(99);
     let (hidden_grey, _) = other.render(&cam, &gt_pose(0));
     let no_depth = DepthImage { width: 640, height: 480, data: vec![0.0; 640 * 480] };
@@ -425,7 +425,7 @@ fn frames_that_hide_the_scene_keep_the_map_and_tracking_resumes() {
         est.push(out.world_from_camera);
         truth.push(seq.gt[i]);
     }
-    let ate = ate_rmse_m(&est, &truth).unwrap_or_else(|e| panic!("{e}"));
+    let ate = ate_rmse_m(&est, &truth).unwrap();
     eprintln!("ATE after the hidden stretch {ate:.4} m");
     assert!(ate < 0.005, "ATE {ate}");
 }
@@ -438,7 +438,7 @@ fn unmapped_stretch(extend_after_unmapped: usize) -> (Tracker, f64) {
     let seq = sequence();
     let cam = camera();
     let mut tracker = Tracker::new(TrackerConfig { extend_after_unmapped, ..TrackerConfig::default() })
-        .unwrap_or_else(|e| panic!("{e}"));
+        .unwrap();
     let aside =
         Se3::from_parts(nalgebra::Translation3::new(0.0, 1.5, 0.0), nalgebra::UnitQuaternion::identity()) * gt_pose(7);
     let (aside_grey, aside_depth) = TabletopScene::tabletop(3).render(&cam, &aside);
@@ -458,7 +458,7 @@ fn unmapped_stretch(extend_after_unmapped: usize) -> (Tracker, f64) {
         est.push(out.world_from_camera);
         truth.push(seq.gt[i]);
     }
-    let ate = ate_rmse_m(&est, &truth).unwrap_or_else(|e| panic!("{e}"));
+    let ate = ate_rmse_m(&est, &truth).unwrap();
     (tracker, ate)
 }
 
@@ -499,7 +499,7 @@ fn a_reset_keeps_the_map_frame_and_the_gauge() {
     // gauge does not jump, and the frames after the reset keep the SLAM's accuracy.
     let seq = sequence();
     let cam = camera();
-    let mut tracker = Tracker::new(TrackerConfig::default()).unwrap_or_else(|e| panic!("{e}"));
+    let mut tracker = Tracker::new(TrackerConfig::default()).unwrap();
     let (other_grey, other_depth) = TabletopScene::tabletop(99).render(&cam, &gt_pose(15));
     let track = |tracker: &mut Tracker, grey: &GreyImage, depth: &DepthImage, i: usize| {
         track_at(tracker, &cam, grey, depth, gt_pose(i), (i / FRAMES_PER_VIEW) as u64)
@@ -526,7 +526,7 @@ fn a_reset_keeps_the_map_frame_and_the_gauge() {
         est.push(out.world_from_camera);
         truth.push(seq.gt[i]);
     }
-    let ate = ate_rmse_m(&est, &truth).unwrap_or_else(|e| panic!("{e}"));
+    let ate = ate_rmse_m(&est, &truth).unwrap();
     eprintln!("reset: gauge moved {:.2} mm, ATE after {:.2} mm", jump * 1e3, ate * 1e3);
     assert!(jump < 1e-3, "the gauge jumped {jump} m at the reset");
     assert!(ate < 0.005, "ATE {ate}");
@@ -540,7 +540,7 @@ fn a_pose_far_from_the_prior_is_rejected() {
     let seq = sequence();
     let cam = camera();
     let cfg = TrackerConfig { prior_noise: PriorNoiseConfig::none(), ..TrackerConfig::default() };
-    let mut tracker = Tracker::new(cfg).unwrap_or_else(|e| panic!("{e}"));
+    let mut tracker = Tracker::new(cfg).unwrap();
     for i in 0..6 {
         let (g, d) = &seq.frames[i];
         let shift = match i {
@@ -556,7 +556,7 @@ fn a_pose_far_from_the_prior_is_rejected() {
             view_index: 0,
             world_from_camera_oracle: None,
         };
-        let out = tracker.track(&input).unwrap_or_else(|e| panic!("{e}"));
+        let out = tracker.track(&input).unwrap();
         if i == 5 {
             assert!(
                 matches!(
@@ -590,7 +590,7 @@ fn a_pose_that_disagrees_with_the_priors_motion_is_dead_reckoned() {
             motion_gate_floor_m: floor_m,
             ..TrackerConfig::default()
         };
-        let mut tracker = Tracker::new(cfg).unwrap_or_else(|e| panic!("{e}"));
+        let mut tracker = Tracker::new(cfg).unwrap();
         let outs: Vec<_> = (0..8)
             .map(|i| {
                 let (g, d) = &seq.frames[i];
@@ -603,7 +603,7 @@ fn a_pose_that_disagrees_with_the_priors_motion_is_dead_reckoned() {
                     view_index: u64::from(i >= 6),
                     world_from_camera_oracle: None,
                 };
-                tracker.track(&input).unwrap_or_else(|e| panic!("{e}"))
+                tracker.track(&input).unwrap()
             })
             .collect();
         (outs, tracker)
@@ -657,7 +657,7 @@ fn the_motion_gate_outvotes_a_single_off_reference() {
             motion_gate_references: references,
             ..TrackerConfig::default()
         };
-        let mut tracker = Tracker::new(cfg).unwrap_or_else(|e| panic!("{e}"));
+        let mut tracker = Tracker::new(cfg).unwrap();
         (0..7)
             .map(|i| {
                 let (g, d) = &seq.frames[i];
@@ -675,7 +675,7 @@ fn the_motion_gate_outvotes_a_single_off_reference() {
                     view_index: 0,
                     world_from_camera_oracle: None,
                 };
-                tracker.track(&input).unwrap_or_else(|e| panic!("{e}")).state
+                tracker.track(&input).unwrap().state
             })
             .collect::<Vec<_>>()
     };

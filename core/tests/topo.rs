@@ -80,15 +80,15 @@ fn relocalise_a_second_session_through_saved_maps() {
     let query = map_of(&query_objects, &query_from_world, &mut rng, 50);
 
     let dir = std::env::temp_dir().join(format!("objslam-topo-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap_or_else(|e| panic!("{e}"));
+    std::fs::create_dir_all(&dir).unwrap();
     let (prior_path, query_path) = (dir.join("prior.json"), dir.join("query.json"));
-    prior.save(&prior_path).unwrap_or_else(|e| panic!("{e}"));
-    query.save(&query_path).unwrap_or_else(|e| panic!("{e}"));
-    let prior = ObjectMap::load(&prior_path).unwrap_or_else(|e| panic!("{e}"));
-    let query = ObjectMap::load(&query_path).unwrap_or_else(|e| panic!("{e}"));
+    prior.save(&prior_path).unwrap();
+    query.save(&query_path).unwrap();
+    let prior = ObjectMap::load(&prior_path).unwrap();
+    let query = ObjectMap::load(&query_path).unwrap();
     let _ = std::fs::remove_dir_all(&dir);
 
-    let r = relocalise(&prior, &query, &MatchConfig::default()).unwrap_or_else(|e| panic!("{e}"));
+    let r = relocalise(&prior, &query, &MatchConfig::default()).unwrap();
     let truth = query_from_world.inverse();
     let rot_deg = r.prior_from_query.isometry.rotation.angle_to(&truth.isometry.rotation).to_degrees();
     let trans_m = (r.prior_from_query.isometry.translation.vector - truth.isometry.translation.vector).norm();

@@ -535,7 +535,7 @@ mod tests {
     /// [80, 120), the table (z = 0) the rest; one detection box spans both objects, centred on the
     /// block.
     fn two_surfaces() -> Frame {
-        let camera = PinholeCamera::from_fovy(160, 120, 0.8).unwrap_or_else(|e| panic!("{e}"));
+        let camera = PinholeCamera::from_fovy(160, 120, 0.8).unwrap();
         let rot = UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI);
         let pose: Se3 = Isometry3::from_parts(Translation3::new(0.0, 0.0, 0.5), rot);
         let mut data = vec![0.0f32; 160 * 120];
@@ -554,7 +554,7 @@ mod tests {
         Frame {
             index: 0,
             camera,
-            depth: DepthImage::new(160, 120, data).unwrap_or_else(|e| panic!("{e}")),
+            depth: DepthImage::new(160, 120, data).unwrap(),
             world_from_camera: pose,
             detections: vec![Detection { bbox: Box2::new(30.0, 25.0, 100.0, 95.0), label: Label::Block, score: 0.9 }],
         }
@@ -579,7 +579,7 @@ mod tests {
     fn frame_with(top: impl Fn(usize, usize) -> f64, boxes: &[Box2]) -> Frame {
         let mut frame = two_surfaces();
         let data: Vec<f32> = (0..120usize * 160).map(|i| (0.5 - top(i % 160, i / 160)) as f32).collect();
-        frame.depth = DepthImage::new(160, 120, data).unwrap_or_else(|e| panic!("{e}"));
+        frame.depth = DepthImage::new(160, 120, data).unwrap();
         frame.detections = boxes.iter().map(|b| Detection { bbox: *b, label: Label::Block, score: 0.9 }).collect();
         frame
     }
@@ -673,7 +673,7 @@ mod tests {
                 data[v * 160 + u] = (0.4 / (1.0 - 3f64.sqrt() * a)) as f32;
             }
         }
-        frame.depth = DepthImage::new(160, 120, data).unwrap_or_else(|e| panic!("{e}"));
+        frame.depth = DepthImage::new(160, 120, data).unwrap();
         let cut = local_objects_from_frame(&frame, &LocalCloudConfig::default())[0].points_in_world.len();
         let gate_only = LocalCloudConfig { connect_slope: 0.0, ..LocalCloudConfig::default() };
         let all = local_objects_from_frame(&frame, &gate_only)[0].points_in_world.len();

@@ -269,11 +269,11 @@ mod tests {
     const FIXTURE: &str = include_str!("../../tests/fixtures/stats.json");
 
     fn fixture() -> Value {
-        serde_json::from_str(FIXTURE).unwrap_or_else(|e| panic!("fixture: {e}"))
+        serde_json::from_str(FIXTURE).unwrap()
     }
 
     fn floats(v: &Value) -> Vec<f64> {
-        v.as_array().unwrap_or_else(|| panic!("not an array")).iter().filter_map(Value::as_f64).collect()
+        v.as_array().expect("not an array").iter().filter_map(Value::as_f64).collect()
     }
 
     fn close(a: f64, b: f64, what: &str) {
@@ -284,14 +284,14 @@ mod tests {
     #[test]
     fn mann_whitney_matches_scipy() {
         let f = fixture();
-        let cases = f["mannwhitneyu"].as_array().unwrap_or_else(|| panic!("cases"));
+        let cases = f["mannwhitneyu"].as_array().expect("cases");
         assert!(cases.len() >= 20);
         for c in cases {
             let name = format!("{} continuity={}", c["name"], c["use_continuity"]);
             let x = floats(&c["x"]);
             let y = floats(&c["y"]);
             let cont = c["use_continuity"].as_bool().unwrap_or(false);
-            let r = mann_whitney_u(&x, &y, cont).unwrap_or_else(|e| panic!("{name}: {e}"));
+            let r = mann_whitney_u(&x, &y, cont).unwrap();
             close(r.statistic, c["u1"].as_f64().unwrap_or(f64::NAN), &name);
             match c["pvalue"].as_f64() {
                 Some(p) => close(r.p_value, p, &name),
@@ -307,14 +307,14 @@ mod tests {
     #[test]
     fn ttest_1samp_matches_scipy() {
         let f = fixture();
-        for c in f["ttest_1samp"].as_array().unwrap_or_else(|| panic!("cases")) {
+        for c in f["ttest_1samp"].as_array().expect("cases") {
             let name = c["name"].to_string();
             let a = floats(&c["a"]);
             let m = c["popmean"].as_f64().unwrap_or(f64::NAN);
             let r = ttest_1samp(&a, m);
             match (c["statistic"].as_f64(), c["pvalue"].as_f64()) {
                 (Some(t), Some(p)) => {
-                    let r = r.unwrap_or_else(|e| panic!("{name}: {e}"));
+                    let r = r.unwrap();
                     close(r.statistic, t, &name);
                     close(r.p_value, p, &name);
                 }
@@ -329,14 +329,14 @@ mod tests {
     #[test]
     fn ttest_ind_matches_scipy() {
         let f = fixture();
-        for c in f["ttest_ind"].as_array().unwrap_or_else(|| panic!("cases")) {
+        for c in f["ttest_ind"].as_array().expect("cases") {
             let name = c["name"].to_string();
             let a = floats(&c["x"]);
             let b = floats(&c["y"]);
             let r = ttest_ind(&a, &b);
             match (c["statistic"].as_f64(), c["pvalue"].as_f64()) {
                 (Some(t), Some(p)) => {
-                    let r = r.unwrap_or_else(|e| panic!("{name}: {e}"));
+                    let r = r.unwrap();
                     close(r.statistic, t, &name);
                     close(r.p_value, p, &name);
                 }

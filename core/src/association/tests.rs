@@ -10,7 +10,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 fn camera() -> PinholeCamera {
-    PinholeCamera::from_fovy(320, 240, 1.0).unwrap_or_else(|e| panic!("{e}"))
+    PinholeCamera::from_fovy(320, 240, 1.0).unwrap()
 }
 
 /// Camera `height` above (x, y) looking straight down (OpenCV z forward = world −z).
@@ -52,13 +52,13 @@ fn run(assoc: &mut Associator, blocks: &[Block], frames: &[(u32, Se3)], rng: &mu
         .iter()
         .map(|(f, pose)| {
             let locals: Vec<LocalObject> = blocks.iter().filter_map(|b| b.local(rng, pose, 150)).collect();
-            assoc.associate_frame(*f, &camera(), pose, &locals).unwrap_or_else(|e| panic!("frame {f}: {e}"))
+            assoc.associate_frame(*f, &camera(), pose, &locals).unwrap()
         })
         .collect()
 }
 
 fn associator(mode: AssociationMode) -> Associator {
-    Associator::new(AssociationConfig { mode, ..AssociationConfig::default() }).unwrap_or_else(|e| panic!("{e}"))
+    Associator::new(AssociationConfig { mode, ..AssociationConfig::default() }).unwrap()
 }
 
 #[test]
@@ -75,7 +75,7 @@ fn single_object_is_tracked_in_every_mode() {
             assert_eq!(f.detections[0].tests.projected_iou, Some(true));
         }
         assert_eq!(a.len(), 1, "{mode:?}");
-        let o = a.object(0).unwrap_or_else(|| panic!("object 0"));
+        let o = a.object(0).expect("object 0");
         assert_eq!(o.centroid_history().len(), 6);
         assert_eq!(o.observations().len(), 6);
         assert_eq!(o.label(), Label::Block);
@@ -103,9 +103,9 @@ fn nearby_objects_stay_separate_and_labels_must_agree() {
     }
     // A detection with another label over object 0 cannot join it.
     let pose = top_down(0.5, 0.0, 0.5);
-    let mut cup = blocks[0].local(&mut rng, &pose, 150).unwrap_or_else(|| panic!("visible"));
+    let mut cup = blocks[0].local(&mut rng, &pose, 150).expect("visible");
     cup.detection.label = Label::Cup;
-    let r = a.associate_frame(20, &camera(), &pose, &[cup]).unwrap_or_else(|e| panic!("{e}"));
+    let r = a.associate_frame(20, &camera(), &pose, &[cup]).unwrap();
     assert_eq!(r.detections[0].decision, Decision::New { object_id: 3 });
 }
 
@@ -120,7 +120,7 @@ fn iou_alone_loses_an_object_after_a_gap_the_ensemble_does_not() {
         let mut rng = ChaCha8Rng::seed_from_u64(3);
         let mut a = associator(mode);
         let out = run(&mut a, &blocks, &frames, &mut rng);
-        let last = out.last().map(|f| f.detections[0]).unwrap_or_else(|| panic!("frames"));
+        let last = out.last().map(|f| f.detections[0]).expect("frames");
         counts.insert(mode.as_str(), (a.len(), last.tests));
     }
     assert_eq!(counts["iou"].0, 2, "{counts:?}");
@@ -141,20 +141,20 @@ fn a_detection_is_used_once_and_an_object_once_per_frame() {
     let b = Block::new(0.5, 0.0, 0.03, Label::Block);
     let pose = top_down(0.5, 0.0, 0.5);
     for f in 0..3 {
-        let l = b.local(&mut rng, &pose, 150).unwrap_or_else(|| panic!("visible"));
-        a.associate_frame(f, &camera(), &pose, &[l]).unwrap_or_else(|e| panic!("{e}"));
+        let l = b.local(&mut rng, &pose, 150).expect("visible");
+        a.associate_frame(f, &camera(), &pose, &[l]).unwrap();
     }
     // Two detections of the same object in one frame: one updates it, the other starts a new one.
-    let l1 = b.local(&mut rng, &pose, 150).unwrap_or_else(|| panic!("visible"));
-    let l2 = b.local(&mut rng, &pose, 150).unwrap_or_else(|| panic!("visible"));
-    let r = a.associate_frame(3, &camera(), &pose, &[l1, l2]).unwrap_or_else(|e| panic!("{e}"));
+    let l1 = b.local(&mut rng, &pose, 150).expect("visible");
+    let l2 = b.local(&mut rng, &pose, 150).expect("visible");
+    let r = a.associate_frame(3, &camera(), &pose, &[l1, l2]).unwrap();
     let decisions: Vec<Decision> = r.detections.iter().map(|d| d.decision).collect();
     assert_eq!(decisions, vec![Decision::Existing { object_id: 0 }, Decision::New { object_id: 1 }]);
     // Seen in the same frame: never merged, even though their centroids agree.
     for f in 4..8 {
-        let l1 = b.local(&mut rng, &pose, 150).unwrap_or_else(|| panic!("visible"));
-        let l2 = b.local(&mut rng, &pose, 150).unwrap_or_else(|| panic!("visible"));
-        let r = a.associate_frame(f, &camera(), &pose, &[l1, l2]).unwrap_or_else(|e| panic!("{e}"));
+        let l1 = b.local(&mut rng, &pose, 150).expect("visible");
+        let l2 = b.local(&mut rng, &pose, 150).expect("visible");
+        let r = a.associate_frame(f, &camera(), &pose, &[l1, l2]).unwrap();
         assert!(r.merges.is_empty());
         let mut ids: Vec<Option<u32>> = r.detections.iter().map(|d| d.decision.object_id()).collect();
         ids.sort();
@@ -208,7 +208,7 @@ fn duplicates_merge_by_two_sample_t_test() {
     assert!(merges[0].p_value >= 0.05);
     let ids: Vec<u32> = a.objects().map(GlobalObject::id).collect();
     assert_eq!(ids, vec![0, 2, 3]);
-    let o = a.object(0).unwrap_or_else(|| panic!("kept"));
+    let o = a.object(0).expect("kept");
     assert_eq!(o.centroid_history().len(), 13);
     assert_eq!(o.observations().len(), 13);
     assert!(o.observations().windows(2).all(|w| w[0].observation.frame <= w[1].observation.frame));
@@ -217,7 +217,7 @@ fn duplicates_merge_by_two_sample_t_test() {
     let mut b = associator(AssociationMode::IouT);
     insert(&mut b, 0, Label::Cup, &cloud(&mut rng, c, 0.004, 8), 0..8);
     insert(&mut b, 1, Label::Cup, &cloud(&mut rng, c, 0.004, 5), 10..15);
-    let r = b.associate_frame(40, &camera(), &top_down(0.5, 0.0, 0.5), &[]).unwrap_or_else(|e| panic!("{e}"));
+    let r = b.associate_frame(40, &camera(), &top_down(0.5, 0.0, 0.5), &[]).unwrap();
     assert!(r.merges.is_empty());
     assert_eq!(b.len(), 2);
 }
@@ -260,7 +260,7 @@ fn projected_box_trims_ignores_points_behind_and_clips() {
     let cfg = AssociationConfig { projected_box_trim: 0.0, ..AssociationConfig::default() };
     let pts: Vec<Point3<f64>> =
         [(-0.02, -0.02), (0.02, 0.02), (0.0, 0.0)].iter().map(|(x, y)| Point3::new(0.5 + x, *y, 0.0)).collect();
-    let b = projected_box(&pts, &cam, &cfw, &cfg).unwrap_or_else(|| panic!("box"));
+    let b = projected_box(&pts, &cam, &cfw, &cfg).expect("box");
     let f = cam.fx;
     assert!((b.width() - f * 0.04 / 0.5).abs() < 1e-9, "{b:?}");
     // A point above the camera (behind it) is ignored.
@@ -276,7 +276,7 @@ fn projected_box_trims_ignores_points_behind_and_clips() {
         (0..100).map(|i| Point3::new(0.5 + 0.0004 * f64::from(i - 50), 0.001 * f64::from(i % 10), 0.0)).collect();
     stray.push(Point3::new(0.6, 0.0, 0.0));
     let trimmed = AssociationConfig { projected_box_trim: 0.02, ..cfg };
-    let bt = projected_box(&stray, &cam, &cfw, &trimmed).unwrap_or_else(|| panic!("box"));
+    let bt = projected_box(&stray, &cam, &cfw, &trimmed).expect("box");
     assert!(bt.max[0] < cam.cx + f * 0.03 / 0.5, "{bt:?}");
 }
 
@@ -325,7 +325,7 @@ fn bad_input_is_defined() {
     let mut a = associator(AssociationMode::Ensemble);
     let pose = top_down(0.5, 0.0, 0.5);
     let b = Block::new(0.5, 0.0, 0.03, Label::Block);
-    let good = b.local(&mut rng, &pose, 50).unwrap_or_else(|| panic!("visible"));
+    let good = b.local(&mut rng, &pose, 50).expect("visible");
     let mut empty = good.clone();
     empty.points_in_world.clear();
     let mut single = good.clone();
@@ -339,7 +339,7 @@ fn bad_input_is_defined() {
     nan_box.detection.bbox = Box2 { min: [f64::NAN, 0.0], max: [10.0, 10.0] };
     let r = a
         .associate_frame(0, &camera(), &pose, &[empty, single.clone(), nan, outside, nan_box])
-        .unwrap_or_else(|e| panic!("{e}"));
+        .unwrap();
     let d: Vec<Decision> = r.detections.iter().map(|o| o.decision).collect();
     assert_eq!(
         d,
@@ -355,14 +355,14 @@ fn bad_input_is_defined() {
     assert!(a.objects().all(|o| o.points_in_world().iter().all(|p| p.iter().all(|v| v.is_finite()))));
     // A single point is enough when the config allows it.
     let mut one = Associator::new(AssociationConfig { min_local_points: 1, ..AssociationConfig::default() })
-        .unwrap_or_else(|e| panic!("{e}"));
-    let r = one.associate_frame(0, &camera(), &pose, &[single]).unwrap_or_else(|e| panic!("{e}"));
+        .unwrap();
+    let r = one.associate_frame(0, &camera(), &pose, &[single]).unwrap();
     assert_eq!(r.detections[0].decision, Decision::New { object_id: 0 });
     // A box partly outside the image is clipped, not rejected; it matches nothing here and, being
     // truncated at the border, does not start an object.
     let mut partly = good.clone();
     partly.detection.bbox.min[0] = -40.0;
-    let r = one.associate_frame(1, &camera(), &pose, &[partly]).unwrap_or_else(|e| panic!("{e}"));
+    let r = one.associate_frame(1, &camera(), &pose, &[partly]).unwrap();
     assert_eq!(r.detections[0].decision, Decision::Skipped { reason: SkipReason::TruncatedAtBorder });
     // Invalid camera or pose: typed error, state unchanged.
     let before = a.clone();
@@ -422,40 +422,40 @@ fn truncated_detections_update_but_never_create() {
     let block = Block::new(0.5, 0.0, 0.03, Label::Block);
     let book = Block::new(0.5, 0.1, 0.02, Label::Book);
     let centre = top_down(0.5, 0.0, 0.5);
-    let l = block.local(&mut rng, &centre, 150).unwrap_or_else(|| panic!("visible"));
-    let r = a.associate_frame(0, &camera(), &centre, &[l]).unwrap_or_else(|e| panic!("{e}"));
+    let l = block.local(&mut rng, &centre, 150).expect("visible");
+    let r = a.associate_frame(0, &camera(), &centre, &[l]).unwrap();
     assert_eq!(r.detections[0].decision, Decision::New { object_id: 0 });
     // Camera moved so both blocks sit on the right image border (u up to 320, clipped).
     let edge = top_down(0.15, 0.0, 0.5);
-    let l = block.local(&mut rng, &edge, 150).unwrap_or_else(|| panic!("visible"));
+    let l = block.local(&mut rng, &edge, 150).expect("visible");
     assert!(l.detection.bbox.max[0] > 319.0, "{:?}", l.detection.bbox);
-    let b = book.local(&mut rng, &edge, 150).unwrap_or_else(|| panic!("visible"));
-    let r = a.associate_frame(1, &camera(), &edge, &[l, b]).unwrap_or_else(|e| panic!("{e}"));
+    let b = book.local(&mut rng, &edge, 150).expect("visible");
+    let r = a.associate_frame(1, &camera(), &edge, &[l, b]).unwrap();
     assert_eq!(r.detections[0].decision, Decision::Existing { object_id: 0 });
     assert_eq!(r.detections[1].decision, Decision::Skipped { reason: SkipReason::TruncatedAtBorder });
     assert_eq!(a.len(), 1);
     // With the margin at 0 the truncated book starts an object.
     let mut z = Associator::new(AssociationConfig { border_margin_px: 0.0, ..AssociationConfig::default() })
-        .unwrap_or_else(|e| panic!("{e}"));
-    let b = book.local(&mut rng, &edge, 150).unwrap_or_else(|| panic!("visible"));
-    let r = z.associate_frame(0, &camera(), &edge, &[b]).unwrap_or_else(|e| panic!("{e}"));
+        .unwrap();
+    let b = book.local(&mut rng, &edge, 150).expect("visible");
+    let r = z.associate_frame(0, &camera(), &edge, &[b]).unwrap();
     assert_eq!(r.detections[0].decision, Decision::New { object_id: 0 });
 }
 
 #[test]
 fn modes_and_configs_round_trip_through_json() {
     for mode in AssociationMode::ALL {
-        let json = serde_json::to_string(&mode).unwrap_or_else(|e| panic!("{e}"));
+        let json = serde_json::to_string(&mode).unwrap();
         assert_eq!(json, format!("\"{}\"", mode.as_str()));
     }
     let cfg: AssociationConfig =
-        serde_json::from_str(r#"{"mode": "iou_np", "np_alpha": 0.01}"#).unwrap_or_else(|e| panic!("{e}"));
+        serde_json::from_str(r#"{"mode": "iou_np", "np_alpha": 0.01}"#).unwrap();
     assert_eq!(cfg.mode, AssociationMode::IouNp);
     assert_eq!(cfg.np_alpha, 0.01);
     assert_eq!(cfg.t_alpha, AssociationConfig::default().t_alpha);
     assert!(serde_json::from_str::<AssociationConfig>(r#"{"np_alpah": 0.01}"#).is_err(), "typos are rejected");
     let m: super::mapper::EnsembleMapperConfig =
         serde_json::from_str(r#"{"association": {"mode": "iou"}, "local": {"pixel_stride": 2}}"#)
-            .unwrap_or_else(|e| panic!("{e}"));
+            .unwrap();
     assert_eq!((m.association.mode, m.local.pixel_stride), (AssociationMode::Iou, 2));
 }

@@ -174,11 +174,11 @@ mod tests {
     use crate::geometry::PinholeCamera;
 
     fn frame() -> Frame {
-        let camera = PinholeCamera::from_fovy(4, 3, 1.0).unwrap_or_else(|e| panic!("{e}"));
+        let camera = PinholeCamera::from_fovy(4, 3, 1.0).unwrap();
         Frame {
             index: 0,
             camera,
-            depth: DepthImage::new(4, 3, vec![0.5; 12]).unwrap_or_else(|e| panic!("{e}")),
+            depth: DepthImage::new(4, 3, vec![0.5; 12]).unwrap(),
             world_from_camera: Se3::identity(),
             detections: vec![Detection { bbox: Box2::new(0.0, 0.0, 2.0, 2.0), label: Label::Cup, score: 0.8 }],
         }
@@ -195,7 +195,7 @@ mod tests {
         f.detections[0].score = f64::NAN;
         assert!(matches!(f.validate(), Err(FrameError::BadDetection { index: 0, .. })));
         let mut f = frame();
-        f.depth = DepthImage::new(3, 4, vec![0.5; 12]).unwrap_or_else(|e| panic!("{e}"));
+        f.depth = DepthImage::new(3, 4, vec![0.5; 12]).unwrap();
         assert!(matches!(f.validate(), Err(FrameError::SizeMismatch { field: "depth", .. })));
     }
 

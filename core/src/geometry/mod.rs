@@ -805,7 +805,7 @@ mod tests {
 
     #[test]
     fn projection_round_trips() {
-        let cam = PinholeCamera::from_fovy(640, 480, 1.0).unwrap_or_else(|e| panic!("{e}"));
+        let cam = PinholeCamera::from_fovy(640, 480, 1.0).unwrap();
         let p = Point3::new(0.1, -0.05, 0.7);
         let uv = cam.project(&p).unwrap_or([f64::NAN; 2]);
         let q = cam.unproject(uv[0], uv[1], 0.7);
@@ -820,7 +820,7 @@ mod tests {
     fn rigid_check_rejects_scaled_and_accepts_rotation() {
         let t = se3_from_yaw(Vector3::new(1.0, 2.0, 3.0), 0.7);
         let m = t.to_homogeneous();
-        let back = se3_from_matrix(&m, "world_from_camera").unwrap_or_else(|e| panic!("{e}"));
+        let back = se3_from_matrix(&m, "world_from_camera").unwrap();
         assert!((back.to_homogeneous() - m).abs().max() < 1e-12);
         assert!((yaw_of(&back) - 0.7).abs() < 1e-12);
         let mut s = m;

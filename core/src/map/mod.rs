@@ -419,7 +419,7 @@ mod tests {
     #[test]
     fn json_round_trip_is_exact() {
         let m = sample_map();
-        let back = ObjectMap::from_json(&m.to_json(), "mem").unwrap_or_else(|e| panic!("{e}"));
+        let back = ObjectMap::from_json(&m.to_json(), "mem").unwrap();
         assert_eq!(m, back);
         assert!((back.objects[0].geometry().yaw_rad - 0.3).abs() < 1e-12);
     }
@@ -454,13 +454,13 @@ mod tests {
 
     fn write(dir: &Path, name: &str, text: &str) -> std::path::PathBuf {
         let p = dir.join(name);
-        std::fs::write(&p, text).unwrap_or_else(|e| panic!("{e}"));
+        std::fs::write(&p, text).unwrap();
         p
     }
 
     fn temp_dir(tag: &str) -> std::path::PathBuf {
         let d = std::env::temp_dir().join(format!("objslam-map-{tag}-{}", std::process::id()));
-        std::fs::create_dir_all(&d).unwrap_or_else(|e| panic!("{e}"));
+        std::fs::create_dir_all(&d).unwrap();
         d
     }
 
@@ -468,20 +468,20 @@ mod tests {
     fn saved_maps_load_back_and_carry_a_content_hash() {
         let d = temp_dir("roundtrip");
         let m = sample_map();
-        m.save(&d.join("m.json")).unwrap_or_else(|e| panic!("{e}"));
+        m.save(&d.join("m.json")).unwrap();
         assert!(!d.join("m.json.tmp").exists());
-        let text = std::fs::read_to_string(d.join("m.json")).unwrap_or_else(|e| panic!("{e}"));
+        let text = std::fs::read_to_string(d.join("m.json")).unwrap();
         assert!(text.contains("\"content_hash\": \"fnv1a64:"), "{text}");
-        assert_eq!(ObjectMap::load(&d.join("m.json")).unwrap_or_else(|e| panic!("{e}")), m);
+        assert_eq!(ObjectMap::load(&d.join("m.json")).unwrap(), m);
     }
 
     /// The hash covers the file's bytes: a file re-indented by hand is refused by `load`, while
     /// the same JSON passed in memory is read (value checks only).
     #[test]
     fn a_reformatted_file_is_refused_but_its_json_is_read() {
-        let v: serde_json::Value = serde_json::from_str(&sample_map().to_json()).unwrap_or_else(|e| panic!("{e}"));
-        let compact = serde_json::to_string(&v).unwrap_or_else(|e| panic!("{e}"));
-        assert_eq!(ObjectMap::from_json(&compact, "m").unwrap_or_else(|e| panic!("{e}")), sample_map());
+        let v: serde_json::Value = serde_json::from_str(&sample_map().to_json()).unwrap();
+        let compact = serde_json::to_string(&v).unwrap();
+        assert_eq!(ObjectMap::from_json(&compact, "m").unwrap(), sample_map());
         let p = write(&temp_dir("reformat"), "compact.json", &compact);
         assert!(matches!(ObjectMap::load(&p), Err(MapError::Checksum { .. })));
     }
@@ -525,7 +525,7 @@ mod tests {
         for &i in &digits {
             let mut bytes = text.clone().into_bytes();
             bytes[i] = if bytes[i] == b'9' { b'0' } else { bytes[i] + 1 };
-            let p = write(&d, "flip.json", std::str::from_utf8(&bytes).unwrap_or_else(|e| panic!("{e}")));
+            let p = write(&d, "flip.json", std::str::from_utf8(&bytes).unwrap());
             assert!(
                 ObjectMap::load(&p).is_err(),
                 "digit at byte {i} flipped was accepted: {}",
@@ -555,7 +555,7 @@ mod tests {
         let m = sample_map();
         let v1 = serde_json::json!({"format": MAP_FORMAT, "version": 1, "objects": m.objects, "next_id": m.next_id});
         let text = v1.to_string();
-        assert_eq!(ObjectMap::from_json(&text, "m").unwrap_or_else(|e| panic!("{e}")), m);
+        assert_eq!(ObjectMap::from_json(&text, "m").unwrap(), m);
         let d = temp_dir("v1");
         let p = write(&d, "v1.json", &text);
         assert!(matches!(ObjectMap::load(&p), Err(MapError::Checksum { reason, .. }) if reason.contains("save_map")));

@@ -274,12 +274,12 @@ mod tests {
             }
         }
         let b = Box2::from_points(pts.iter()).unwrap_or(Box2::new(0.0, 0.0, 0.0, 0.0));
-        (DepthImage::new(camera.width, camera.height, data).unwrap_or_else(|e| panic!("{e}")), b)
+        (DepthImage::new(camera.width, camera.height, data).unwrap(), b)
     }
 
     #[test]
     fn block_top_is_recovered_and_tracked_across_frames() {
-        let camera = PinholeCamera::from_fovy(160, 120, 0.8).unwrap_or_else(|e| panic!("{e}"));
+        let camera = PinholeCamera::from_fovy(160, 120, 0.8).unwrap();
         let mut mapper =
             NaiveMapper::new(NaiveConfig { pixel_stride: 1, trim_fraction: 0.0, ..NaiveConfig::default() });
         for (i, x) in [0.0, 0.02, 0.04].iter().enumerate() {
@@ -294,7 +294,7 @@ mod tests {
                 world_from_camera: pose,
                 detections: vec![Detection { bbox, label: Label::Block, score: 0.9 }],
             };
-            let s = mapper.update(&frame).unwrap_or_else(|e| panic!("{e}"));
+            let s = mapper.update(&frame).unwrap();
             assert_eq!(s.assigned, vec![Some(0)], "frame {i} must update object 0");
         }
         let map = mapper.map();
@@ -309,7 +309,7 @@ mod tests {
 
     #[test]
     fn different_label_creates_new_object_and_tiny_boxes_are_skipped() {
-        let camera = PinholeCamera::from_fovy(160, 120, 0.8).unwrap_or_else(|e| panic!("{e}"));
+        let camera = PinholeCamera::from_fovy(160, 120, 0.8).unwrap();
         let pose = top_down_pose(0.0);
         let (depth, bbox) = render(&camera, &pose, 0.05);
         let frame = Frame {
@@ -329,7 +329,7 @@ mod tests {
     }
 
     fn mapper_update(frame: &Frame) -> UpdateSummary {
-        NaiveMapper::new(NaiveConfig::default()).update(frame).unwrap_or_else(|e| panic!("{e}"))
+        NaiveMapper::new(NaiveConfig::default()).update(frame).unwrap()
     }
 
     #[test]

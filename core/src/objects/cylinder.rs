@@ -383,7 +383,7 @@ mod tests {
                 [0.4 + 0.035 * a.cos(), -0.1 + 0.035 * a.sin()]
             })
             .collect();
-        let f = fit_circle(&xy, 0.003).unwrap_or_else(|| panic!("no fit"));
+        let f = fit_circle(&xy, 0.003).expect("no fit");
         assert!((f.center[0] - 0.4).abs() < 1e-9 && (f.center[1] + 0.1).abs() < 1e-9, "{f:?}");
         assert!((f.radius - 0.035).abs() < 1e-9);
         assert!(f.rms_m < 1e-9 && (f.inlier_fraction - 1.0).abs() < 1e-12);
@@ -401,7 +401,7 @@ mod tests {
         let mean = [pts.iter().map(|p| p.x).sum::<f64>() / n, pts.iter().map(|p| p.y).sum::<f64>() / n];
         let mean_off = ((mean[0] - c[0]).powi(2) + (mean[1] - c[1]).powi(2)).sqrt();
         assert!(mean_off > 0.01, "mean off by {mean_off}");
-        let g = fit_cylinder(&pts, &CylinderFitConfig::default()).unwrap_or_else(|| panic!("rejected"));
+        let g = fit_cylinder(&pts, &CylinderFitConfig::default()).expect("rejected");
         let off = ((g.center.x - c[0]).powi(2) + (g.center.y - c[1]).powi(2)).sqrt();
         assert!(off < 0.002, "axis off by {off}");
         assert!((g.half_extents.x - 0.033).abs() < 0.002, "radius {}", g.half_extents.x);
@@ -429,15 +429,15 @@ mod tests {
             ));
         }
         let side: Vec<[f64; 2]> = pts.iter().filter(|p| p.z < 0.209).map(|p| [p.x, p.y]).collect();
-        let algebraic = fit_circle(&side, 0.003).unwrap_or_else(|| panic!("no algebraic fit"));
+        let algebraic = fit_circle(&side, 0.003).expect("no algebraic fit");
         let algebraic_off = (algebraic.center[0] - c[0]).hypot(algebraic.center[1] - c[1]);
         assert!(algebraic_off > 0.005 || (algebraic.radius - 0.033).abs() > 0.005, "{algebraic:?}");
-        let consensus = fit_circle_consensus(&side, 0.003, (0.01, 0.2), 200, 0).unwrap_or_else(|| panic!("no fit"));
+        let consensus = fit_circle_consensus(&side, 0.003, (0.01, 0.2), 200, 0).expect("no fit");
         let off = (consensus.center[0] - c[0]).hypot(consensus.center[1] - c[1]);
         assert!(off < 0.002 && (consensus.radius - 0.033).abs() < 0.002, "{consensus:?}");
         // 175 of 575 side points are the can's.
         assert!((consensus.inlier_fraction - 400.0 / 575.0).abs() < 0.03, "{consensus:?}");
-        let g = fit_cylinder(&pts, &CylinderFitConfig::default()).unwrap_or_else(|| panic!("rejected"));
+        let g = fit_cylinder(&pts, &CylinderFitConfig::default()).expect("rejected");
         assert!((g.center.x - c[0]).hypot(g.center.y - c[1]) < 0.002, "{g:?}");
         // Same seed, same circle; no hypotheses, no consensus fit.
         assert_eq!(fit_circle_consensus(&side, 0.003, (0.01, 0.2), 200, 0), Some(consensus));
@@ -465,10 +465,10 @@ mod tests {
         let highest = pts.iter().map(|p| p.z).fold(f64::NEG_INFINITY, f64::max);
         assert!(highest - h > 2.5 * sigma, "max only {} σ above", (highest - h) / sigma);
         let bottom = pts.iter().map(|p| p.z).fold(f64::INFINITY, f64::min);
-        let old = fit_cylinder(&pts, &CylinderFitConfig::default()).unwrap_or_else(|| panic!("rejected"));
+        let old = fit_cylinder(&pts, &CylinderFitConfig::default()).expect("rejected");
         assert!(((old.center.z + old.half_extents.z) - highest).abs() < 1e-12, "{old:?}");
         let cfg = CylinderFitConfig { top_from_face: true, ..Default::default() };
-        let new = fit_cylinder(&pts, &cfg).unwrap_or_else(|| panic!("rejected"));
+        let new = fit_cylinder(&pts, &cfg).expect("rejected");
         let top = new.center.z + new.half_extents.z;
         assert!((top - h).abs() < 1e-4, "top {top} vs {h}");
         assert!((new.center.z - new.half_extents.z - bottom).abs() < 1e-12, "bottom kept: {new:?}");
@@ -477,15 +477,15 @@ mod tests {
         // Top face not seen (side wall only): too few interior points, the highest point stays.
         let wall: Vec<Point3<f64>> =
             partial_cylinder(c, r, h, -1.75, 1.75, 24).into_iter().filter(|p| p.z < h - 0.0011).collect();
-        let w_old = fit_cylinder(&wall, &CylinderFitConfig::default()).unwrap_or_else(|| panic!("rejected"));
-        let w_new = fit_cylinder(&wall, &cfg).unwrap_or_else(|| panic!("rejected"));
+        let w_old = fit_cylinder(&wall, &CylinderFitConfig::default()).expect("rejected");
+        let w_new = fit_cylinder(&wall, &cfg).expect("rejected");
         assert_eq!(w_old, w_new);
     }
 
     #[test]
     fn circumcircle_matches_closed_form() {
         // Right triangle: the hypotenuse is a diameter.
-        let (c, r) = circumcircle([0.0, 0.0], [0.06, 0.0], [0.0, 0.08]).unwrap_or_else(|| panic!("none"));
+        let (c, r) = circumcircle([0.0, 0.0], [0.06, 0.0], [0.0, 0.08]).expect("none");
         assert!((c[0] - 0.03).abs() < 1e-12 && (c[1] - 0.04).abs() < 1e-12 && (r - 0.05).abs() < 1e-12);
         assert!(circumcircle([0.0, 0.0], [0.01, 0.01], [0.02, 0.02]).is_none());
     }

@@ -465,7 +465,7 @@ mod tests {
     fn removes_injected_outliers_keeps_inliers() {
         for seed in [5u64, 6, 7] {
             let (pts, truth) = contaminated_cloud(seed);
-            let est = robust_centroid_scale(&pts, &IForestConfig::default()).unwrap_or_else(|e| panic!("{e}"));
+            let est = robust_centroid_scale(&pts, &IForestConfig::default()).unwrap();
             let outliers = truth.iter().filter(|t| !**t).count();
             let removed_out = truth.iter().zip(&est.inlier).filter(|(t, k)| !**t && !**k).count();
             let inliers = truth.len() - outliers;
@@ -488,7 +488,7 @@ mod tests {
         for seed in [5u64, 6, 7] {
             let (pts, truth) = contaminated_cloud(seed);
             let one = robust_centroid_scale(&pts, &IForestConfig { passes: 1, ..Default::default() })
-                .unwrap_or_else(|e| panic!("{e}"));
+                .unwrap();
             let removed = truth.iter().zip(&one.inlier).filter(|(t, k)| !**t && !**k).count();
             assert!((40..=85).contains(&removed), "seed {seed}: one pass removed {removed}/100");
         }
@@ -511,9 +511,9 @@ mod tests {
         let (mut dropped, mut dropped_re, mut shrink, mut shrink_re) = (0usize, 0usize, 0.0, 0.0);
         for seed in 0..10u64 {
             let pts = clean_box_surface(seed);
-            let (_, raw_half) = mean_and_half_extent(&pts).unwrap_or_else(|| panic!("empty"));
-            let a = robust_centroid_scale(&pts, &plain).unwrap_or_else(|e| panic!("{e}"));
-            let b = robust_centroid_scale(&pts, &readmit).unwrap_or_else(|e| panic!("{e}"));
+            let (_, raw_half) = mean_and_half_extent(&pts).expect("empty");
+            let a = robust_centroid_scale(&pts, &plain).unwrap();
+            let b = robust_centroid_scale(&pts, &readmit).unwrap();
             dropped += pts.len() - a.n_inliers();
             dropped_re += pts.len() - b.n_inliers();
             shrink += (raw_half - a.half_extents).sum();
@@ -532,7 +532,7 @@ mod tests {
         for (seed, gap) in [(5u64, 3.0), (6, 3.0), (7, 3.0), (5, 4.0), (6, 4.0), (7, 4.0)] {
             let (pts, truth) = contaminated_cloud(seed);
             let config = IForestConfig { readmit_rings: 3, readmit_gap_factor: gap, ..Default::default() };
-            let est = robust_centroid_scale(&pts, &config).unwrap_or_else(|e| panic!("{e}"));
+            let est = robust_centroid_scale(&pts, &config).unwrap();
             let removed_out = truth.iter().zip(&est.inlier).filter(|(t, k)| !**t && !**k).count();
             let dropped_in = truth.iter().zip(&est.inlier).filter(|(t, k)| **t && !**k).count();
             eprintln!("seed {seed}, gap {gap}: readmission keeps {removed_out}/100 outliers out, drops {dropped_in}/400 inliers");
@@ -555,18 +555,18 @@ mod tests {
         // Identical points only: readmission leaves the removal as it is (no spacing, no panic).
         let pts = vec![Point3::new(0.4, -0.1, 0.02); 40];
         let est = robust_centroid_scale(&pts, &IForestConfig { readmit_rings: 3, ..Default::default() })
-            .unwrap_or_else(|e| panic!("{e}"));
+            .unwrap();
         assert_eq!(est.n_inliers(), 40);
     }
 
     #[test]
     fn deterministic_for_a_seed() {
         let (pts, _) = contaminated_cloud(9);
-        let a = robust_centroid_scale(&pts, &IForestConfig::default()).unwrap_or_else(|e| panic!("{e}"));
-        let b = robust_centroid_scale(&pts, &IForestConfig::default()).unwrap_or_else(|e| panic!("{e}"));
+        let a = robust_centroid_scale(&pts, &IForestConfig::default()).unwrap();
+        let b = robust_centroid_scale(&pts, &IForestConfig::default()).unwrap();
         assert_eq!(a, b);
         let c = robust_centroid_scale(&pts, &IForestConfig { seed: 1, ..Default::default() })
-            .unwrap_or_else(|e| panic!("{e}"));
+            .unwrap();
         assert_ne!(a.scores, c.scores);
     }
 
@@ -574,7 +574,7 @@ mod tests {
     fn fewer_points_than_subsample_uses_all_points() {
         let (pts, _) = contaminated_cloud(3);
         let few: Vec<_> = pts.iter().step_by(10).copied().collect(); // 50 points
-        let forest = IsolationForest::fit(&few, &IForestConfig::default()).unwrap_or_else(|e| panic!("{e}"));
+        let forest = IsolationForest::fit(&few, &IForestConfig::default()).unwrap();
         assert_eq!(forest.sample_size(), 50);
         assert_eq!(forest.n_trees(), 100);
     }
@@ -597,7 +597,7 @@ mod tests {
     #[test]
     fn identical_points_score_one_half_and_keep_all() {
         let pts = vec![Point3::new(0.4, -0.1, 0.02); 40];
-        let est = robust_centroid_scale(&pts, &IForestConfig::default()).unwrap_or_else(|e| panic!("{e}"));
+        let est = robust_centroid_scale(&pts, &IForestConfig::default()).unwrap();
         assert!(est.scores.iter().all(|s| (s - 0.5).abs() < 1e-12));
         assert_eq!(est.n_inliers(), 40);
         assert_eq!(est.half_extents, Vector3::zeros());

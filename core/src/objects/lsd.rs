@@ -204,14 +204,14 @@ mod tests {
 
     fn step_image(w: u32, h: u32, split: u32) -> GreyImage {
         let data = (0..w * h).map(|i| if i % w < split { 40 } else { 210 }).collect();
-        GreyImage::new(w, h, data).unwrap_or_else(|e| panic!("{e}"))
+        GreyImage::new(w, h, data).unwrap()
     }
 
     #[test]
     fn vertical_step_gives_one_long_vertical_segment() {
         let img = step_image(160, 120, 80);
-        let segs = detect_segments(&img, &LsdConfig::default()).unwrap_or_else(|e| panic!("{e}"));
-        let longest = segs.first().unwrap_or_else(|| panic!("no segment"));
+        let segs = detect_segments(&img, &LsdConfig::default()).unwrap();
+        let longest = segs.first().expect("no segment");
         assert!(longest.length_px() > 100.0, "{longest:?}");
         let u = (longest.a[0] + longest.b[0]) / 2.0;
         assert!((u - 80.0).abs() < 1.5, "edge at u = {u}");
@@ -221,7 +221,7 @@ mod tests {
     #[test]
     fn flat_image_and_bad_input() {
         let flat = GreyImage { width: 64, height: 48, data: vec![128; 64 * 48] };
-        assert!(detect_segments(&flat, &LsdConfig::default()).unwrap_or_else(|e| panic!("{e}")).is_empty());
+        assert!(detect_segments(&flat, &LsdConfig::default()).unwrap().is_empty());
         let short = GreyImage { width: 64, height: 48, data: vec![0; 10] };
         assert_eq!(
             detect_segments(&short, &LsdConfig::default()),
@@ -230,7 +230,7 @@ mod tests {
         let bad = LsdConfig { scale: 0.0, ..Default::default() };
         assert!(matches!(detect_segments(&flat, &bad), Err(ObjectsError::BadConfig { .. })));
         let tiny = GreyImage { width: 2, height: 2, data: vec![0, 255, 0, 255] };
-        assert!(detect_segments(&tiny, &LsdConfig::default()).unwrap_or_else(|e| panic!("{e}")).is_empty());
+        assert!(detect_segments(&tiny, &LsdConfig::default()).unwrap().is_empty());
     }
 
     #[test]

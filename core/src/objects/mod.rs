@@ -666,11 +666,11 @@ mod config_tests {
     #[test]
     fn config_round_trips_and_fills_defaults() {
         let cfg = ParamConfig::default();
-        let text = serde_json::to_string(&cfg).unwrap_or_else(|e| panic!("{e}"));
-        let back: ParamConfig = serde_json::from_str(&text).unwrap_or_else(|e| panic!("{e}"));
+        let text = serde_json::to_string(&cfg).unwrap();
+        let back: ParamConfig = serde_json::from_str(&text).unwrap();
         assert_eq!(back, cfg);
         let partial: ParamConfig =
-            serde_json::from_str(r#"{"window_frames": 5, "iforest": {"passes": 1}}"#).unwrap_or_else(|e| panic!("{e}"));
+            serde_json::from_str(r#"{"window_frames": 5, "iforest": {"passes": 1}}"#).unwrap();
         assert_eq!(partial.window_frames, 5);
         assert_eq!(partial.iforest.passes, 1);
         assert_eq!(partial.iforest.n_trees, 100);
@@ -708,18 +708,18 @@ mod support_tests {
     fn standing_object_reaches_the_support() {
         let pts = cut_can(1);
         let mut plain = ObjectEstimator::new(Shape::Cylinder, ParamConfig::default());
-        let g = plain.estimate(&pts).unwrap_or_else(|e| panic!("{e}")).geometry;
+        let g = plain.estimate(&pts).unwrap().geometry;
         // Without the support: the bottom is where the points stop.
         assert!((g.center.z - g.half_extents.z - 0.005).abs() < 0.0015, "{g:?}");
         let config = ParamConfig { support_z_m: Some(0.0), ..ParamConfig::default() };
         let mut est = ObjectEstimator::new(Shape::Cylinder, config);
-        let e = est.estimate(&pts).unwrap_or_else(|e| panic!("{e}"));
+        let e = est.estimate(&pts).unwrap();
         let s = e.geometry;
         assert!((s.center.z - s.half_extents.z).abs() < 1e-12, "bottom {}", s.center.z - s.half_extents.z);
         assert!((s.center.z + s.half_extents.z - (g.center.z + g.half_extents.z)).abs() < 1e-12, "top moved");
         assert!((s.half_extents.z - 0.05).abs() < 0.0015, "{s:?}");
         // Not the raw stage (the points' extent).
-        let raw = e.stages.raw.unwrap_or_else(|| panic!("no raw stage"));
+        let raw = e.stages.raw.expect("no raw stage");
         assert!(raw.center.z - raw.half_extents.z > 0.004);
     }
 

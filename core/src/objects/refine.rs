@@ -524,7 +524,7 @@ mod tests {
 
     #[test]
     fn config_defaults_fill_missing_fields() {
-        let c: RefineConfig = serde_json::from_str(r#"{"point_weight_px_per_m": 0}"#).unwrap_or_else(|e| panic!("{e}"));
+        let c: RefineConfig = serde_json::from_str(r#"{"point_weight_px_per_m": 0}"#).unwrap();
         assert_eq!(c.point_weight_px_per_m, 0.0);
         assert!(c.visible_edges_only && c.accept_if_lower_cost);
         assert_eq!(c.max_points, 300);

@@ -345,7 +345,7 @@ mod tests {
 
     #[test]
     fn edges_behind_the_camera_are_skipped_and_scores_vanish_without_segments() {
-        let cam = PinholeCamera::from_fovy(640, 480, 1.0).unwrap_or_else(|e| panic!("{e}"));
+        let cam = PinholeCamera::from_fovy(640, 480, 1.0).unwrap();
         // Camera at the origin looking along world +x (OpenCV axes: z_c = +x_w, x_c = −y_w, y_c = −z_w).
         let r = nalgebra::Matrix3::new(0.0, 0.0, 1.0, -1.0, 0.0, 0.0, 0.0, -1.0, 0.0);
         let rot = UnitQuaternion::from_matrix(&r);

@@ -729,7 +729,7 @@ mod tests {
 
     /// Top-down camera over a 10 cm block (top at z = 0.1) on the table, depth rendered exactly.
     fn frame(index: u32, x: f64) -> Frame {
-        let camera = PinholeCamera::from_fovy(160, 120, 0.8).unwrap_or_else(|e| panic!("{e}"));
+        let camera = PinholeCamera::from_fovy(160, 120, 0.8).unwrap();
         let rot = UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI);
         let pose: Se3 = Isometry3::from_parts(Translation3::new(x, 0.0, 0.5), rot);
         let mut data = vec![0.0f32; 160 * 120];
@@ -751,7 +751,7 @@ mod tests {
         Frame {
             index,
             camera,
-            depth: DepthImage::new(160, 120, data).unwrap_or_else(|e| panic!("{e}")),
+            depth: DepthImage::new(160, 120, data).unwrap(),
             world_from_camera: pose,
             detections: vec![Detection { bbox: b, label: Label::Block, score: 0.9 }],
         }
@@ -784,9 +784,9 @@ mod tests {
     fn every_mode_tracks_one_block_and_reports_its_points() {
         for mode in ["naive", "iou", "iou_np", "iou_t", "ensemble"] {
             let cfg = PipelineConfig { association_mode: mode.into(), ..PipelineConfig::default() };
-            let mut p = ObjectPipeline::new(cfg).unwrap_or_else(|e| panic!("{e}"));
+            let mut p = ObjectPipeline::new(cfg).unwrap();
             for (i, x) in [0.0, 0.005, 0.01, 0.015].iter().enumerate() {
-                let up = p.update(&frame(i as u32, *x), None).unwrap_or_else(|e| panic!("{mode}: {e}"));
+                let up = p.update(&frame(i as u32, *x), None).unwrap();
                 assert_eq!(up.assigned.len(), 1);
                 let id = up.assigned[0].unwrap_or_else(|| panic!("{mode}: frame {i} unassigned"));
                 assert!(up.observed.get(&id).is_some_and(|v| !v.is_empty()), "{mode}");
@@ -807,7 +807,7 @@ mod tests {
         // 7 x 7 map points on the block top (z = 0.1) and 10 on the table (z = 0) inside the box:
         // the local cloud is exactly the block-top points (the table ones fail the height filter).
         let cfg = PipelineConfig { object_points: ObjectPointSource::SlamMap, ..PipelineConfig::default() };
-        let mut p = ObjectPipeline::new(cfg).unwrap_or_else(|e| panic!("{e}"));
+        let mut p = ObjectPipeline::new(cfg).unwrap();
         for (i, x) in [0.0, 0.005, 0.01, 0.015].iter().enumerate() {
             let f = frame(i as u32, *x);
             let camera_from_world = f.world_from_camera.inverse();
@@ -827,7 +827,7 @@ mod tests {
                 let uv = [f.detections[0].bbox.min[0] + 2.0 + f64::from(k), f.detections[0].bbox.min[1] + 2.0];
                 pts.push(MapPointObservation { pixel: uv, p_in_world: w });
             }
-            let up = p.update_with_map_points(&f, None, Some(&pts)).unwrap_or_else(|e| panic!("{e}"));
+            let up = p.update_with_map_points(&f, None, Some(&pts)).unwrap();
             let id = up.assigned[0].unwrap_or_else(|| panic!("frame {i} unassigned"));
             let obs = up.observed.get(&id).map_or(0, Vec::len);
             assert_eq!(obs, n_top, "frame {i}");
@@ -838,8 +838,8 @@ mod tests {
         let g = map.objects[0].geometry();
         assert!(g.center.x.abs() < 0.01 && g.center.y.abs() < 0.01, "{:?}", g.center);
         // Without map points the slam_map option falls back to the depth cloud.
-        let up = p.update_with_map_points(&frame(4, 0.02), None, None).unwrap_or_else(|e| panic!("{e}"));
-        let id = up.assigned[0].unwrap_or_else(|| panic!("unassigned"));
+        let up = p.update_with_map_points(&frame(4, 0.02), None, None).unwrap();
+        let id = up.assigned[0].expect("unassigned");
         assert!(up.observed.get(&id).map_or(0, Vec::len) > 49);
     }
 
@@ -851,9 +851,9 @@ mod tests {
             Translation3::new(0.02, -0.03, 0.0),
             UnitQuaternion::from_axis_angle(&Vector3::z_axis(), 2f64.to_radians()),
         );
-        let mut p = ObjectPipeline::new(PipelineConfig::default()).unwrap_or_else(|e| panic!("{e}"));
+        let mut p = ObjectPipeline::new(PipelineConfig::default()).unwrap();
         for (i, x) in [0.0, 0.005, 0.01, 0.015].iter().enumerate() {
-            p.update(&frame(i as u32, *x), None).unwrap_or_else(|e| panic!("{e}"));
+            p.update(&frame(i as u32, *x), None).unwrap();
         }
         p.refresh_estimates();
         let before = p.map();
@@ -883,8 +883,8 @@ mod tests {
     fn bad_mode_and_grey_size_are_typed_errors() {
         let cfg = PipelineConfig { association_mode: "teleport".into(), ..PipelineConfig::default() };
         assert!(matches!(ObjectPipeline::new(cfg), Err(PipelineError::UnknownMode(_))));
-        let mut p = ObjectPipeline::new(PipelineConfig::default()).unwrap_or_else(|e| panic!("{e}"));
-        let grey = GreyImage::new(10, 10, vec![0; 100]).unwrap_or_else(|e| panic!("{e}"));
+        let mut p = ObjectPipeline::new(PipelineConfig::default()).unwrap();
+        let grey = GreyImage::new(10, 10, vec![0; 100]).unwrap();
         assert!(matches!(p.update(&frame(0, 0.0), Some(&grey)), Err(PipelineError::GreySize { .. })));
         assert_eq!(p.map().len(), 0);
     }

@@ -335,7 +335,7 @@ mod tests {
         for _ in 0..20 {
             let a: JointVector = std::array::from_fn(|_| rng.random_range(-2.0..2.0));
             let b: JointVector = std::array::from_fn(|_| rng.random_range(-2.0..2.0));
-            let seg = solve_move(&a, &b, &limits).unwrap_or_else(|e| panic!("{e}"));
+            let seg = solve_move(&a, &b, &limits).unwrap();
             assert!(seg.duration_s > 0.0);
             let dt = 1e-4;
             let n = (seg.duration_s / dt) as usize;
@@ -382,7 +382,7 @@ mod tests {
             [0.5, -0.3, 0.2, -1.0, 0.1, 1.0, 0.3],
             [-0.2; ARM_DOF],
         ];
-        let t = time_parameterize(&w, &limits, 0.01).unwrap_or_else(|e| panic!("{e}"));
+        let t = time_parameterize(&w, &limits, 0.01).unwrap();
         assert_eq!(t.positions.len(), t.times_s.len());
         assert_eq!(t.positions.first(), Some(&w[0]));
         assert_eq!(t.goal(), Some(&w[3]));
@@ -400,7 +400,7 @@ mod tests {
             .fold(f64::INFINITY, f64::min);
         assert!(closest < 1e-3, "waypoint missed by {closest}");
         // A single waypoint is a zero-length trajectory.
-        let still = time_parameterize(&w[..1], &limits, 0.01).unwrap_or_else(|e| panic!("{e}"));
+        let still = time_parameterize(&w[..1], &limits, 0.01).unwrap();
         assert_eq!(still.positions, vec![w[0]]);
         assert_eq!(still.duration_s, 0.0);
     }
@@ -415,8 +415,8 @@ mod tests {
                 [a.sin(), 1.0 - a.cos(), 0.0, -1.5, 0.0, 1.5, 0.3 * a]
             })
             .collect();
-        let t = time_parameterize_path(&w, &limits, 0.005).unwrap_or_else(|e| panic!("{e}"));
-        let chained = time_parameterize(&w, &limits, 0.005).unwrap_or_else(|e| panic!("{e}"));
+        let t = time_parameterize_path(&w, &limits, 0.005).unwrap();
+        let chained = time_parameterize(&w, &limits, 0.005).unwrap();
         assert_eq!(t.positions.first(), Some(&w[0]));
         assert_eq!(t.goal(), w.last());
         // No stops: much faster than the rest-to-rest chain, and the speed stays up mid-path.

@@ -496,24 +496,24 @@ mod tests {
 
     fn temp_dir(tag: &str) -> PathBuf {
         let dir = std::env::temp_dir().join(format!("objslam-record-{tag}-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap_or_else(|e| panic!("{e}"));
+        std::fs::create_dir_all(&dir).unwrap();
         dir
     }
 
     fn record_frames(path: &Path, options: RecordOptions) -> u64 {
         {
-            let rec = Recorder::create(path, "objslam-test", options).unwrap_or_else(|e| panic!("{e}"));
-            let cam = PinholeCamera::from_fovy(64, 48, 1.0).unwrap_or_else(|e| panic!("{e}"));
+            let rec = Recorder::create(path, "objslam-test", options).unwrap();
+            let cam = PinholeCamera::from_fovy(64, 48, 1.0).unwrap();
             // A smooth gradient image and a tilted plane: what a camera sees of a table.
             let rgb: Vec<u8> = (0..64 * 48).flat_map(|i| [(i % 64 * 4) as u8, (i / 64 * 5) as u8, 90]).collect();
             let depth: Vec<f32> = (0..64 * 48).map(|i| 0.6 + 0.002 * (i / 64) as f32).collect();
             for f in 0..20 {
                 rec.set_frame(f, 0.25 * f64::from(f));
-                rec.log_camera(&Se3::identity(), &cam).unwrap_or_else(|e| panic!("{e}"));
-                rec.log_rgb(64, 48, &rgb).unwrap_or_else(|e| panic!("{e}"));
-                rec.log_depth(64, 48, &depth).unwrap_or_else(|e| panic!("{e}"));
+                rec.log_camera(&Se3::identity(), &cam).unwrap();
+                rec.log_rgb(64, 48, &rgb).unwrap();
+                rec.log_depth(64, 48, &depth).unwrap();
             }
-            rec.flush().unwrap_or_else(|e| panic!("{e}"));
+            rec.flush().unwrap();
         }
         std::fs::metadata(path).map(|m| m.len()).unwrap_or(0)
     }
@@ -526,15 +526,15 @@ mod tests {
             let table = TableTop { center: [0.5, 0.0], size: [0.8, 1.0] };
             let rec =
                 Recorder::create(&path, "objslam-test", RecordOptions { table: Some(table), ..Default::default() })
-                    .unwrap_or_else(|e| panic!("{e}"));
-            let cam = PinholeCamera::from_fovy(8, 6, 1.0).unwrap_or_else(|e| panic!("{e}"));
+                    .unwrap();
+            let cam = PinholeCamera::from_fovy(8, 6, 1.0).unwrap();
             rec.set_frame(0, 0.0);
-            rec.log_camera(&Se3::identity(), &cam).unwrap_or_else(|e| panic!("{e}"));
-            rec.log_rgb(8, 6, &[128u8; 8 * 6 * 3]).unwrap_or_else(|e| panic!("{e}"));
-            rec.log_depth(8, 6, &[0.5f32; 48]).unwrap_or_else(|e| panic!("{e}"));
+            rec.log_camera(&Se3::identity(), &cam).unwrap();
+            rec.log_rgb(8, 6, &[128u8; 8 * 6 * 3]).unwrap();
+            rec.log_depth(8, 6, &[0.5f32; 48]).unwrap();
             assert!(matches!(rec.log_depth(8, 6, &[0.5f32; 47]), Err(RecordError::BufferLength { .. })));
             rec.log_detections(&[Detection { bbox: Box2::new(1.0, 1.0, 4.0, 4.0), label: Label::Cup, score: 0.9 }])
-                .unwrap_or_else(|e| panic!("{e}"));
+                .unwrap();
             let g = ObjectGeometry {
                 shape: Shape::Cylinder,
                 center: Vector3::new(0.5, 0.0, 0.05),
@@ -546,13 +546,13 @@ mod tests {
                 DrawnObject { id: 0, label: "cup".into(), geometry: g },
                 DrawnObject { id: 1, label: "block".into(), geometry: b },
             ];
-            rec.log_objects("world/map", &objects).unwrap_or_else(|e| panic!("{e}"));
-            rec.log_objects(GROUND_TRUTH_ROOT, &objects).unwrap_or_else(|e| panic!("{e}"));
+            rec.log_objects("world/map", &objects).unwrap();
+            rec.log_objects(GROUND_TRUTH_ROOT, &objects).unwrap();
             rec.log_trajectory("estimated", &[Point3::origin(), Point3::new(0.1, 0.0, 0.5)])
-                .unwrap_or_else(|e| panic!("{e}"));
-            rec.log_scalar("timings/render_ms", 70.0).unwrap_or_else(|e| panic!("{e}"));
-            rec.log_event("done").unwrap_or_else(|e| panic!("{e}"));
-            rec.flush().unwrap_or_else(|e| panic!("{e}"));
+                .unwrap();
+            rec.log_scalar("timings/render_ms", 70.0).unwrap();
+            rec.log_event("done").unwrap();
+            rec.flush().unwrap();
         }
         let len = std::fs::metadata(&path).map(|m| m.len()).unwrap_or(0);
         assert!(len > 1000, "rrd has {len} bytes");
@@ -576,8 +576,8 @@ mod tests {
     #[test]
     fn depth_png_round_trips_in_millimetres() {
         let depth = [0.0f32, 0.4567, 1.0, f32::NAN, -1.0, 70.0, 2.5, 0.0011];
-        let png = depth_png_mm(4, 2, &depth).unwrap_or_else(|e| panic!("{e}"));
-        let img = image::load_from_memory(&png).unwrap_or_else(|e| panic!("{e}")).into_luma16();
+        let png = depth_png_mm(4, 2, &depth).unwrap();
+        let img = image::load_from_memory(&png).unwrap().into_luma16();
         let got: Vec<u16> = img.pixels().map(|p| p.0[0]).collect();
         assert_eq!(got, vec![0, 457, 1000, 0, 0, 0, 2500, 1]);
     }
@@ -602,7 +602,7 @@ mod tests {
             dir.join("tri.stl"),
             "solid t\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 0\nvertex 0 1 0\nendloop\nendfacet\nendsolid t\n",
         )
-        .unwrap_or_else(|e| panic!("{e}"));
+        .unwrap();
         let urdf = dir.join("r.urdf");
         std::fs::write(
             &urdf,
@@ -610,16 +610,16 @@ mod tests {
 <geometry><mesh filename="tri.stl"/></geometry></collision></link><link name="tip"/>
 <joint name="j" type="fixed"><parent link="base"/><child link="tip"/></joint></robot>"#,
         )
-        .unwrap_or_else(|e| panic!("{e}"));
+        .unwrap();
         let rec = Recorder::create(
             &dir.join("r.rrd"),
             "objslam-test",
             RecordOptions { robot_urdf: Some(urdf), ..Default::default() },
         )
-        .unwrap_or_else(|e| panic!("{e}"));
+        .unwrap();
         assert_eq!(rec.robot_links, vec!["base".to_string()]);
         rec.log_robot_pose(&[("base".into(), Se3::identity()), ("tip".into(), Se3::identity())])
-            .unwrap_or_else(|e| panic!("{e}"));
+            .unwrap();
         let missing = Recorder::create(
             &dir.join("m.rrd"),
             "objslam-test",

@@ -244,7 +244,7 @@ mod tests {
 
     #[test]
     fn bundle_adjustment_recovers_perturbed_poses_and_points() {
-        let cam = PinholeCamera::from_fovy(640, 480, 50f64.to_radians()).unwrap_or_else(|e| panic!("{e}"));
+        let cam = PinholeCamera::from_fovy(640, 480, 50f64.to_radians()).unwrap();
         let mut rng = ChaCha8Rng::seed_from_u64(3);
         // Three cameras 10 cm apart looking down +z at points 0.5–1 m away.
         let truth: Vec<Se3> = (0..3).map(|i| Se3::translation(0.1 * i as f64, 0.0, 0.0).inverse()).collect();

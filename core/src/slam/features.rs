@@ -632,7 +632,7 @@ mod tests {
     use crate::slam::synthetic::shapes_texture;
 
     fn extractor() -> OrbExtractor {
-        OrbExtractor::new(OrbConfig::default()).unwrap_or_else(|e| panic!("{e}"))
+        OrbExtractor::new(OrbConfig::default()).unwrap()
     }
 
     /// Rotate by `angle_rad` and scale by `scale` about the image centre (bilinear, grey 0 outside).
@@ -666,8 +666,8 @@ mod tests {
         let img = shapes_texture(640, 480, 11);
         let warped = warp(&img, angle_deg.to_radians(), scale);
         let mut orb = extractor();
-        let a = orb.extract(&img).unwrap_or_else(|e| panic!("{e}"));
-        let b = orb.extract(&warped).unwrap_or_else(|e| panic!("{e}"));
+        let a = orb.extract(&img).unwrap();
+        let b = orb.extract(&warped).unwrap();
         let (s, c) = angle_deg.to_radians().sin_cos();
         let map = |k: &Keypoint| {
             let (dx, dy) = (f64::from(k.x) - 320.0, f64::from(k.y) - 240.0);
@@ -707,7 +707,7 @@ mod tests {
     #[test]
     fn extracts_the_requested_number_of_spread_features() {
         let img = shapes_texture(640, 480, 3);
-        let f = extractor().extract(&img).unwrap_or_else(|e| panic!("{e}"));
+        let f = extractor().extract(&img).unwrap();
         assert_eq!(f.keypoints.len(), f.descriptors.len());
         assert!((950..=1000).contains(&f.keypoints.len()), "{}", f.keypoints.len());
         let levels: std::collections::BTreeSet<u8> = f.keypoints.iter().map(|k| k.level).collect();
@@ -722,7 +722,7 @@ mod tests {
             assert!(n * 100 >= 15 * f.keypoints.len(), "quadrant {qx},{qy}: {n}");
         }
         // Deterministic.
-        assert_eq!(extractor().extract(&img).unwrap_or_else(|e| panic!("{e}")), f);
+        assert_eq!(extractor().extract(&img).unwrap(), f);
     }
 
     #[test]
@@ -766,11 +766,11 @@ mod tests {
     fn degenerate_images_give_no_features_or_an_error() {
         let mut orb = extractor();
         let flat = GreyImage { width: 640, height: 480, data: vec![90; 640 * 480] };
-        assert!(orb.extract(&flat).unwrap_or_else(|e| panic!("{e}")).keypoints.is_empty());
+        assert!(orb.extract(&flat).unwrap().keypoints.is_empty());
         let tiny = shapes_texture(20, 20, 1);
-        assert!(orb.extract(&tiny).unwrap_or_else(|e| panic!("{e}")).keypoints.is_empty());
+        assert!(orb.extract(&tiny).unwrap().keypoints.is_empty());
         let empty = GreyImage { width: 0, height: 0, data: vec![] };
-        assert!(orb.extract(&empty).unwrap_or_else(|e| panic!("{e}")).keypoints.is_empty());
+        assert!(orb.extract(&empty).unwrap().keypoints.is_empty());
         let bad = GreyImage { width: 10, height: 10, data: vec![0; 99] };
         assert!(matches!(orb.extract(&bad), Err(SlamError::BufferLength { .. })));
         assert!(OrbExtractor::new(OrbConfig { scale_factor: 1.0, ..OrbConfig::default() }).is_err());

@@ -341,7 +341,7 @@ mod tests {
     use nalgebra::{Translation3, UnitQuaternion};
 
     fn camera() -> PinholeCamera {
-        PinholeCamera::from_fovy(640, 480, 50f64.to_radians()).unwrap_or_else(|e| panic!("{e}"))
+        PinholeCamera::from_fovy(640, 480, 50f64.to_radians()).unwrap()
     }
 
     fn gauss(rng: &mut ChaCha8Rng) -> f64 {
@@ -398,7 +398,7 @@ mod tests {
                 &RansacConfig { seed, ..RansacConfig::default() },
                 &PoseRefineConfig::default(),
             )
-            .unwrap_or_else(|e| panic!("{e}"));
+            .unwrap();
             let (dt, dr) = errors(&truth, &est.world_from_camera);
             assert!(dt < 0.001 && dr < 0.1, "seed {seed} depth {with_depth}: {dt} m, {dr}°");
             // Outliers are flagged: at most 3 % of them slip through, at least 95 % of inliers kept.
@@ -412,7 +412,7 @@ mod tests {
     fn refinement_converges_from_the_prior_on_clean_data() {
         let (truth, corr) = scene(5, 0.0, true);
         let prior = truth * Se3::translation(0.01, 0.0, -0.01);
-        let est = refine_pose(&corr, &camera(), &prior, &PoseRefineConfig::default()).unwrap_or_else(|e| panic!("{e}"));
+        let est = refine_pose(&corr, &camera(), &prior, &PoseRefineConfig::default()).unwrap();
         let (dt, dr) = errors(&truth, &est.world_from_camera);
         assert!(dt < 5e-4 && dr < 0.05, "{dt} m, {dr}°");
     }

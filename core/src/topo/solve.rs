@@ -467,7 +467,7 @@ mod tests {
             let truth = Similarity3::from_parts(Translation3::new(0.3, -1.0, 2.0), rot, rng.random_range(0.5..2.0));
             let q: Vec<Vector3<f64>> =
                 p.iter().map(|v| truth.transform_vector(v) + truth.isometry.translation.vector).collect();
-            let est = umeyama(&p, &q).unwrap_or_else(|| panic!("degenerate"));
+            let est = umeyama(&p, &q).expect("degenerate");
             assert!((est.to_homogeneous() - truth.to_homogeneous()).abs().max() < 1e-9);
             let s = scale_from_distance_ratios(&p, &q, 1e-6).unwrap_or(0.0);
             assert!((s - truth.scaling()).abs() < 1e-9);
@@ -484,7 +484,7 @@ mod tests {
         );
         let q: Vec<Vector3<f64>> =
             p.iter().map(|v| truth.transform_vector(v) + truth.isometry.translation.vector).collect();
-        let est = umeyama(&p, &q).unwrap_or_else(|| panic!("degenerate"));
+        let est = umeyama(&p, &q).expect("degenerate");
         assert!((est.to_homogeneous() - truth.to_homogeneous()).abs().max() < 1e-9);
         let line: Vec<Vector3<f64>> = (0..4).map(|i| Vector3::new(i as f64, 0.0, 0.0)).collect();
         assert!(umeyama(&line, &line).is_none());
@@ -501,9 +501,9 @@ mod tests {
         let truth = Similarity3::from_parts(Translation3::new(0.3, -1.0, 0.2), rot, 1.7);
         let q: Vec<Vector3<f64>> =
             p.iter().map(|v| truth.transform_vector(v) + truth.isometry.translation.vector).collect();
-        let est = yaw_similarity(&p, &q).unwrap_or_else(|| panic!("degenerate"));
+        let est = yaw_similarity(&p, &q).expect("degenerate");
         assert!((est.to_homogeneous() - truth.to_homogeneous()).abs().max() < 1e-9);
-        let fixed = with_scale(&est, &p, &q, 1.7).unwrap_or_else(|| panic!("bad scale"));
+        let fixed = with_scale(&est, &p, &q, 1.7).expect("bad scale");
         assert!((fixed.to_homogeneous() - truth.to_homogeneous()).abs().max() < 1e-9);
     }
 }

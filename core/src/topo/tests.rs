@@ -236,7 +236,7 @@ fn relocalise_returns_prior_from_query_and_ids() {
     let truth = yaw_transform();
     let prior = to_map(&nodes, 0);
     let query = to_map(&transformed(&nodes, &truth), 100);
-    let r = relocalise(&prior, &query, &MatchConfig::default()).unwrap_or_else(|e| panic!("{e}"));
+    let r = relocalise(&prior, &query, &MatchConfig::default()).unwrap();
     assert!((r.prior_from_query.to_homogeneous() - truth.inverse().to_homogeneous()).abs().max() < 1e-6);
     assert_eq!(r.matched_ids, (0..6).map(|i| (i, 100 + i)).collect::<Vec<_>>());
     let err = relocalise(&ObjectMap::new(), &query, &MatchConfig::default());
@@ -291,7 +291,7 @@ fn fused_cues_are_exact_on_exact_data_and_sizes_pull_the_scale() {
         })
         .collect();
     let noise = NoiseModel::default();
-    let fused = fuse_cues(&truth, &pairs, &noise, true).unwrap_or_else(|| panic!("degenerate"));
+    let fused = fuse_cues(&truth, &pairs, &noise, true).expect("degenerate");
     assert!((fused.to_homogeneous() - truth.to_homogeneous()).abs().max() < 1e-9);
     // Sizes all say 10 % larger while positions say 1.7: the fused scale lies strictly between,
     // closer to the cue with the smaller variance.
@@ -343,7 +343,7 @@ fn fit_pairs_recovers_the_truth_and_rejects_bad_indices() {
     let pairs: Vec<(usize, usize)> = (0..prior.len()).map(|i| (i, i)).collect();
     for scale_source in [ScaleSource::Fused, ScaleSource::Umeyama, ScaleSource::DistanceRatio] {
         let config = MatchConfig { scale_source, ..MatchConfig::default() };
-        let fit = fit_pairs(&prior, &query, &pairs, &config).unwrap_or_else(|| panic!("degenerate"));
+        let fit = fit_pairs(&prior, &query, &pairs, &config).expect("degenerate");
         assert!((fit.query_from_prior.to_homogeneous() - truth.to_homogeneous()).abs().max() < 1e-9);
         assert!((fit.scale_umeyama - 1.7).abs() < 1e-9);
     }
@@ -373,14 +373,14 @@ fn robust_fuse_is_exact_on_exact_data_and_discounts_a_gross_outlier() {
     };
     let noise = NoiseModel::default();
     for kernel in [RobustKernel::None, RobustKernel::Huber, RobustKernel::Cauchy] {
-        let t = robust_fuse(&truth, &cues(&query), &noise, true, kernel, 2.0, 5).unwrap_or_else(|| panic!("none"));
+        let t = robust_fuse(&truth, &cues(&query), &noise, true, kernel, 2.0, 5).expect("none");
         assert!((t.to_homogeneous() - truth.to_homogeneous()).abs().max() < 1e-9, "{kernel:?}");
     }
     // One centre 10 cm (prior units) off: the re-weighted fits land closer to the truth than least
     // squares.
     query[3].center += Vector3::new(0.1, 0.0, 0.0) * truth.scaling();
     let err = |kernel| {
-        let t = robust_fuse(&truth, &cues(&query), &noise, false, kernel, 2.0, 10).unwrap_or_else(|| panic!("none"));
+        let t = robust_fuse(&truth, &cues(&query), &noise, false, kernel, 2.0, 10).expect("none");
         (t.isometry.translation.vector - truth.isometry.translation.vector).norm()
     };
     let (ls, huber, cauchy) = (err(RobustKernel::None), err(RobustKernel::Huber), err(RobustKernel::Cauchy));
@@ -391,7 +391,7 @@ fn robust_fuse_is_exact_on_exact_data_and_discounts_a_gross_outlier() {
 fn a_partial_config_json_keeps_the_defaults_and_unknown_fields_are_refused() {
     let config: MatchConfig =
         serde_json::from_str(r#"{"inlier_threshold": 0.08, "noise": {"yaw_rad": 0.1}, "robust_kernel": "huber"}"#)
-            .unwrap_or_else(|e| panic!("{e}"));
+            .unwrap();
     assert_eq!(config.inlier_threshold, 0.08);
     assert_eq!(config.noise.yaw_rad, 0.1);
     assert_eq!(config.noise.position, NoiseModel::default().position);
@@ -437,7 +437,7 @@ fn robust_fuse_discounts_one_badly_estimated_extent() {
         .collect();
     let noise = NoiseModel::default();
     let scale_err = |kernel| {
-        let t = robust_fuse(&truth, &cues, &noise, false, kernel, 2.0, 10).unwrap_or_else(|| panic!("none"));
+        let t = robust_fuse(&truth, &cues, &noise, false, kernel, 2.0, 10).expect("none");
         (t.scaling() / truth.scaling() - 1.0).abs()
     };
     let (ls, huber, cauchy) =
