@@ -203,7 +203,9 @@ impl ActiveMapperPy {
     /// of (4x4 `world_from_camera`, target object id).
     #[pyo3(signature = (*, around = None))]
     fn candidate_views<'py>(&self, py: Python<'py>, around: Option<Vec<i64>>) -> PyResult<Vec<TargetedView<'py>>> {
-        let around = around.map(|ids| ids.into_iter().map(|i| object_id(i, "around")).collect::<PyResult<Vec<_>>>()).transpose()?;
+        let around = around
+            .map(|ids| ids.into_iter().map(|i| object_id(i, "around")).collect::<PyResult<Vec<_>>>())
+            .transpose()?;
         let s = &self.system;
         let views = s.session().candidate_views(&s.map(), around.as_deref()).map_err(input_err)?;
         Ok(views.iter().map(|v| (matrix_py(py, &v.world_from_camera), v.target_object)).collect())

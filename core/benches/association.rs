@@ -18,9 +18,9 @@ use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use objslam_core::association::stats::mann_whitney_u;
 use objslam_core::association::{AssociationConfig, Associator, Decision, LocalObject};
 use objslam_core::frame::Detection;
+use objslam_core::geometry::project_geometry;
 use objslam_core::geometry::{ObjectGeometry, PinholeCamera, Se3, Shape};
 use objslam_core::map::Label;
-use objslam_core::geometry::project_geometry;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 

@@ -13,9 +13,9 @@ use objslam_core::association::mapper::{EnsembleMapper, EnsembleMapperConfig};
 use objslam_core::association::metrics::{association_metrics, observation_gt_ids, AssociationMetrics, MetricsConfig};
 use objslam_core::association::{AssociationConfig, AssociationMode, Decision};
 use objslam_core::frame::{DepthImage, Detection, Frame};
+use objslam_core::geometry::project_geometry;
 use objslam_core::geometry::{Box2, ObjectGeometry, PinholeCamera, Se3, Shape};
 use objslam_core::map::Label;
-use objslam_core::geometry::project_geometry;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 

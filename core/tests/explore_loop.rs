@@ -123,8 +123,8 @@ fn run(strategy: Strategy, seed: u64, cfg: &ExploreConfig) -> Episode {
         }
         let next = match strategy {
             Strategy::ObjectDriven | Strategy::ExpectedGain => {
-                let cands = sample_candidates(&map, &cc, &cfg.grid, &AlwaysReachable, seed * 1000 + step as u64)
-                    .unwrap();
+                let cands =
+                    sample_candidates(&map, &cc, &cfg.grid, &AlwaysReachable, seed * 1000 + step as u64).unwrap();
                 let views: Vec<Se3> = cands.iter().map(|c| c.world_from_camera).collect();
                 let ctx = UtilityContext::new(&map, &grids, &hist, &cam, cfg).unwrap();
                 let scores = ctx.score_all(&views, strategy, Some(&current)).unwrap();

@@ -146,13 +146,7 @@ fn render(index: u32, camera: &PinholeCamera, pose: &Se3, scene: &[Truth], rng: 
         .filter(|(_, m)| m.0 >= MIN_PIXELS)
         .map(|(t, m)| Detection { bbox: Box2::new(m.1[0], m.1[1], m.1[2], m.1[3]), label: t.label, score: 0.9 })
         .collect();
-    Frame {
-        index,
-        camera: *camera,
-        depth: DepthImage::new(w, h, data).unwrap(),
-        world_from_camera: *pose,
-        detections,
-    }
+    Frame { index, camera: *camera, depth: DepthImage::new(w, h, data).unwrap(), world_from_camera: *pose, detections }
 }
 
 /// Fuse the views with the default pipeline (refresh after each view) and return the map.

@@ -19,8 +19,7 @@ fn scores_match_sklearn() {
         .expect("points")
         .iter()
         .map(|p| {
-            let v: Vec<f64> =
-                p.as_array().expect("point").iter().filter_map(|x| x.as_f64()).collect();
+            let v: Vec<f64> = p.as_array().expect("point").iter().filter_map(|x| x.as_f64()).collect();
             Point3::new(v[0], v[1], v[2])
         })
         .collect();
@@ -31,8 +30,7 @@ fn scores_match_sklearn() {
     let seeds = 20u64;
     let mut ours = vec![0.0; points.len()];
     for seed in 0..seeds {
-        let forest = IsolationForest::fit(&points, &IForestConfig { seed, ..Default::default() })
-            .unwrap();
+        let forest = IsolationForest::fit(&points, &IForestConfig { seed, ..Default::default() }).unwrap();
         for (o, p) in ours.iter_mut().zip(&points) {
             *o += forest.score(p) / seeds as f64;
         }

@@ -60,8 +60,7 @@ fn lsd_finds_cv2_long_segments() {
             .expect("segments")
             .iter()
             .map(|s| {
-                let v: Vec<f64> =
-                    s.as_array().expect("seg").iter().filter_map(|x| x.as_f64()).collect();
+                let v: Vec<f64> = s.as_array().expect("seg").iter().filter_map(|x| x.as_f64()).collect();
                 LineSegment::new([v[0], v[1]], [v[2], v[3]])
             })
             .filter(|s| s.length_px() >= LONG_PX)

@@ -13,8 +13,7 @@ use rand_chacha::ChaCha8Rng;
 
 /// A camera at `eye` looking at `target` (OpenCV axes; world z up).
 fn look_at(eye: Vector3<f64>, target: Vector3<f64>) -> Se3 {
-    objslam_core::geometry::look_at_with_up(&eye.into(), &target.into(), &Vector3::z())
-        .unwrap()
+    objslam_core::geometry::look_at_with_up(&eye.into(), &target.into(), &Vector3::z()).unwrap()
 }
 
 fn camera() -> PinholeCamera {
@@ -139,8 +138,8 @@ fn alg2_alone_finds_the_sampled_yaw_on_exact_geometry() {
         eyes().into_iter().enumerate().map(|(i, e)| line_frame(&mut rng, i as u32, e, 0.3)).collect();
     let t = truth();
     // Candidate cube: true centre and extents, candidate yaw.
-    let a = align_yaw(&frames, |yaw| cuboid(t.center, yaw, t.half_extents), &YawConfig::default())
-        .expect("no alignment");
+    let a =
+        align_yaw(&frames, |yaw| cuboid(t.center, yaw, t.half_extents), &YawConfig::default()).expect("no alignment");
     let err = yaw_error_deg(&cuboid(t.center, a.yaw_rad, t.half_extents), &t, 0.05).unwrap_or(f64::NAN);
     assert!(err <= 3.0 + 1e-9, "Alg. 2 yaw error {err:.2}° > half the 6° sampling step");
     assert_eq!(a.samples.len(), 30);
@@ -302,8 +301,7 @@ fn table_filter_drops_support_points() {
     let ifo = out.stages.iforest.expect("no iforest stage");
     let bottom = ifo.center.z - ifo.half_extents.z;
     assert!(bottom > 0.004, "bottom {bottom}");
-    let plain =
-        ObjectEstimator::new(Shape::Cuboid, ParamConfig::default()).estimate(&pts).unwrap();
+    let plain = ObjectEstimator::new(Shape::Cuboid, ParamConfig::default()).estimate(&pts).unwrap();
     let g = plain.stages.iforest.expect("no iforest stage");
     assert!(g.center.z < ifo.center.z, "table points pull the plain centre down");
 }

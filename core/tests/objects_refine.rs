@@ -88,8 +88,8 @@ fn estimator_keeps_the_refinement_only_when_it_lowers_the_cost() {
         let frames = r.frames.clone();
         // The estimator's inliers are not exposed; the refinement with all points agrees on the
         // decision here (the cost falls by more than 3 %).
-        let res = refine_yaw_scale(&lines, &frames, &r.points_in_world, &RefineConfig::default())
-            .expect("no refinement");
+        let res =
+            refine_yaw_scale(&lines, &frames, &r.points_in_world, &RefineConfig::default()).expect("no refinement");
         assert!(res.rms_after_px < 0.97 * res.rms_before_px, "{:?}", (res.rms_before_px, res.rms_after_px));
         assert_eq!(new.stage, EstimateStage::Refined);
     }
@@ -119,8 +119,7 @@ fn estimator_keeps_the_refinement_only_when_it_lowers_the_cost() {
 }
 
 fn look_at(eye: Vector3<f64>, target: Vector3<f64>) -> Se3 {
-    objslam_core::geometry::look_at_with_up(&eye.into(), &target.into(), &Vector3::z())
-        .unwrap()
+    objslam_core::geometry::look_at_with_up(&eye.into(), &target.into(), &Vector3::z()).unwrap()
 }
 
 fn camera() -> PinholeCamera {

@@ -125,9 +125,7 @@ fn ik_reaches_every_target_pinocchio_reaches() {
         }
         reached += 1;
         let target = pose(&case["target"]);
-        let sol = chain
-            .inverse(&target, &q_init, &IkConfig::default())
-            .unwrap();
+        let sol = chain.inverse(&target, &q_init, &IkConfig::default()).unwrap();
         assert!(chain.within_limits(&sol.q));
         let got = chain.forward(&sol.q);
         let dp = (got.translation.vector - target.translation.vector).norm();

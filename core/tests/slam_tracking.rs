@@ -274,13 +274,12 @@ fn bad_input_is_a_typed_error_or_a_lost_frame() {
     assert!(matches!(tracker.track(&input_for(&grey, &depth, &cam, nan)), Err(SlamError::NonFinitePose { .. })));
 
     // Ground truth requested but missing.
-    let mut oracle = Tracker::new(TrackerConfig { pose_source: PoseSource::GroundTruth, ..TrackerConfig::default() })
-        .unwrap();
+    let mut oracle =
+        Tracker::new(TrackerConfig { pose_source: PoseSource::GroundTruth, ..TrackerConfig::default() }).unwrap();
     assert_eq!(oracle.track(&input_for(&grey, &depth, &cam, gt)), Err(SlamError::MissingGroundTruth));
     // A true pose offered to any other pose source is refused: it cannot reach an estimate.
     for source in [PoseSource::Slam, PoseSource::Kinematics] {
-        let mut t = Tracker::new(TrackerConfig { pose_source: source, ..TrackerConfig::default() })
-            .unwrap();
+        let mut t = Tracker::new(TrackerConfig { pose_source: source, ..TrackerConfig::default() }).unwrap();
         let with_truth = TrackInput { world_from_camera_oracle: Some(gt), ..input_for(&grey, &depth, &cam, gt) };
         assert_eq!(t.track(&with_truth), Err(SlamError::OracleNotAllowed { pose_source: source }));
     }
@@ -321,8 +320,7 @@ fn garbage_frames_never_panic() {
     for (w, h) in [(640u32, 480u32), (64, 48), (37, 41), (8, 8)] {
         let cam = PinholeCamera::from_fovy(w, h, 1.0).unwrap();
         for source in [PoseSource::Slam, PoseSource::Kinematics, PoseSource::GroundTruth] {
-            let mut tracker = Tracker::new(TrackerConfig { pose_source: source, ..TrackerConfig::default() })
-                .unwrap();
+            let mut tracker = Tracker::new(TrackerConfig { pose_source: source, ..TrackerConfig::default() }).unwrap();
             for f in 0..3 {
                 let n = (w * h) as usize;
                 let grey = GreyImage { width: w, height: h, data: (0..n).map(|_| (next() % 256) as u8).collect() };
@@ -397,8 +395,7 @@ fn frames_that_hide_the_scene_keep_the_map_and_tracking_resumes() {
     let seq = sequence();
     let cam = camera();
     let noise = PriorNoiseConfig::default();
-    let mut tracker = Tracker::new(TrackerConfig { prior_noise: noise, ..TrackerConfig::default() })
-        .unwrap();
+    let mut tracker = Tracker::new(TrackerConfig { prior_noise: noise, ..TrackerConfig::default() }).unwrap();
     let other = TabletopScene::tabletop(99);
     let (hidden_grey, _) = other.render(&cam, &gt_pose(0));
     let no_depth = DepthImage { width: 640, height: 480, data: vec![0.0; 640 * 480] };
@@ -437,8 +434,7 @@ fn frames_that_hide_the_scene_keep_the_map_and_tracking_resumes() {
 fn unmapped_stretch(extend_after_unmapped: usize) -> (Tracker, f64) {
     let seq = sequence();
     let cam = camera();
-    let mut tracker = Tracker::new(TrackerConfig { extend_after_unmapped, ..TrackerConfig::default() })
-        .unwrap();
+    let mut tracker = Tracker::new(TrackerConfig { extend_after_unmapped, ..TrackerConfig::default() }).unwrap();
     let aside =
         Se3::from_parts(nalgebra::Translation3::new(0.0, 1.5, 0.0), nalgebra::UnitQuaternion::identity()) * gt_pose(7);
     let (aside_grey, aside_depth) = TabletopScene::tabletop(3).render(&cam, &aside);

@@ -68,7 +68,12 @@ fn a_tracked_frame_without_a_grey_image_is_a_typed_error() {
         .unwrap();
     let (frame, _) = capture.load_frame(f).unwrap();
     let err = system
-        .process_frame(objslam_core::system::FrameInput { frame, grey: None, view_index: 0, world_from_camera_gt: None })
+        .process_frame(objslam_core::system::FrameInput {
+            frame,
+            grey: None,
+            view_index: 0,
+            world_from_camera_gt: None,
+        })
         .unwrap_err();
     assert!(matches!(err, objslam_core::system::SystemError::MissingGrey), "{err}");
 }

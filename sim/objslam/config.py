@@ -120,8 +120,8 @@ class ExploreRunConfig:
     the table (counted from the whole image, border included): they do not mark table cells seen,
     so the cells stay unknown until a map object covers them; cells with such evidence far from
     every map object are *unexplained* (the depth shows an object the map does not have: detected
-    only truncated, or too few times) and draw discovery views centred on them. 0 = off (as
-    before stop 24; the reports' commands say which they ran). Core ``explore::discovery``."""
+    only truncated, or too few times) and draw discovery views centred on them. 0 = off.
+    Core ``explore::discovery``; measured in ``studies/discovery_evidence/``."""
     discovery_evidence_weight: float = 10.0
     """An unexplained table cell counts as this many unseen cells in the discovery count, gain
     and budget reserve (a 5 cm block overlaps 9-16 cells of 2 cm; ``discovery_min_new_cells`` is 25)."""
@@ -179,49 +179,24 @@ class ParamRunConfig:
     """Beyond the paper: an estimate whose bottom lies within this of the table top (z = 0) is
     extended down to it, its top kept (objects stand on the table; the local clouds cut the
     points within 5 mm of the table, so bottoms sit ~3 mm high: ``ParamConfig::support_z_m`` in
-    ``core/src/objects/mod.rs``). 0 = off (the paper). Measured by the exploration benchmark
-    with and without it (``reports/exploration_highest_top/`` vs ``reports/exploration_no_snap/``,
-    same 9 seeds, both with the highest-point cylinder top): every strategy's 3D IoU rises and CDE
-    falls."""
+    ``core/src/objects/mod.rs``). 0 = off (the paper). Default 0.015 m; measured in ``studies/support_snap/``."""
     cylinder_consensus_iterations: int = 200
     """Circles through three random side-wall points tried as a second start of the cylinder fit
-    (the one with more points on the circle is kept); 0 = the algebraic start only (before
-    2026-12-02: a neighbour's points merged into a bottle's cloud pulled that start off the wall)."""
+    (the one with more points on the circle is kept); 0 = the algebraic start only (a neighbour's points merged into a bottle's cloud can pull that
+    start off the wall). Default 200."""
     window_keep: str = "most_segments_yaw"
     """Which frames the line-alignment window (``ParamConfig::window_frames`` = 10) keeps once full
-    (``WindowKeep`` in ``core/src/objects/mod.rs``): ``"most_segments_yaw"`` (default since
-    2026-12-04, beyond the paper) = Alg. 2's yaw sampling on the ten frames with the most LSD
-    segments in the object's box, the refinement on the last ten; ``"latest"`` = the last ten for
-    both (the paper's "t consecutive images"); ``"most_segments"`` = the most-segment ten for both.
-    Alg. 2 weighs every frame by its share of aligned segments, so when an object's last frames see
-    it small, two to five segments each, their noisy votes decide its yaw: with ``"latest"``, main
-    benchmark of 2026-12-04, expected-gain scene03 seed 6, a 4.3 × 4.0 cm block ended 43° off
-    (``cargo run --release -p objslam-core --example param_replay -- <estimator_inputs.json> --yaw 13``
-    on ``--set record.estimator_inputs=true``), the only yaw error above 1.4° in 315 episodes.
-    Nine seeds, 315 episodes paired (``reports/exploration_window_keep_yaw/main_vs_before.md``):
-    ``"most_segments_yaw"`` against ``"latest"`` leaves that block 0.3° off, expected-gain's mean yaw
-    error 0.45° → 0.27°, mean 3D IoU and offset-removed 3D IoU within their standard errors
-    (−0.000 to +0.001, +0.001 ± 0.001), views unchanged; the episodes that moved mostly took
-    another path after a yaw changed, and with it another SLAM offset. ``"most_segments"`` also
-    fixes the block but on seeds 0-2 (``reports/exploration_window_keep/``) costs 3D IoU −0.013 ±
-    0.008 (object-driven): the refinement then reprojects into old frames with old poses."""
+    (``WindowKeep`` in ``core/src/objects/mod.rs``): ``"most_segments_yaw"`` (default, beyond the
+    paper) = Alg. 2's yaw sampling on the ten frames with the most LSD segments in the object's box,
+    the refinement on the last ten; ``"latest"`` = the last ten for both (the paper's "t consecutive
+    images"); ``"most_segments"`` = the most-segment ten for both. Alg. 2 weighs every frame by its
+    share of aligned segments, so frames that see an object small (two to five segments) can decide
+    its yaw with noisy votes. Measurements: ``studies/window_keep/``."""
     cylinder_top_from_face: bool = True
     """Beyond the paper: a cylinder's top from the median height of its top face's points instead
     of its highest point, which depth noise lifts ~3 σ above the face (``core/src/objects/cylinder.rs``).
-    Measured with exact poses, seeds 0-2 (``reports/exploration_fk_topface/vs_baseline.md``, made by
-    ``experiments/compare_sweeps.py`` against the same episodes of ``reports/exploration_fk/``):
-    cylinder height error +1.5 → +0.1 mm (``size_errors.md``), 3D IoU +0.006 to +0.007 and CDE
-    −0.03 cm for object-driven, random and coverage alike. With the default SLAM poses
-    (``reports/exploration_topface/vs_baseline.md``, seeds 0-2, against
-    ``reports/exploration_highest_top/``, the main benchmark before this default) the
-    map's global offset dominates: 3D IoU +0.002 (object-driven ± 0.006, random ± 0.001); with
-    the offset removed +0.005 ± 0.003 and +0.004 ± 0.002. The whole main benchmark re-run with
-    it (9 seeds, ``reports/exploration_highest_top/top_from_face_vs_this.md``): 3D IoU +0.001 to
-    +0.003 for every strategy, +0.002 to +0.005 (± 0.001) with the offset removed, cylinder
-    height error −0.2 to −0.4 mm (``reports/exploration_size_errors.md``).
-    On by default since 2026-12-03 (the reports made after that date use it; each report's
-    recorded command and run folders say so); False = the highest point, as before."""
-
+    Default true; false = the highest point (the paper). Measurements:
+    ``studies/cylinder_top_from_face/``."""
 
 @dataclass(frozen=True)
 class PriorNoiseConfig:
@@ -361,36 +336,23 @@ class RunConfig:
     its frame's pose put it. Exploration benchmark, seed 0, mean over the 7 scenes: object-driven
     3D IoU 0.707 → 0.790 and CDE 1.01 → 0.60 cm with it; Init 0.743 → 0.822."""
     slam_motion_gate_m: float = 0.01
-    """With the ``slam`` pose source: a tracked pose farther than this (plus the per-view bias's
-    conjugation bound) from the last tracked frame of the same view moved by the prior's motion
-    is lost and dead-reckoned instead (the core's ``TrackerConfig::motion_gate_floor_m``, 0 there):
-    a frame that sees little of the scene cannot track to a consensus centimetres off and corrupt
-    the map. Found on ``exploration_top_init`` (expected-gain, scene05, seed 2): the last view faced
-    the robot's link, 89 inliers tracked 21 mm off and became a keyframe; 3D IoU 0.831 → 0.886 with
-    the gate (0.5 cm: 0.870, it then rejects good frames against a first frame 1 cm off). On the main
-    benchmark it fires rarely (seeds 0-2: one frame in 105 episodes). On by default since
-    2026-12-04; 0 disables."""
+    """With the ``slam`` pose source: a tracked pose farther than this, metres, from the last
+    tracked frame of the same view moved by the prior's motion is lost and dead-reckoned instead
+    (the core's ``TrackerConfig::motion_gate_floor_m``): a frame that sees little of the scene
+    cannot track to a consensus centimetres off and corrupt the map. Default 0.01; 0 disables.
+    Measurements: ``studies/motion_gate/``."""
     slam_motion_gate_deg: float = 2.0
-    """The same gate's rotation floor, degrees (``motion_gate_floor_deg``); 0 disables. 1° rejected
-    a good frame at CI resolution (320x240 at 2 Hz: a 40° turn between two frames, the tracked
-    rotation 1.95° from the prediction while its position was 5.8 mm from the truth, better than
-    the prior's 10 mm); 2° keeps it and still rejects the failure above (a translation one)."""
+    """The same gate's rotation floor, degrees (``motion_gate_floor_deg``). Default 2; 0 disables."""
     slam_motion_gate_references: int = 2
     """How many of the last tracked frames of the view the motion gate predicts from; a pose
-    passes when it agrees with any (``motion_gate_references``, at least 1). With 1 (the gate as
-    first landed) a reference that was itself accepted off (expected-gain, scene04, seed 3: a frame
-    13.5 mm off the truth after one 7.4 mm off) got the next, correct frame (6.3 mm) rejected and
-    the view dead-reckoned from the bad pose: 3D IoU 0.893 → 0.870 against the gate off. With 2 a
-    single off reference is outvoted; the frame facing the robot's link above is off from both and
-    still rejected (replays of both episodes' captures, ``experiments/slam_capture.py``)."""
+    passes when it agrees with any, so one reference accepted slightly off is outvoted
+    (``motion_gate_references``, at least 1). Default 2."""
     slam_extend_after_unmapped: int = 3
     """With the ``slam`` pose source: after this many consecutive lost frames that show the scene
     but little of the SLAM map (the camera looks where the map has no points), insert a fixed
     keyframe at the frame's estimated pose and track on from it, keeping the old map (the core's
-    ``TrackerConfig::extend_after_unmapped``). 0 restores the behaviour before 2026-12-05: such
-    frames counted towards a map reset (10 frames), which also restarted the world ← map gauge.
-    Found on the 35° camera (expected-gain, scene07, seed 0): two resets, the object map 28 mm off
-    at the end, 3D IoU 0.23."""
+    ``TrackerConfig::extend_after_unmapped``). Default 3; 0 = such frames count towards a map
+    reset. Measurements: ``studies/narrow_fov/``."""
     camera: CameraConfig = field(default_factory=CameraConfig)
     detector: DetectorConfig = field(default_factory=DetectorConfig)
     textures: TextureConfig = field(default_factory=TextureConfig)

@@ -110,17 +110,8 @@ class GraspRunConfig:
     reobserve: bool = False
     """Before each attempt, look at the target from close views and re-estimate it in a fresh local
     map (the core's pipeline, same settings as the exploration); the refined estimate is grasped.
-    Measured on the main benchmark's estimated maps of 2026-12-03, 9 seeds, with the defaults below
-    (``reports/grasping_reobserve_register/``): 463/470 (98.5 %) against 468/468 without; grasped x-y centre 2.2 mm
-    from the truth (median; p90 4.6) against 1.8 mm (p90 3.6) for the map's own estimate. The
-    steps that got it there, each measured on the same maps: 441/470 as first built (planned from
-    the close view, unregistered) → 450/470 returning to ready (``reports/grasping_reobserve_ready/``)
-    → 463/470 registered as well (``reports/grasping_reobserve_register/``). Re-run on the main
-    benchmark's maps of stop 29 (2026-12-04, every current default; ``reports/grasping_reobserve/``):
-    460/470 (97.9 %) against 466/468 without (both with the blind approach, ``contact_retries = 0``;
-    ``reports/grasping_reobserve/blind_approach/``); with contact retries (stop 30, 2026-12-04) 465/470
-    against 468/468; grasped centre 2.2 mm (p90 4.7) against the map's 1.8 mm (p90 3.8): the close
-    views still do not beat the map, so re-observation stays off."""
+    Default false: on the original scenes the close views did not beat the map's own estimate
+    (``studies/grasp_reobserve/``)."""
     reobserve_views: str = "top"
     """``"top"``: two top-down views above the estimate (0.36 and 0.29 m); ``"top+oblique"``: a
     top-down view and two obliques from the robot's side."""
@@ -136,24 +127,17 @@ class GraspRunConfig:
     """How the local estimate refines the map's (see :func:`combine`): ``"hybrid"`` or ``"local"``."""
     reobserve_register: bool = True
     """Express the local map in the exploration map's frame before using it: the local map runs its
-    own SLAM, so all its objects share one calibration offset of its two views (several mm, the
-    same in every re-observation of a session). The offset is the median x-y difference between
-    local objects and the map objects they match (nearest centre within
-    ``reobserve_register_pair_m``), the target excluded; with no neighbour in view it is the
-    target's own difference (the map's centre is kept, the close views still give sizes and
-    obstacles). Measured on the main benchmark's maps, 9 seeds, both returning to ready
-    (``reports/grasping_reobserve_register/``): grasped centre error 5.1 → 2.2 mm (median; p90
-    8.5 → 4.6), success 450/470 → 463/470. On since 2026-12-03; False = the local map as it is."""
+    own SLAM, so all its objects share one calibration offset of its two views (several mm). The
+    offset is the median x-y difference between local objects and the map objects they match
+    (nearest centre within ``reobserve_register_pair_m``), the target excluded; with no neighbour
+    in view it is the target's own difference (the map's centre is kept, the close views still
+    give sizes and obstacles). Default true; false = the local map as it is."""
     reobserve_return_ready: bool = True
     """After the close views, return to the ready configuration before the grasp is planned (planned
     around the local objects and the refined target), so the grasp starts from the posture it has
-    without re-observation. The close views leave the wrist wherever their camera roll put it; the
-    planner prefers the hand yaw nearest the current one, and for a symmetric grasp that was often
-    the flipped yaw with joint 7 near its limit, whose IK took an unusual elbow and collided on the
-    approach (scene03 seed 1: the cup's approach tracking error 0.073 rad with an exact estimate).
-    Measured on the main benchmark's maps, 9 seeds, unregistered (``reports/grasping_reobserve_ready/``):
-    441/470 → 450/470, collisions 23 → 15. False = plan from the last close view, as before
-    2026-12-03."""
+    without re-observation: the close views leave the wrist wherever their camera roll put it, and
+    a flipped hand yaw near joint 7's limit can take an unusual elbow. Default true; false = plan
+    from the last close view."""
     reobserve_register_pair_m: float = 0.02
     """With ``reobserve_register``: a local object and its nearest map neighbour farther apart than
     this (x-y, metres) do not enter the offset. The offset is two views' calibration bias (a few mm,
@@ -177,7 +161,7 @@ class GraspRunConfig:
     plan left on each side plus ``contact_extra_shift_m`` (the least the centre must be off for that
     finger to land on the object) and a fresh grasp plan from there descends again, at most this many
     times per attempt; with no retry left, or no plan for the moved estimate, the hand goes on down as
-    planned. 0 = the approach is executed blind, as before stop 30 (2026-12-04)."""
+    planned. Default 2; 0 = the approach is executed blind."""
     contact_force_n: float = 5.0
     """Rise of the upward external force within ``contact_window_s`` that, with the hand stalled,
     stops the approach, newtons."""

@@ -26,7 +26,7 @@ descent (``plan_linear``) until the held object's estimated bottom is 1 cm above
 through the item (beyond the paper, :attr:`PlaceConfig.feel_support`: a guarded move on the
 arm's external-wrench estimate, :meth:`~objslam.world.SimWorld.external_wrench`), opening, and a
 straight retreat up, with the hand across the line. Without the feel, the descent ends at the
-release gap and the item drops from there (before stop 31). Choices are fields of
+release gap and the item drops from there. Choices are fields of
 :class:`PlaceConfig`. A task whose classes the scene (or the map) lacks is not run.
 """
 
@@ -89,7 +89,7 @@ class PlaceConfig:
     held at the start of the slow descent, drifting by up to 2.6 N per 0.05 s during it (six slow
     descents: scene04 seed 8's bottles, scene03 seed 0's cups, on their maps). When the item
     meets its support the rise over the window is 4.3-77 N (medians: blocks 8, cups 8, bottles
-    22; ``reports/placement.json``). False: let go at the release gap, as before (stop 30)."""
+    22; ``reports/placement.json``). Default true; false: let go at the release gap."""
     feel_start_m: float = 0.01
     """The slow descent starts this far above the release-gap pose, metres."""
     feel_depth_m: float = 0.02

@@ -3,8 +3,8 @@
 //! jitter, each detection the projected box of the block.
 
 use super::*;
-use crate::geometry::{ObjectGeometry, Shape};
 use crate::geometry::project_geometry;
+use crate::geometry::{ObjectGeometry, Shape};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -337,9 +337,7 @@ fn bad_input_is_defined() {
     outside.detection.bbox = Box2::new(-50.0, -50.0, -10.0, -10.0);
     let mut nan_box = good.clone();
     nan_box.detection.bbox = Box2 { min: [f64::NAN, 0.0], max: [10.0, 10.0] };
-    let r = a
-        .associate_frame(0, &camera(), &pose, &[empty, single.clone(), nan, outside, nan_box])
-        .unwrap();
+    let r = a.associate_frame(0, &camera(), &pose, &[empty, single.clone(), nan, outside, nan_box]).unwrap();
     let d: Vec<Decision> = r.detections.iter().map(|o| o.decision).collect();
     assert_eq!(
         d,
@@ -354,8 +352,7 @@ fn bad_input_is_defined() {
     assert_eq!(r.detections[2].dropped_non_finite, 2);
     assert!(a.objects().all(|o| o.points_in_world().iter().all(|p| p.iter().all(|v| v.is_finite()))));
     // A single point is enough when the config allows it.
-    let mut one = Associator::new(AssociationConfig { min_local_points: 1, ..AssociationConfig::default() })
-        .unwrap();
+    let mut one = Associator::new(AssociationConfig { min_local_points: 1, ..AssociationConfig::default() }).unwrap();
     let r = one.associate_frame(0, &camera(), &pose, &[single]).unwrap();
     assert_eq!(r.detections[0].decision, Decision::New { object_id: 0 });
     // A box partly outside the image is clipped, not rejected; it matches nothing here and, being
@@ -435,8 +432,7 @@ fn truncated_detections_update_but_never_create() {
     assert_eq!(r.detections[1].decision, Decision::Skipped { reason: SkipReason::TruncatedAtBorder });
     assert_eq!(a.len(), 1);
     // With the margin at 0 the truncated book starts an object.
-    let mut z = Associator::new(AssociationConfig { border_margin_px: 0.0, ..AssociationConfig::default() })
-        .unwrap();
+    let mut z = Associator::new(AssociationConfig { border_margin_px: 0.0, ..AssociationConfig::default() }).unwrap();
     let b = book.local(&mut rng, &edge, 150).expect("visible");
     let r = z.associate_frame(0, &camera(), &edge, &[b]).unwrap();
     assert_eq!(r.detections[0].decision, Decision::New { object_id: 0 });
@@ -448,14 +444,12 @@ fn modes_and_configs_round_trip_through_json() {
         let json = serde_json::to_string(&mode).unwrap();
         assert_eq!(json, format!("\"{}\"", mode.as_str()));
     }
-    let cfg: AssociationConfig =
-        serde_json::from_str(r#"{"mode": "iou_np", "np_alpha": 0.01}"#).unwrap();
+    let cfg: AssociationConfig = serde_json::from_str(r#"{"mode": "iou_np", "np_alpha": 0.01}"#).unwrap();
     assert_eq!(cfg.mode, AssociationMode::IouNp);
     assert_eq!(cfg.np_alpha, 0.01);
     assert_eq!(cfg.t_alpha, AssociationConfig::default().t_alpha);
     assert!(serde_json::from_str::<AssociationConfig>(r#"{"np_alpah": 0.01}"#).is_err(), "typos are rejected");
     let m: super::mapper::EnsembleMapperConfig =
-        serde_json::from_str(r#"{"association": {"mode": "iou"}, "local": {"pixel_stride": 2}}"#)
-            .unwrap();
+        serde_json::from_str(r#"{"association": {"mode": "iou"}, "local": {"pixel_stride": 2}}"#).unwrap();
     assert_eq!((m.association.mode, m.local.pixel_stride), (AssociationMode::Iou, 2));
 }

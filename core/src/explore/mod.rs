@@ -121,8 +121,8 @@ pub use utility::{
     ObjectFeatures, ObjectHistory, ObjectViewTerms, StopReason, UtilityContext, ViewScore,
 };
 pub use views::{
-    camera_position_free, coverage_views, init_views, random_views, sample_candidates,
-    sample_candidates_around, sample_candidates_at, AlwaysReachable, CandidateView, Reachability,
+    camera_position_free, coverage_views, init_views, random_views, sample_candidates, sample_candidates_around,
+    sample_candidates_at, AlwaysReachable, CandidateView, Reachability,
 };
 pub use visibility::{
     integrate_object, point_visibility, CellVisibility, ObjectFrameUpdate, ObservedPoints, Occluders, Viewpoint,

@@ -226,8 +226,7 @@ fn utility_prefers_the_view_facing_the_unobserved_face() {
     let mut grids = ExplorationGrids::new();
     grids.sync(&map, &cfg.grid).unwrap();
     observe_all_but(&mut grids, 0, Face::NegX, &cfg.grid);
-    let ctx =
-        UtilityContext::new(&map, &grids, &HistoryBook::default(), &camera(), &cfg).unwrap();
+    let ctx = UtilityContext::new(&map, &grids, &HistoryBook::default(), &camera(), &cfg).unwrap();
     let facing_seen = view(eye_around(center, 0.0, 30.0, 0.45), center);
     let facing_unseen = view(eye_around(center, 180.0, 30.0, 0.45), center);
     let side = view(eye_around(center, 90.0, 30.0, 0.45), center);
@@ -260,8 +259,7 @@ fn occlusion_term_follows_the_paper_formula() {
     let map = map_of(vec![a, b]);
     let mut grids = ExplorationGrids::new();
     grids.sync(&map, &cfg.grid).unwrap();
-    let ctx =
-        UtilityContext::new(&map, &grids, &HistoryBook::default(), &camera(), &cfg).unwrap();
+    let ctx = UtilityContext::new(&map, &grids, &HistoryBook::default(), &camera(), &cfg).unwrap();
     // Looking along +x, the two blocks overlap in the image.
     let s = ctx
         .score(&view(eye_around([0.56, 0.0, 0.05], 180.0, 20.0, 0.5), [0.56, 0.0, 0.05]), Strategy::ObjectDriven, None)
@@ -398,13 +396,11 @@ fn same_seed_gives_same_candidates_and_utilities() {
     }
     let grids = {
         let mut g = ExplorationGrids::new();
-        g.integrate_frame(&map, &camera(), &a[0].world_from_camera, &[], None, &cfg.grid)
-            .unwrap();
+        g.integrate_frame(&map, &camera(), &a[0].world_from_camera, &[], None, &cfg.grid).unwrap();
         g
     };
     let views: Vec<Se3> = a.iter().map(|v| v.world_from_camera).collect();
-    let ctx =
-        UtilityContext::new(&map, &grids, &HistoryBook::default(), &camera(), &cfg).unwrap();
+    let ctx = UtilityContext::new(&map, &grids, &HistoryBook::default(), &camera(), &cfg).unwrap();
     for strategy in [Strategy::ObjectDriven, Strategy::ExpectedGain] {
         let s1 = ctx.score_all(&views, strategy, Some(&views[0])).unwrap();
         let s2 = ctx.score_all(&views, strategy, Some(&views[0])).unwrap();
@@ -412,8 +408,7 @@ fn same_seed_gives_same_candidates_and_utilities() {
         assert!(next_best_view(&s1).is_some());
     }
     // Restricting to one object samples only around it.
-    let one = sample_candidates_around(&map, Some(&[1]), &cc, &cfg.grid, &AlwaysReachable, 7)
-        .unwrap();
+    let one = sample_candidates_around(&map, Some(&[1]), &cc, &cfg.grid, &AlwaysReachable, 7).unwrap();
     assert!(!one.is_empty() && one.iter().all(|v| v.target_object == Some(1)));
     // A reachability callback filters.
     let only_positive_y = |p: &Se3| p.translation.vector.y > 0.0;
@@ -471,10 +466,8 @@ fn baseline_generators() {
         assert!((a.x - b.x).abs() < 1e-12 || (a.y - b.y).abs() < 1e-12);
     }
     let map = three_object_map();
-    let r1 = random_views(&table, &map, &cc, &GridConfig::default(), &AlwaysReachable, 10, 3)
-        .unwrap();
-    let r2 = random_views(&table, &map, &cc, &GridConfig::default(), &AlwaysReachable, 10, 3)
-        .unwrap();
+    let r1 = random_views(&table, &map, &cc, &GridConfig::default(), &AlwaysReachable, 10, 3).unwrap();
+    let r2 = random_views(&table, &map, &cc, &GridConfig::default(), &AlwaysReachable, 10, 3).unwrap();
     assert_eq!(r1.len(), 10);
     assert_eq!(r1, r2);
     let never = |_: &Se3| false;
@@ -526,8 +519,7 @@ fn bad_inputs_give_typed_errors() {
         .unwrap_or_default()
         .is_empty());
     assert_eq!(next_best_view(&[]), None);
-    let ctx = UtilityContext::new(&empty, &ExplorationGrids::new(), &HistoryBook::default(), &camera(), &ec)
-        .unwrap();
+    let ctx = UtilityContext::new(&empty, &ExplorationGrids::new(), &HistoryBook::default(), &camera(), &ec).unwrap();
     assert_eq!(ctx.score(&pose, Strategy::ObjectDriven, None).map(|s| s.utility), Ok(0.0));
     assert!(ctx.score(&bad_pose, Strategy::ObjectDriven, None).is_err());
     assert_eq!(Strategy::parse("expected-gain"), Ok(Strategy::ExpectedGain));
@@ -553,30 +545,21 @@ fn utility_matches_closed_form_for_one_unknown_cube() {
     let map = map_of(vec![object(Label::Block, center, 0.0, [0.05, 0.05, 0.05])]);
     let mut grids = ExplorationGrids::new();
     grids.sync(&map, &cfg.grid).unwrap();
-    let ctx =
-        UtilityContext::new(&map, &grids, &HistoryBook::default(), &camera(), &cfg).unwrap();
+    let ctx = UtilityContext::new(&map, &grids, &HistoryBook::default(), &camera(), &cfg).unwrap();
     // Level with the centre, facing +x: only the +x face (100 cells) faces the camera within 80°.
-    let level = ctx
-        .score(&view(eye_around(center, 0.0, 0.0, 0.5), center), Strategy::ObjectDriven, None)
-        .unwrap();
+    let level = ctx.score(&view(eye_around(center, 0.0, 0.0, 0.5), center), Strategy::ObjectDriven, None).unwrap();
     assert!((level.utility - 100.0).abs() < 1e-9, "{level:?}");
     assert_eq!(level.objects[0].visible_cells, 100);
     // 45° above +x: the +x face and the top (incidence 45°) are seen: 200 bits.
-    let high = ctx
-        .score(&view(eye_around(center, 0.0, 45.0, 0.5), center), Strategy::ObjectDriven, None)
-        .unwrap();
+    let high = ctx.score(&view(eye_around(center, 0.0, 45.0, 0.5), center), Strategy::ObjectDriven, None).unwrap();
     assert!((high.utility - 200.0).abs() < 1e-9, "{high:?}");
     // Whole-object scope: H_obj = 500 bits from any view that sees the object.
     let whole = ExploreConfig { entropy_scope: EntropyScope::Object, ..ExploreConfig::default() };
-    let ctx2 =
-        UtilityContext::new(&map, &grids, &HistoryBook::default(), &camera(), &whole).unwrap();
-    let s2 = ctx2
-        .score(&view(eye_around(center, 0.0, 0.0, 0.5), center), Strategy::ObjectDriven, None)
-        .unwrap();
+    let ctx2 = UtilityContext::new(&map, &grids, &HistoryBook::default(), &camera(), &whole).unwrap();
+    let s2 = ctx2.score(&view(eye_around(center, 0.0, 0.0, 0.5), center), Strategy::ObjectDriven, None).unwrap();
     assert!((s2.utility - 500.0).abs() < 1e-9);
     // Looking away: the object is not in the view, f = 0.
-    let away =
-        look_at(&eye_around(center, 0.0, 0.0, 0.5), &Point3::new(2.0, 0.0, 0.05)).unwrap();
+    let away = look_at(&eye_around(center, 0.0, 0.0, 0.5), &Point3::new(2.0, 0.0, 0.05)).unwrap();
     let s3 = ctx.score(&away, Strategy::ObjectDriven, None).unwrap();
     assert_eq!(s3.utility, 0.0);
     assert!(s3.objects.is_empty());
@@ -977,9 +960,7 @@ fn unexplained_evidence_draws_a_view_centred_on_the_unmapped_object() {
     assert!((9..=16).contains(&n), "{n} unexplained cells");
     let NextView::Move { world_from_camera, .. } = d else { panic!("expected a move: {d:?}") };
     // B is in the inner image of the chosen view, A's cells explained by the map.
-    let uv = cam
-        .project(&(world_from_camera.inverse() * Point3::from(Vector3::from(b))))
-        .expect("B behind the camera");
+    let uv = cam.project(&(world_from_camera.inverse() * Point3::from(Vector3::from(b)))).expect("B behind the camera");
     assert!(uv[0] > 32.0 && uv[0] < 288.0 && uv[1] > 24.0 && uv[1] < 216.0, "B at {uv:?}");
     // The same step as a strategy outside the core sees it: the paper's rule says "all
     // explored", the weighted unseen table is worth a view, and the argmax of the discovery gain
@@ -989,12 +970,7 @@ fn unexplained_evidence_draws_a_view_centred_on_the_unmapped_object() {
     assert_eq!(step.paper_stop(&map, &cam).unwrap(), Some(SessionStop::AllExplored));
     let weight = step.table_unknown_weight(&map);
     assert!(weight >= min_new && weight >= evidence.discovery_evidence_weight * n as f64, "{weight}");
-    let views: Vec<Se3> = step
-        .table_candidate_views(&map)
-        .unwrap()
-        .iter()
-        .map(|c| c.world_from_camera)
-        .collect();
+    let views: Vec<Se3> = step.table_candidate_views(&map).unwrap().iter().map(|c| c.world_from_camera).collect();
     let gains = step.table_gain(&map, &cam, &views);
     let best = (0..views.len())
         .filter(|i| gains[*i].cells >= min_new)
@@ -1048,12 +1024,8 @@ fn the_decision_step_view_reproduces_the_built_in_utility_strategies() {
         assert!(features.iter().all(|f| f.explore), "sides unseen: both still to explore");
         assert_eq!(s.paper_stop(&map, &cam).unwrap(), None);
         let around: Vec<u32> = features.iter().filter(|f| f.explore).map(|f| f.object_id).collect();
-        let views: Vec<Se3> = s
-            .candidate_views(&map, Some(&around))
-            .unwrap()
-            .iter()
-            .map(|c| c.world_from_camera)
-            .collect();
+        let views: Vec<Se3> =
+            s.candidate_views(&map, Some(&around)).unwrap().iter().map(|c| c.world_from_camera).collect();
         assert!(views.len() >= 8, "{}", views.len());
         let scores = s.score_views(&map, &cam, &views, strategy, &top, false).unwrap();
         let mut order: Vec<usize> = (0..views.len()).filter(|i| scores[*i].utility.is_finite()).collect();

@@ -8,9 +8,9 @@ use nalgebra::{Point3, Vector3};
 use super::grid::{binary_entropy_bits, log_odds, plogp_bits, probability_from_log_odds, GridStats};
 use super::visibility::{check_pose, point_visibility, CellVisibility, Occluders, Viewpoint};
 use super::{EntropyScope, ExplorationGrids, ExploreConfig, ExploreError, IouMode, Strategy};
+use crate::geometry::project_geometry;
 use crate::geometry::{iou3d, Box2, ObjectGeometry, PinholeCamera, Se3};
 use crate::map::ObjectMap;
-use crate::geometry::project_geometry;
 
 /// The estimates one object had at past decision steps, oldest first (pipeline input).
 ///

@@ -487,8 +487,7 @@ mod tests {
         // in the range scikit-learn gives on such data (≈ 50–75 %).
         for seed in [5u64, 6, 7] {
             let (pts, truth) = contaminated_cloud(seed);
-            let one = robust_centroid_scale(&pts, &IForestConfig { passes: 1, ..Default::default() })
-                .unwrap();
+            let one = robust_centroid_scale(&pts, &IForestConfig { passes: 1, ..Default::default() }).unwrap();
             let removed = truth.iter().zip(&one.inlier).filter(|(t, k)| !**t && !**k).count();
             assert!((40..=85).contains(&removed), "seed {seed}: one pass removed {removed}/100");
         }
@@ -554,8 +553,7 @@ mod tests {
         assert!((median_spacing(&two).unwrap_or(0.0) - 0.05).abs() < 1e-12);
         // Identical points only: readmission leaves the removal as it is (no spacing, no panic).
         let pts = vec![Point3::new(0.4, -0.1, 0.02); 40];
-        let est = robust_centroid_scale(&pts, &IForestConfig { readmit_rings: 3, ..Default::default() })
-            .unwrap();
+        let est = robust_centroid_scale(&pts, &IForestConfig { readmit_rings: 3, ..Default::default() }).unwrap();
         assert_eq!(est.n_inliers(), 40);
     }
 
@@ -565,8 +563,7 @@ mod tests {
         let a = robust_centroid_scale(&pts, &IForestConfig::default()).unwrap();
         let b = robust_centroid_scale(&pts, &IForestConfig::default()).unwrap();
         assert_eq!(a, b);
-        let c = robust_centroid_scale(&pts, &IForestConfig { seed: 1, ..Default::default() })
-            .unwrap();
+        let c = robust_centroid_scale(&pts, &IForestConfig { seed: 1, ..Default::default() }).unwrap();
         assert_ne!(a.scores, c.scores);
     }
 

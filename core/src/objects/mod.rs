@@ -669,8 +669,7 @@ mod config_tests {
         let text = serde_json::to_string(&cfg).unwrap();
         let back: ParamConfig = serde_json::from_str(&text).unwrap();
         assert_eq!(back, cfg);
-        let partial: ParamConfig =
-            serde_json::from_str(r#"{"window_frames": 5, "iforest": {"passes": 1}}"#).unwrap();
+        let partial: ParamConfig = serde_json::from_str(r#"{"window_frames": 5, "iforest": {"passes": 1}}"#).unwrap();
         assert_eq!(partial.window_frames, 5);
         assert_eq!(partial.iforest.passes, 1);
         assert_eq!(partial.iforest.n_trees, 100);

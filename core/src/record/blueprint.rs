@@ -247,8 +247,8 @@ mod tests {
 
     #[test]
     fn blueprint_has_the_layout_and_the_hidden_depth_cloud() {
-        let msgs = blueprint_messages("objslam-test", Some(&TableTop { center: [0.5, 0.0], size: [1.0, 1.0] }))
-            .unwrap();
+        let msgs =
+            blueprint_messages("objslam-test", Some(&TableTop { center: [0.5, 0.0], size: [1.0, 1.0] })).unwrap();
         assert!(matches!(msgs.first(), Some(LogMsg::SetStoreInfo(_))));
         let text = format!("{msgs:?}");
         for needle in ["EyeControls3D", "EntityBehavior", "ViewportBlueprint", "ContainerBlueprint", "overrides"] {

@@ -548,8 +548,7 @@ mod tests {
             ];
             rec.log_objects("world/map", &objects).unwrap();
             rec.log_objects(GROUND_TRUTH_ROOT, &objects).unwrap();
-            rec.log_trajectory("estimated", &[Point3::origin(), Point3::new(0.1, 0.0, 0.5)])
-                .unwrap();
+            rec.log_trajectory("estimated", &[Point3::origin(), Point3::new(0.1, 0.0, 0.5)]).unwrap();
             rec.log_scalar("timings/render_ms", 70.0).unwrap();
             rec.log_event("done").unwrap();
             rec.flush().unwrap();
@@ -618,8 +617,7 @@ mod tests {
         )
         .unwrap();
         assert_eq!(rec.robot_links, vec!["base".to_string()]);
-        rec.log_robot_pose(&[("base".into(), Se3::identity()), ("tip".into(), Se3::identity())])
-            .unwrap();
+        rec.log_robot_pose(&[("base".into(), Se3::identity()), ("tip".into(), Se3::identity())]).unwrap();
         let missing = Recorder::create(
             &dir.join("m.rrd"),
             "objslam-test",

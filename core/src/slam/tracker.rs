@@ -140,18 +140,8 @@ pub struct TrackerConfig {
     /// frame's output pose (dead-reckoned from the last tracked frame within its view, else the
     /// prior) with new points from its keypoints, held fixed in bundle adjustment (nothing ties it
     /// to the rest of the map), and tracking goes on from it. The old map is kept, so tracking
-    /// returns to it when the camera does. 0 disables (such frames then count towards
-    /// [`Self::reset_after_lost`], the behaviour before 2026-12-05). Found on the 35° camera
-    /// (expected-gain, scene07, seed 0): the camera swept over the table's corner onto the floor;
-    /// ten lost frames (too few inliers; 219 map points predicted in view at the first, 20 at the
-    /// sixth) reset the map, the new map started at a view's prior 1 cm off and a
-    /// second such stretch reset it again; each reset also restarted the world ← map gauge (as
-    /// resets did then), and the object map, moved with the new gauge's early corrections, ended
-    /// 28 mm off (3D IoU 0.23). With the extension, the stretch's fourth to sixth frames (28, 20
-    /// and 20 map points predicted in view) extended the map once and it was never reset: 3D IoU
-    /// 0.82 (0.73 with the extension off, resets keeping the gauge as they now do; with a first
-    /// version that told unmapped frames by coarse matches instead of points predicted in view:
-    /// 0.81 with neither a reset nor an extension, 0.78 extending after 10 frames, 0.82 after 5).
+    /// returns to it when the camera does. Default 3; 0 disables (such frames then count towards
+    /// [`Self::reset_after_lost`]). Measurements: `studies/narrow_fov/`.
     pub extend_after_unmapped: usize,
 }
 
@@ -867,9 +857,7 @@ impl Tracker {
     /// it was fitted to) and the last tracked frame stay: the next frame with depth starts the new
     /// map at its pose estimate in the same frame (dead-reckoned from the last tracked frame
     /// within its view, else the prior through the gauge), so the object map, placed with the
-    /// gauge, stays where it is. (Before 2026-12-05 the gauge restarted from the new map's
-    /// first view, and the object map, moved with the new gauge's early corrections by up to a
-    /// view's 1 cm bias, left the world frame the old views had fixed.)
+    /// gauge, stays where it is.
     fn reset_map(&mut self) {
         self.points.clear();
         self.keyframes.clear();

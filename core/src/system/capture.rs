@@ -165,7 +165,10 @@ impl Capture {
 
     /// A frame's grey image, depth and core frame.
     pub fn load_frame(&self, f: &CapturedFrame) -> Result<(Frame, GreyImage), CaptureError> {
-        let invalid = |field: &str, reason: String| CaptureError::Invalid { field: format!("frame {}: {field}", f.index), reason };
+        let invalid = |field: &str, reason: String| CaptureError::Invalid {
+            field: format!("frame {}: {field}", f.index),
+            reason,
+        };
         let grey = GreyImage::new(f.width, f.height, read_gz(&self.dir.join(format!("grey_{}.u8.gz", f.index)))?)
             .map_err(|e| invalid("grey", e.to_string()))?;
         let raw = read_gz(&self.dir.join(format!("depth_{}.f32.gz", f.index)))?;
@@ -184,7 +187,8 @@ impl Capture {
             .iter()
             .enumerate()
             .map(|(i, (u0, v0, u1, v1, label, score))| {
-                let label = Label::parse(label).map_err(|e| invalid(&format!("detections[{i}].label"), e.to_string()))?;
+                let label =
+                    Label::parse(label).map_err(|e| invalid(&format!("detections[{i}].label"), e.to_string()))?;
                 Ok(Detection { bbox: Box2::new(*u0, *v0, *u1, *v1), label, score: *score })
             })
             .collect::<Result<Vec<_>, CaptureError>>()?;
