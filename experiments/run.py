@@ -3,21 +3,36 @@
 Writes ``runs/<date>/<time>_<strategy>_<scene>_<seed>/`` and prints a per-object table and the means.
 Its ``run.rrd`` opens in the Rerun viewer with ``make view``; ``--spawn`` / ``--serve`` show the
 run live while it goes.
-Exit status 0 on success, 1 on a failed run (its folder is kept and marked), 2 on a bad config.
+Exit status 0 on success, 1 on a failed run (its folder is kept and marked), 2 on a bad config,
+130 on Ctrl-C (SIGINT) and 143 on SIGTERM (the folder is kept, marked interrupted or terminated;
+one line says where it is).
 """
 
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
 
 from objslam.cli import HelpFormatter, has_display, start_viewer
 from objslam.config import STRATEGIES, ConfigError, RunConfig, load_run_config
-from objslam.episode import format_table, run_episode
+from objslam.episode import RunStopped, format_table, run_episode
 from objslam.scene import SceneFileError
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run, and turn a signal into one line and the shell's exit status (no traceback)."""
+    try:
+        return _main(argv)
+    except RunStopped as e:
+        print(f"run {e.status}: its folder is kept, marked incomplete: {e.run_dir}", file=sys.stderr)
+        return e.exit_code
+    except KeyboardInterrupt:
+        print("interrupted before a run folder was made", file=sys.stderr)
+        return 128 + signal.SIGINT
+
+
+def _main(argv: list[str] | None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=HelpFormatter)
     try:  # the true defaults: experiments/configs/default.toml over the dataclass defaults
         base = load_run_config()
@@ -76,6 +91,8 @@ def main(argv: list[str] | None = None) -> int:
     except ConfigError as e:
         print(f"config error: {e}", file=sys.stderr)
         return 2
+    except RunStopped:
+        raise
     except Exception as e:  # noqa: BLE001 - the run folder already records the traceback
         print(f"run failed: {type(e).__name__}: {e}", file=sys.stderr)
         return 1

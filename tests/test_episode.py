@@ -138,6 +138,7 @@ def test_discovery_finds_the_object_the_paper_rule_leaves_unmapped(tmp_path, ci_
     the budget (stop reason max_views, the object still missed), so the test keeps that estimator
     to test the stopping rule, not the estimator."""
     common = {
+        "preset": '"ideal"',  # the scenario was found in the ideal world
         "scene": '"scenes/scene03.toml"',
         "camera.fovy_deg": 35.0,
         "seed": 0,
@@ -160,6 +161,7 @@ def test_object_evidence_maps_the_object_seen_only_at_the_border(tmp_path, ci_ov
     ``explore.discovery_evidence_height_m`` its cells stay unexplained and draw a view centred on
     it: every object mapped (seeds 1 and 2 both show the effect)."""
     common = {
+        "preset": '"ideal"',  # the scenario was found in the ideal world
         "scene": '"scenes/scene06.toml"',
         "camera.fovy_deg": 35.0,
         "seed": 1,
@@ -183,10 +185,10 @@ def test_object_evidence_maps_the_object_seen_only_at_the_border(tmp_path, ci_ov
     assert missed(without) >= 1, without["objects"]
     assert missed(evidence) == 0, evidence["objects"]
     assert evidence["mean"]["iou3d"] > without["mean"]["iou3d"] + 0.05
-    # The per-view unexplained-cell count: the can's cells while the map lacks it, none once it
-    # is mapped; always none with the option off.
+    # The per-view unexplained-cell count: the can's cells while the map lacks it, at most a
+    # couple at its border once it is mapped; always none with the option off.
     curve = evidence["table_unexplained_curve"]
-    assert len(curve) == len(evidence["table_known_curve"]) and max(curve) >= 5 and curve[-1] == 0, curve
+    assert len(curve) == len(evidence["table_known_curve"]) and max(curve) >= 5 and curve[-1] <= 2, curve
     assert not any(without["table_unexplained_curve"]), without["table_unexplained_curve"]
     # ... and recorded for the viewer: the unexplained cells as points, their count as a scalar.
     rerun = shutil.which("rerun") or str(Path(__file__).resolve().parents[1] / ".venv" / "bin" / "rerun")
@@ -198,10 +200,11 @@ def test_object_evidence_maps_the_object_seen_only_at_the_border(tmp_path, ci_ov
 
 
 def test_slam_pose_source_beats_noisy_kinematics(tmp_path, ci_overlay) -> None:
-    """Pipeline against simulator ground truth: visual tracking seeded by the noisy kinematic prior
-    (1 cm / 1° per view) ends with a lower ATE than the prior itself, and is never lost."""
-    kin = run_episode(_cfg(tmp_path, ci_overlay, pose_source='"kinematics"'), progress=False).metrics
-    slam = run_episode(_cfg(tmp_path, ci_overlay, pose_source='"slam"'), progress=False).metrics
+    """Pipeline against simulator ground truth, in the ideal world (the prior's error independent
+    per view, 1 cm / 1°, zero mean): visual tracking seeded by it ends with a lower ATE than the
+    prior itself, and is never lost."""
+    kin = run_episode(_cfg(tmp_path, ci_overlay, pose_source='"kinematics"', preset='"ideal"'), progress=False).metrics
+    slam = run_episode(_cfg(tmp_path, ci_overlay, pose_source='"slam"', preset='"ideal"'), progress=False).metrics
     assert kin["ate_rmse_m"] > 0.004  # the prior's bias is there
     assert slam["lost_frames"] == 0
     assert slam["ate_rmse_m"] < kin["ate_rmse_m"], (slam["ate_rmse_m"], kin["ate_rmse_m"])

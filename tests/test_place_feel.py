@@ -18,7 +18,8 @@ def test_the_wrench_estimate_recovers_a_force_applied_at_the_tcp(ci_overlay) -> 
     # Joint friction off (the estimate does not model it): the drives alone balance the force, so
     # Jᵀ w = −τ gives it back.
     scene = load_scene(SCENES[3])
-    cfg = load_run_config(overlays=[ci_overlay], overrides=[], strategy="init")
+    # The ideal world: the release gap is checked to the millimetre against an exact table.
+    cfg = load_run_config(overlays=[ci_overlay], overrides=['preset="ideal"'], strategy="init")
     world = SimWorld(scene, cfg.camera, np.random.default_rng(0), grasp_physics=True)
     for j in world.joints[:7]:
         j.set_friction(0.0)
@@ -48,7 +49,8 @@ def test_a_bottle_is_let_go_once_the_hand_feels_the_table(ci_overlay, feel) -> N
     # scene04's tallest bottle, from an exact map: by feel, the hand stops on contact and the bottle
     # is let go within 2 mm of the table; without, it is let go at the tall items' 5 mm release gap.
     scene = load_scene(SCENES[3])
-    cfg = load_run_config(overlays=[ci_overlay], overrides=[], strategy="init")
+    # The ideal world: the release gap is checked to the millimetre against an exact table.
+    cfg = load_run_config(overlays=[ci_overlay], overrides=['preset="ideal"'], strategy="init")
     pcfg = PlaceConfig(feel_support=feel)
     session = GraspSession(scene, cfg, pcfg.grasp)
     placer = Placer(session, pcfg)

@@ -77,7 +77,7 @@ def test_core_back_projection_matches_the_renderers_position_buffer(scene1_world
     mask = np.isin(f.segmentation, ids)
     rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
     u0, u1, v0, v1 = int(cols[0]), int(cols[-1]) + 1, int(rows[0]), int(rows[-1]) + 1
-    m = objslam.NaiveMapper(json.dumps({"pixel_stride": 1, "trim_fraction": 0.0, "voxel_m": 1e-6}))
+    m = objslam.NaiveMapper(json.dumps({"pixel_stride": 1, "trim_fraction": 0.0, "voxel_m": 1e-4}))
     ids_out = m.update(
         index=0,
         intrinsics=f.intrinsics,
