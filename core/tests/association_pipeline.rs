@@ -8,6 +8,9 @@
 //! noise (boxes jittered by ±5 % of their size, 10 % misses): the ensemble still ends with at most
 //! one extra object and no merge.
 
+// Test code may unwrap (clippy.toml allows it in #[test] functions; this covers their helpers).
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use objslam_core::association::mapper::{EnsembleMapper, EnsembleMapperConfig};
 use objslam_core::association::metrics::{association_metrics, observation_gt_ids, AssociationMetrics, MetricsConfig};

@@ -5,6 +5,9 @@
 //! Scene: five objects (seeded layout below), table 0.8 × 1.2 m centred at (0.5, 0); camera
 //! 96 × 72 px, fovy 1 rad. Every episode starts with the four-corner Init views.
 
+// Test code may unwrap (clippy.toml allows it in #[test] functions; this covers their helpers).
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
 use nalgebra::{Point3, Vector3};
 use objslam_core::explore::{
     init_views, next_best_view, object_features, random_views, sample_candidates, stop_reason, AlwaysReachable,

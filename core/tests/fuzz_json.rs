@@ -7,6 +7,9 @@
 //! Proptest keeps failing seeds in `core/tests/fuzz_json.proptest-regressions`; cases found by
 //! hand are the regression tests at the end.
 
+// Test code may unwrap (clippy.toml allows it in #[test] functions; this covers their helpers).
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
 use nalgebra::{Point3, Vector3};
 use objslam_core::active::{ActiveConfig, ActiveSession};
 use objslam_core::eval::{config_from_json, ground_truth_from_json};

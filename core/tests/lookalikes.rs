@@ -11,6 +11,9 @@
 //! a single block seen in several partial views (parts hidden by the image border) stay one map
 //! object.
 
+// Test code may unwrap (clippy.toml allows it in #[test] functions; this covers their helpers).
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
 use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
 use objslam_core::frame::{DepthImage, Detection, Frame};
 use objslam_core::geometry::{iou3d, Box2, ObjectGeometry, PinholeCamera, Se3, Shape};

@@ -2,6 +2,9 @@
 //! 30 px or more that `cv2.createLineSegmentDetector()` finds on the same frames, with both
 //! endpoints within 2 px (in either order). Fixture: `core/tests/fixtures/make_lsd.py`.
 
+// Test code may unwrap (clippy.toml allows it in #[test] functions; this covers their helpers).
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
 use std::path::PathBuf;
 
 use objslam_core::frame::GreyImage;

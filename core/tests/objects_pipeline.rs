@@ -2,6 +2,9 @@
 //! 30 % clutter, the stage chain raw → iforest → lines → refined, and the documented fallbacks.
 //! Seeds are fixed; envelopes are stated in each assertion.
 
+// Test code may unwrap (clippy.toml allows it in #[test] functions; this covers their helpers).
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
 use nalgebra::{Point3, Vector3};
 use objslam_core::geometry::{iou3d, yaw_error_deg, Box2, ObjectGeometry, PinholeCamera, Se3, Shape};
 use objslam_core::map::EstimateStage;

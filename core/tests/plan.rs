@@ -8,6 +8,9 @@
 //! Kinematics reference values come from SAPIEN's pinocchio model via
 //! `core/tests/fixtures/make_panda_kinematics.py` → `core/tests/fixtures/panda_kinematics.json`.
 
+// Test code may unwrap (clippy.toml allows it in #[test] functions; this covers their helpers).
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
 use std::path::PathBuf;
 
 use nalgebra::{Quaternion, Translation3, UnitQuaternion, Vector3};

@@ -1,6 +1,9 @@
 //! Pipeline tests of `slam::Tracker` on a ray-cast synthetic RGB-D sequence (textured table plane
 //! with four textured boxes, `TabletopScene::tabletop(3)`), camera on a smooth arc.
 
+// Test code may unwrap (clippy.toml allows it in #[test] functions; this covers their helpers).
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
 use nalgebra::Point3;
 use objslam_core::frame::{DepthImage, GreyImage};
 use objslam_core::geometry::{Box2, PinholeCamera, Se3};

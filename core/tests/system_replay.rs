@@ -5,6 +5,9 @@
 //! judged against the scene's ground truth, which the system never sees. The capture is of the
 //! realistic world (sensor model, the robot's calibration errors in the prior).
 
+// Test code may unwrap (clippy.toml allows it in #[test] functions; this covers their helpers).
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
 use std::path::Path;
 
 use objslam_core::eval::{estimates_from_map, evaluate, EvalConfig};

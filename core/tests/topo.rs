@@ -4,6 +4,9 @@
 //! Seed 2024; envelope pinned: rotation < 2°, translation (prior units) < 3 cm, scale within 3 %,
 //! all shared objects matched, no false pair.
 
+// Test code may unwrap (clippy.toml allows it in #[test] functions; this covers their helpers).
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
 use nalgebra::{Similarity3, Translation3, UnitQuaternion, Vector3};
 use objslam_core::geometry::se3_from_yaw;
 use objslam_core::map::{EstimateStage, Label, MapObject, ObjectMap};

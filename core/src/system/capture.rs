@@ -81,7 +81,7 @@ pub struct CaptureHeader {
 #[serde(tag = "event", rename_all = "snake_case")]
 pub enum CaptureEvent {
     /// A frame.
-    Frame(CapturedFrame),
+    Frame(Box<CapturedFrame>),
     /// A view was reached and its frames fused.
     ViewDone {
         /// False for Init views.
@@ -158,7 +158,7 @@ impl Capture {
         Ok(System::new(
             self.header.mapper_config.clone(),
             self.header.active_config.clone(),
-            self.header.tracker_config.clone(),
+            self.header.tracker_config,
             table,
         )?)
     }
