@@ -31,7 +31,6 @@ import math
 import shlex
 import statistics
 import sys
-from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
@@ -397,7 +396,6 @@ def write_reports(
         "commit": commit(),
         "command": command,
         "machine": machine(),
-        "date": datetime.now(timezone.utc).strftime("%Y-%m-%d"),
         "config": config,
         "summary": summary,
         "targets": targets,
