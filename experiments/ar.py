@@ -40,13 +40,11 @@ from objslam import _native
 from objslam.camera import SAPIEN_FROM_CV
 from objslam.config import load_run_config, to_dict
 from objslam.episode import run_episode
-from objslam.provenance import commit, report_files
+from objslam.provenance import commit, machine, report_files
 from objslam.scene import gt_objects, load_scene
 from objslam.world import SimWorld, look_at
 
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO / "experiments"))
-from objslam.provenance import machine
 
 VIEW_DISTANCE_M = 0.40
 """Horizontal distance from the looked-at object to the AR camera, metres."""

@@ -28,12 +28,9 @@ from typing import Any
 
 import numpy as np
 import tomllib
-from objslam.provenance import commit, report_files
+from objslam.provenance import commit, machine, report_files
 
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO / "experiments"))
-
-from bench import machine
 
 PRESETS = ("realistic", "ideal")
 

@@ -39,8 +39,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
 from objslam.provenance import commit, machine, report_files
 
 REPO = Path(__file__).resolve().parents[1]

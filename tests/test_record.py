@@ -76,9 +76,6 @@ def test_frames_are_encoded_and_a_third_of_raw(tmp_path: Path) -> None:
 
 
 def test_jpeg_frames_export_to_video(tmp_path: Path) -> None:
-    import sys
-
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "experiments"))
     import export_video
 
     enc = record(tmp_path / "run.rrd", jpeg_quality=90)
