@@ -42,8 +42,8 @@ MODES = ("naive", "iou", "iou_np", "iou_t", "ensemble", "ensemble+")
 #: object (min_observations = 1); "ensemble+" is our default pipeline (consolidation, objects
 #: confirmed after 3 observations).
 MODE_SETS = {
-    **{m: (f'association_mode="{m}"', "consolidate=false", "min_observations=1") for m in MODES[:5]},
-    "ensemble+": ('association_mode="ensemble"', "consolidate=true", "min_observations=3"),
+    **{m: (f'map.association_mode="{m}"', "map.consolidate=false", "map.min_observations=1") for m in MODES[:5]},
+    "ensemble+": ('map.association_mode="ensemble"', "map.consolidate=true", "map.min_observations=3"),
 }
 STAGES = ("raw", "iforest", "lines", "refined")
 
@@ -60,7 +60,7 @@ def _noise_line() -> str:
 
 def associate(a: argparse.Namespace, command: str) -> int:
     jobs = [
-        Job(sc, "init", sd, tuple(a.config), (*a.set, *MODE_SETS[m], "parameterize=false"), {"mode": m})
+        Job(sc, "init", sd, tuple(a.config), (*a.set, *MODE_SETS[m], "map.parameterize=false"), {"mode": m})
         for sc in scene_files()
         for m in MODES
         for sd in a.seeds
@@ -142,7 +142,7 @@ def associate(a: argparse.Namespace, command: str) -> int:
 
 def parameterize(a: argparse.Namespace, command: str) -> int:
     jobs = [
-        Job(sc, "init", sd, tuple(a.config), (*a.set, 'association_mode="ensemble"', "parameterize=true"))
+        Job(sc, "init", sd, tuple(a.config), (*a.set, 'map.association_mode="ensemble"', "map.parameterize=true"))
         for sc in scene_files()
         for sd in a.seeds
     ]

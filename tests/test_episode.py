@@ -91,14 +91,12 @@ def test_bad_config_names_the_key(ci_overlay) -> None:
         load_run_config(overrides=['strategy="teleport"'])
     with pytest.raises(ConfigError, match="detector.miss_rate"):
         load_run_config(overrides=["detector.miss_rate=2.0"])
-    with pytest.raises(ConfigError, match="param.support_snap_m"):
-        load_run_config(overrides=["param.support_snap_m=-0.01"])
-    with pytest.raises(ConfigError, match="param.cylinder_consensus_iterations"):
-        load_run_config(overrides=["param.cylinder_consensus_iterations=-1"])
-    with pytest.raises(ConfigError, match="param.window_keep"):
-        load_run_config(overrides=['param.window_keep="newest"'])
-    with pytest.raises(ConfigError, match="slam_extend_after_unmapped"):
-        load_run_config(overrides=["slam_extend_after_unmapped=-1"])
+    with pytest.raises(ConfigError, match="map.param.support_snap_m"):
+        load_run_config(overrides=["map.param.support_snap_m=-0.01"])
+    with pytest.raises(ConfigError, match="map.param.window_keep"):
+        load_run_config(overrides=['map.param.window_keep="newest"'])
+    with pytest.raises(ConfigError, match="slam.extend_after_unmapped"):
+        load_run_config(overrides=["slam.extend_after_unmapped=-1"])
 
 
 def test_object_driven_episode_takes_next_best_views(tmp_path, ci_overlay) -> None:
@@ -142,7 +140,7 @@ def test_discovery_finds_the_object_the_paper_rule_leaves_unmapped(tmp_path, ci_
         "scene": '"scenes/scene03.toml"',
         "camera.fovy_deg": 35.0,
         "seed": 0,
-        "param.cylinder_top_from_face": "false",
+        "map.param.cylinder.top_from_face": "false",
     }
     paper = run_episode(
         _cfg(tmp_path, ci_overlay, strategy="object-driven", **common, **{"explore.discovery_before_stop": "false", "explore.discovery_reserve": "false"}),
@@ -218,7 +216,7 @@ def test_slam_pose_source_beats_noisy_kinematics(tmp_path, ci_overlay) -> None:
 def test_object_clouds_from_slam_map_points(tmp_path, ci_overlay) -> None:
     """object_points = slam_map: the association works on the SLAM map points inside each box (the
     paper's local objects) and still finds the scene's objects; the map points are recorded."""
-    cfg = _cfg(tmp_path, ci_overlay, pose_source='"slam"', object_points='"slam_map"')
+    cfg = _cfg(tmp_path, ci_overlay, pose_source='"slam"', **{"map.object_points": '"slam_map"'})
     r = run_episode(cfg, progress=False)
     m = r.metrics
     assert m["lost_frames"] == 0
@@ -239,7 +237,7 @@ def test_map_follows_the_slam_gauge(tmp_path, ci_overlay) -> None:
     (``follow_slam_gauge``): the option changes the map, the run stays tracked, and the map is
     still accurate against simulator ground truth."""
     follow = run_episode(_cfg(tmp_path, ci_overlay), progress=False)
-    fixed = run_episode(_cfg(tmp_path, ci_overlay, follow_slam_gauge="false"), progress=False)
+    fixed = run_episode(_cfg(tmp_path, ci_overlay, **{"map.follow_slam_gauge": "false"}), progress=False)
     assert follow.metrics["lost_frames"] == 0 and fixed.metrics["lost_frames"] == 0
     # Same frames and poses (the option moves the map, not the camera): same trajectory error.
     assert follow.metrics["ate_rmse_m"] == fixed.metrics["ate_rmse_m"]

@@ -127,7 +127,7 @@ def test_a_strategy_sees_the_unseen_table_cells_the_coverage_counts(tmp_path, ci
     n, unexplained = int(n), int(unexplained)
     # As many unknown cells as the recorded coverage after Init leaves (2 cm cells).
     sx, sy = load_scene(Path(cfg.scene) if Path(cfg.scene).is_absolute() else HERE.parent / cfg.scene).table.size
-    total = (sx / cfg.explore.discovery_cell_m) * (sy / cfg.explore.discovery_cell_m)
+    total = (sx / cfg.explore["discovery_cell_m"]) * (sy / cfg.explore["discovery_cell_m"])
     known = m["table_known_curve"][-1]
     assert 0 < n < total
     assert abs(n - (1.0 - known) * total) <= 0.01 * total, (n, known, total)

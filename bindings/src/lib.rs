@@ -268,6 +268,15 @@ fn evaluate_map(gt_json: &str, map_json: &str, config_json: Option<&str>) -> PyR
     serde_json::to_string(&ev).map_err(|e| json_err("evaluation", e))
 }
 
+/// The core's settings of a run (`{"slam", "map", "explore", "eval"}` tables as JSON, missing keys
+/// taking the core's defaults) parsed, range-checked and returned complete as JSON; the error names
+/// the field as `table.key` (`objslam_core::system::SystemConfig`).
+#[pyfunction]
+fn resolve_config(config_json: &str) -> PyResult<String> {
+    let c = objslam_core::system::SystemConfig::from_json(config_json).map_err(input_err)?;
+    serde_json::to_string(&c).map_err(|e| json_err("config", e))
+}
+
 /// Load a map file and return its JSON (checks format, version, content hash and values).
 #[pyfunction]
 fn load_map(path: &str) -> PyResult<String> {
@@ -489,6 +498,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<plan::PlannerPy>()?;
     m.add_function(wrap_pyfunction!(ar::ar_run, m)?)?;
     m.add_function(wrap_pyfunction!(evaluate_map, m)?)?;
+    m.add_function(wrap_pyfunction!(resolve_config, m)?)?;
     m.add_function(wrap_pyfunction!(load_map, m)?)?;
     m.add_function(wrap_pyfunction!(save_map, m)?)?;
     m.add_function(wrap_pyfunction!(map_objects_json, m)?)?;

@@ -15,7 +15,7 @@ use objslam_core::map::EstimateStage;
 use objslam_core::objects::lsd::LineSegment;
 use objslam_core::objects::refine::{refine_yaw_scale, RefineConfig};
 use objslam_core::objects::yaw::{cuboid, project_edges, visible_edges, LineFrame, CUBE_EDGES};
-use objslam_core::objects::{ObjectEstimate, ObjectEstimator, ParamConfig};
+use objslam_core::objects::{iforest::IForestConfig, ObjectEstimate, ObjectEstimator, ParamConfig};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -244,7 +244,9 @@ fn synthetic_thin_book_with_streaks() {
         }
         let pts = surface_points(&mut rng, &t, 0.002);
         let run_with = |refine: RefineConfig| {
-            let mut est = ObjectEstimator::new(Shape::Cuboid, ParamConfig { refine, ..Default::default() });
+            // Four iForest passes, no readmission: the refinement variants on one cleaned cloud.
+            let iforest = IForestConfig { passes: 4, readmit_rings: 0, ..Default::default() };
+            let mut est = ObjectEstimator::new(Shape::Cuboid, ParamConfig { refine, iforest, ..Default::default() });
             for f in &frames {
                 est.add_frame(f.clone());
             }

@@ -18,7 +18,7 @@ axis-aligned textures), kept as an ablation. ``--preset ideal`` on the experimen
 from __future__ import annotations
 
 import dataclasses
-import math
+import json
 from dataclasses import dataclass, field, fields, is_dataclass
 from pathlib import Path
 from typing import Any, get_type_hints
@@ -39,187 +39,45 @@ class ConfigError(ValueError):
     """A configuration value or key is invalid; the message names the key."""
 
 
-@dataclass(frozen=True)
-class ExploreRunConfig:
-    """Exploration (mirrors ``objslam_core::active::ActiveConfig``; meanings in the core's
-    ``explore`` module docs). Every strategy starts with the same Init step: four views over the
-    table corners (inset by ``init_inset_m``), ``init_height_m`` high, tilted ``init_tilt_deg``
-    towards the centre."""
+CORE_TABLES = ("slam", "map", "explore", "eval")
+"""The run config's tables of core settings (``objslam_core::system::SystemConfig``, documented in
+``core/src/system/config.rs`` and the structs it names: ``[slam]`` = ``TrackerConfig``, ``[map]`` =
+``PipelineConfig``, ``[explore]`` = ``ActiveConfig``, ``[eval]`` = ``EvalConfig``). They pass to the
+core untouched: their names, units, defaults and range checks are the core's, and a run's resolved
+``config.toml`` holds them complete."""
 
-    max_views: int = 10
-    """Views after Init (paper: 10)."""
-    utility_lambda: float = 0.2
-    """λ of the utility (paper: 0.2)."""
-    cell_m: float = 0.01
-    """Surface grid cell, metres (paper: 1 cm)."""
-    views_per_object: int = 12
-    """Candidate views sampled around each object still to explore."""
-    distance_m: tuple[float, float] = (0.35, 0.6)
-    """Candidate camera distance from the object centre, metres."""
-    elevation_deg: tuple[float, float] = (45.0, 80.0)
-    """Candidate elevation above the object's horizontal plane, degrees (the paper gives none).
-    Views below ~45° look across the crowded table: neighbours occlude the target, boxes take in
-    their surfaces and the association merges objects. Exploration benchmark, seed 0,
-    object-driven: 25-75° → 3D IoU 0.790 / CDE 0.60 cm (2 merged and 2 missed objects in scene07);
-    45-80° → 0.834 / 0.40 cm; 60-88° → 0.834 / 0.50 cm (chosen on seed 0; the 3-seed report is
-    the check)."""
-    init_height_m: float = 0.5
-    init_inset_m: float = 0.3
-    init_tilt_deg: float = 20.0
-    coverage_height_m: float = 0.45
-    coverage_inset_m: float = 0.15
-    done_occupied_ratio: float = 0.5
-    done_normalized_entropy: float = 0.5
-    motion_cost_bits_per_m: float = 20.0
-    stop_when_explored: bool = True
-    """object-driven / expected-gain: stop once every object is explored (the paper's rule).
-    ``false``: keep choosing views by the same utility, every object counted (s(x) = 1), until
-    ``max_views`` — the equal-budget comparison with random and coverage."""
-    discovery_before_stop: bool = True
-    """object-driven / expected-gain, beyond the paper: when every mapped object is explored, do
-    not stop while a view aimed at the unseen table top would still see
-    ``discovery_min_new_cells`` cells not seen yet; go there. The paper's utility knows only the
-    objects already mapped, so an object the Init views missed is never looked for (core
-    ``explore::discovery`` module docs); how much of the table the Init views leave unseen is in
-    each episode's ``table_known_curve`` and the reports' table-known tables (``init`` row of
-    ``reports/exploration_narrow_fov``). ``false`` = the paper's stopping rule
-    (the reports' commands say which they ran)."""
-    discovery_weight: float = 0.0
-    """object-driven / expected-gain, beyond the paper: weight of the table discovery gain (bits
-    per cm² of table top not seen yet) added to every candidate's utility, candidates aimed at the
-    unseen table joining those around objects. 0 = the paper's utility. On a seed-0 pilot with the default
-    camera (not kept as a report) 1.0 spent the first views on the empty table margins the Init
-    views miss and ended with a lower 3D IoU than 0; hence off."""
-    discovery_cell_m: float = 0.02
-    """Table coverage cell, metres."""
-    discovery_min_new_cells: int = 25
-    """Cells a view must newly see to keep exploring after every object is done (25 × 2 cm × 2 cm
-    = 100 cm², about the footprint of the smallest object class)."""
-    discovery_reserve: bool = True
-    """object-driven / expected-gain, beyond the paper: the budget reserve. At each decision,
-    estimate how many discovery views are still worth taking (greedy cover of the unseen table by
-    reachable candidates, each revealing ``discovery_min_new_cells`` new cells); when the views
-    left in ``max_views`` are no more than that, take a discovery view instead of the object NBV.
-    Objects first, the table's share of the budget last (core ``explore::discovery``)."""
-    discovery_min_frames: int = 3
-    """A table cell counts as seen once depth returns of this many frames landed in it (the map
-    confirms an object after ``pipeline.min_observations`` = 3 untruncated detections; a cell seen
-    in fewer frames may hold an object the map has not confirmed)."""
-    discovery_margin_frac: float = 0.1
-    """Returns within this fraction of the image width / height of the border do not mark table
-    cells, and predicted views count only the inner image (truncated detections do not seed
-    map objects)."""
-    discovery_exclude_truncated_px: float = 0.0
-    """Pixels inside a detection box within this many pixels of the image edge (a truncated
-    detection; the association's ``border_margin_px`` is 2) do not mark table cells: the object
-    there may never be confirmed. 0 = off (the default; the reports were made without it).
-    Measured on scene06, seed 6, 35° camera, exact poses: a block detected truncated in all but two
-    frames was never mapped while its cells counted as seen (core ``explore::discovery``)."""
-    discovery_evidence_height_m: float = 0.02
-    """Depth returns more than this above the table top are evidence of an object, not a sight of
-    the table (counted from the whole image, border included): they do not mark table cells seen,
-    so the cells stay unknown until a map object covers them; cells with such evidence far from
-    every map object are *unexplained* (the depth shows an object the map does not have: detected
-    only truncated, or too few times) and draw discovery views centred on them. 0 = off.
-    Core ``explore::discovery``; measured in ``studies/discovery_evidence/``."""
-    discovery_evidence_weight: float = 10.0
-    """An unexplained table cell counts as this many unseen cells in the discovery count, gain
-    and budget reserve (a 5 cm block overlaps 9-16 cells of 2 cm; ``discovery_min_new_cells`` is 25)."""
-    discovery_evidence_explained_m: float = 0.025
-    """Evidence within this distance of a map object's primitive is explained by it, metres."""
-    discovery_evidence_max_views: int = 2
-    """After this many views taken for unexplained cells they count as plain unseen cells (an
-    object a centred view cannot get into the map does not take the budget)."""
+RUNTIME_KEYS = {"slam": ("pose_source",), "explore": ("strategy", "seed")}
+"""Core keys the episode fills from the run config's top level (``pose_source``, ``strategy``,
+``seed``); setting them in a core table is an error."""
 
 
-@dataclass(frozen=True)
-class NaiveMapperConfig:
-    """Configuration of the naive mapper (mirrors ``objslam_core::naive::NaiveConfig``)."""
+def resolve_core_tables(tables: dict[str, Any]) -> dict[str, dict[str, Any]]:
+    """The core tables complete (missing keys take the core's defaults), range-checked by the core;
+    a :class:`ConfigError` names the key as ``table.key``. Keys whose value is unset (null) are
+    left out (TOML has no null)."""
+    from . import _native
 
-    pixel_stride: int = 4
-    iou_threshold: float = 0.3
-    voxel_m: float = 0.005
-    trim_fraction: float = 0.02
-    min_points: int = 20
-    max_depth_m: float = 3.0
-
-
-WINDOW_KEEP = ("latest", "most_segments", "most_segments_yaw")
-
-
-@dataclass(frozen=True)
-class ParamRunConfig:
-    """Parameterization knobs a run usually changes (the rest keep the core's ``ParamConfig``
-    defaults, documented in ``core/src/objects``)."""
-
-    refine_center: bool = True
-    """Let the yaw/scale refinement also move the centre (the paper refines yaw and scale only)."""
-    refine_prior_px_per_m: float = 200.0
-    """Weight of the refinement's prior on centre and scale, pixels per metre."""
-    iforest_passes: int = 1
-    """Isolation-forest fits per estimate, each on the points the previous kept. 1 = the paper's
-    Algorithm 1 (the run default: the local clouds are already cut to the object's surface, and
-    more passes trim its extremes — Init sweep refined 3D IoU 0.656 with 1 pass vs 0.620 with 4);
-    the core's own default of 4 suits heavily contaminated clouds (``core/src/objects/iforest.rs``)."""
-    iforest_readmit_rings: int = 3
-    """Beyond the paper: after removal, rings of re-admission of removed points lying within
-    ``iforest_readmit_gap`` × the kept cloud's median point spacing of a kept point (border points
-    of a clean surface come back; points behind a gap stay out). 0 = the paper's plain removal.
-    Chosen on the Init sweep, seed 0 (iForest-stage 3D IoU 0.399 → 0.415, refined 0.656 → 0.672)
-    and confirmed on held-out seed 1 (0.390 → 0.403, refined 0.635 → 0.651); rings 1-10 and gaps
-    2-4 were tried (``core/examples/param_replay.rs`` on recorded estimator inputs)."""
-    iforest_readmit_gap: float = 4.0
-    """Gap separating an outlier from the cloud, in median point spacings (2 gave back too few
-    border points on the Init sweep; 3 and 4 both beat plain removal, 4 by a little more)."""
-    cylinder_fit: bool = True
-    """Beyond the paper: the ``refined`` stage of cylinders is a circle fitted to their side-wall
-    points with the height centred on the points' vertical extent (``core/src/objects/cylinder.rs``);
-    False = the paper (cylinders end at the iForest mean and axis-aligned extent)."""
-    support_snap_m: float = 0.015
-    """Beyond the paper: an estimate whose bottom lies within this of the table top (z = 0) is
-    extended down to it, its top kept (objects stand on the table; the local clouds cut the
-    points within 5 mm of the table, so bottoms sit ~3 mm high: ``ParamConfig::support_z_m`` in
-    ``core/src/objects/mod.rs``). 0 = off (the paper). Default 0.015 m; measured in ``studies/support_snap/``."""
-    cylinder_consensus_iterations: int = 200
-    """Circles through three random side-wall points tried as a second start of the cylinder fit
-    (the one with more points on the circle is kept); 0 = the algebraic start only (a neighbour's points merged into a bottle's cloud can pull that
-    start off the wall). Default 200."""
-    window_keep: str = "most_segments_yaw"
-    """Which frames the line-alignment window (``ParamConfig::window_frames`` = 10) keeps once full
-    (``WindowKeep`` in ``core/src/objects/mod.rs``): ``"most_segments_yaw"`` (default, beyond the
-    paper) = Alg. 2's yaw sampling on the ten frames with the most LSD segments in the object's box,
-    the refinement on the last ten; ``"latest"`` = the last ten for both (the paper's "t consecutive
-    images"); ``"most_segments"`` = the most-segment ten for both. Alg. 2 weighs every frame by its
-    share of aligned segments, so frames that see an object small (two to five segments) can decide
-    its yaw with noisy votes. Measurements: ``studies/window_keep/``."""
-    cylinder_top_from_face: bool = True
-    """Beyond the paper: a cylinder's top from the median height of its top face's points instead
-    of its highest point, which depth noise lifts ~3 σ above the face (``core/src/objects/cylinder.rs``).
-    Default true; false = the highest point (the paper). Measurements:
-    ``studies/cylinder_top_from_face/``."""
-
-@dataclass(frozen=True)
-class PriorNoiseConfig:
-    """The estimator's assumed error of the kinematic pose prior (core ``PriorNoiseConfig``): the
-    SLAM's world ← map gauge weights and its prior and motion gates. Its own tuning, never read from
-    the simulator: the robot's actual error is ``[robot]`` (:mod:`objslam.calibration`)."""
-
-    bias_trans_m: float = 0.01
-    """Assumed translation error constant over a view, metres (its magnitude). Default 0.01."""
-    bias_rot_deg: float = 1.0
-    """Assumed rotation error constant over a view, degrees. Default 1.0."""
-    jitter_trans_m: float = 0.0005
-    """Assumed per-frame translation error, standard deviation per axis, metres. Default 0.0005."""
-    jitter_rot_deg: float = 0.05
-    """Assumed per-frame rotation error, standard deviation per axis, degrees. Default 0.05."""
+    for table, keys in RUNTIME_KEYS.items():
+        given = tables.get(table)
+        if isinstance(given, dict):
+            for k in keys:
+                if k in given:
+                    raise ConfigError(f"{table}.{k}: set by the run's top-level {k!r}, not in [{table}]")
+    for table in CORE_TABLES:
+        if table in tables and not isinstance(tables[table], dict):
+            raise ConfigError(f"{table}: expected a table")
+    try:
+        resolved = json.loads(_native.resolve_config(json.dumps(tables)))
+    except ValueError as e:
+        raise ConfigError(str(e)) from e
+    for table, keys in RUNTIME_KEYS.items():
+        for k in keys:
+            resolved[table].pop(k, None)
+    return {t: _drop_none(resolved[t]) for t in CORE_TABLES}
 
 
-@dataclass(frozen=True)
-class EvalConfig:
-    """Evaluation (mirrors ``objslam_core::eval::EvalConfig``)."""
-
-    max_match_distance_m: float = 0.10
-    square_tolerance: float = 0.05
+def _drop_none(d: dict[str, Any]) -> dict[str, Any]:
+    return {k: _drop_none(v) if isinstance(v, dict) else v for k, v in d.items() if v is not None}
 
 
 @dataclass(frozen=True)
@@ -300,71 +158,27 @@ class RunConfig:
     view; falls back to ``joint`` when a waypoint is unreachable) or ``joint`` (the planner's
     joint-space path, during which the camera can swing off the table); both timed by the planner's
     Ruckig trajectories (``SimWorld.move_along``)."""
-    association_mode: str = "ensemble"
-    """Association: ``naive`` (the foundation baseline), ``iou``, ``iou_np``, ``iou_t`` or
-    ``ensemble`` (the paper's method; see the core's ``association`` module)."""
-    parameterize: bool = True
-    """Run object parameterization (iForest, line-alignment yaw, refinement) after association."""
     pose_source: str = "slam"
     """Camera pose used by the mapper: ``slam`` (default: visual tracking seeded by the kinematic
     prior, the paper's ORB-SLAM2 role), ``kinematics`` (the prior as is, with the tracker's map
     points), ``ground_truth`` (oracle, an ablation: the only source the true pose reaches), ``fk``
     (the prior as is, no tracker; fast runs). The prior is forward kinematics of the nominal robot
     model on the joint readings; its error is the simulated robot's (``[robot]``)."""
-    object_points: str = "depth"
-    """Local object point clouds for the association: ``depth`` (depth pixels in each box) or
-    ``slam_map`` (the SLAM map points observed in each box, the paper's Sec. III-B; needs a
-    pose source other than ``fk``, which runs no tracker)."""
-    consolidate: bool = True
-    """Beyond the paper: fold same-label objects whose boxes overlap into one after each view (the
-    statistical tests split objects seen from very different viewpoints). False = the paper's
-    pipeline."""
-    consolidate_cloud_overlap: float = 0.5
-    """With ``consolidate``: two same-label objects whose boxes intersect are also folded when at
-    least this share of the smaller cloud lies within 1 cm of the other cloud (they see the same
-    surface). Above 1 disables this test."""
-    relabel_vote_ratio: float = 4.0
-    """With ``consolidate``: an object seen under another label at the place of an object with at
-    least this many times its observations is folded into it (a detector label confusion, not a
-    second object); the label is then the majority vote. 0 disables."""
-    min_observations: int = 3
-    """Objects seen fewer times are left out of the map (false positives, label confusions)."""
-    follow_slam_gauge: bool = True
-    """With a tracker: when the SLAM re-fits its world ← map gauge to the views' kinematic priors
-    (millimetres per view), move the whole object map with it so points fused under different
-    gauges stay one rigid map (``ObjectPipeline::transform_world``). False keeps each point where
-    its frame's pose put it. Exploration benchmark, seed 0, mean over the 7 scenes: object-driven
-    3D IoU 0.707 → 0.790 and CDE 1.01 → 0.60 cm with it; Init 0.743 → 0.822."""
-    slam_motion_gate_m: float = 0.01
-    """With the ``slam`` pose source: a tracked pose farther than this, metres, from the last
-    tracked frame of the same view moved by the prior's motion is lost and dead-reckoned instead
-    (the core's ``TrackerConfig::motion_gate_floor_m``): a frame that sees little of the scene
-    cannot track to a consensus centimetres off and corrupt the map. Default 0.01; 0 disables.
-    Measurements: ``studies/motion_gate/``."""
-    slam_motion_gate_deg: float = 2.0
-    """The same gate's rotation floor, degrees (``motion_gate_floor_deg``). Default 2; 0 disables."""
-    slam_motion_gate_references: int = 2
-    """How many of the last tracked frames of the view the motion gate predicts from; a pose
-    passes when it agrees with any, so one reference accepted slightly off is outvoted
-    (``motion_gate_references``, at least 1). Default 2."""
-    slam_extend_after_unmapped: int = 3
-    """With the ``slam`` pose source: after this many consecutive lost frames that show the scene
-    but little of the SLAM map (the camera looks where the map has no points), insert a fixed
-    keyframe at the frame's estimated pose and track on from it, keeping the old map (the core's
-    ``TrackerConfig::extend_after_unmapped``). Default 3; 0 = such frames count towards a map
-    reset. Measurements: ``studies/narrow_fov/``."""
     camera: CameraConfig = field(default_factory=CameraConfig)
     detector: DetectorConfig = field(default_factory=DetectorConfig)
     textures: TextureConfig = field(default_factory=TextureConfig)
-    naive: NaiveMapperConfig = field(default_factory=NaiveMapperConfig)
-    param: ParamRunConfig = field(default_factory=ParamRunConfig)
-    prior_noise: PriorNoiseConfig = field(default_factory=PriorNoiseConfig)
     robot: RobotConfig = field(default_factory=RobotConfig)
     table: TableConfig = field(default_factory=TableConfig)
     contact: ContactConfig = field(default_factory=ContactConfig)
-    eval: EvalConfig = field(default_factory=EvalConfig)
-    explore: ExploreRunConfig = field(default_factory=ExploreRunConfig)
     record: RecordConfig = field(default_factory=RecordConfig)
+    slam: dict[str, Any] = field(default_factory=dict)
+    """Visual tracking (core ``TrackerConfig``; ``pose_source`` comes from the top level)."""
+    map: dict[str, Any] = field(default_factory=dict)
+    """The object map: association, consolidation, parameterization (core ``PipelineConfig``)."""
+    explore: dict[str, Any] = field(default_factory=dict)
+    """Exploration (core ``ActiveConfig``; ``strategy`` and ``seed`` come from the top level)."""
+    eval: dict[str, Any] = field(default_factory=dict)
+    """Scoring against the truth (core ``EvalConfig``)."""
 
     def validate(self) -> None:
         """Raise :class:`ConfigError` naming the key if a value is out of range."""
@@ -388,10 +202,6 @@ class RunConfig:
                 f"strategy: unknown {self.strategy!r}; known: {', '.join(STRATEGIES)} "
                 "(or set python_strategy for a strategy written in Python)"
             )
-        if self.association_mode not in ASSOCIATION_MODES:
-            raise ConfigError(
-                f"association_mode: unknown {self.association_mode!r}; known: {', '.join(ASSOCIATION_MODES)}"
-            )
         if self.preset not in available_presets():
             raise ConfigError(f"preset: unknown {self.preset!r}; known: {', '.join(available_presets())}")
         if self.seed < 0:
@@ -404,36 +214,10 @@ class RunConfig:
             raise ConfigError(f"camera_path: unknown {self.camera_path!r}; known: {', '.join(CAMERA_PATHS)}")
         if self.pose_source not in POSE_SOURCES:
             raise ConfigError(f"pose_source: unknown {self.pose_source!r}; known: {', '.join(POSE_SOURCES)}")
-        if not (0.0 < self.consolidate_cloud_overlap):
-            raise ConfigError("consolidate_cloud_overlap: must be > 0 (above 1 disables the test)")
-        if self.relabel_vote_ratio < 0.0:
-            raise ConfigError("relabel_vote_ratio: must be ≥ 0 (0 disables the label-confusion fold)")
-        if self.object_points not in OBJECT_POINT_SOURCES:
+        if self.map.get("object_points") == "slam_map" and self.pose_source == "fk":
             raise ConfigError(
-                f"object_points: unknown {self.object_points!r}; known: {', '.join(OBJECT_POINT_SOURCES)}"
+                "map.object_points: slam_map needs a tracker (pose_source kinematics, slam or ground_truth)"
             )
-        if self.object_points == "slam_map" and self.pose_source == "fk":
-            raise ConfigError(
-                "object_points: slam_map needs a tracker (pose_source kinematics, slam or ground_truth)"
-            )
-        if self.param.iforest_passes < 1:
-            raise ConfigError("param.iforest_passes: must be ≥ 1")
-        if self.param.iforest_readmit_rings < 0:
-            raise ConfigError("param.iforest_readmit_rings: must be ≥ 0")
-        if not (self.param.support_snap_m >= 0.0 and math.isfinite(self.param.support_snap_m)):
-            raise ConfigError("param.support_snap_m: must be a finite number ≥ 0")
-        if self.param.window_keep not in WINDOW_KEEP:
-            raise ConfigError(f"param.window_keep: unknown {self.param.window_keep!r}; known: {', '.join(WINDOW_KEEP)}")
-        if self.param.cylinder_consensus_iterations < 0:
-            raise ConfigError("param.cylinder_consensus_iterations: must be ≥ 0")
-        if not (self.param.iforest_readmit_gap > 0 and math.isfinite(self.param.iforest_readmit_gap)):
-            raise ConfigError("param.iforest_readmit_gap: must be a finite number > 0")
-        if self.slam_extend_after_unmapped < 0:
-            raise ConfigError("slam_extend_after_unmapped: must be ≥ 0 (0 disables)")
-        if self.min_observations < 1:
-            raise ConfigError("min_observations: must be ≥ 1")
-        if self.explore.max_views < 0:
-            raise ConfigError("explore.max_views: must be ≥ 0")
         if self.record.every_n_frames < 1:
             raise ConfigError("record.every_n_frames: must be ≥ 1")
         if self.record.depth_every_n_frames < 1:
@@ -453,8 +237,6 @@ class RunConfig:
 
 POSE_SOURCES = ("fk", "kinematics", "slam", "ground_truth")
 CAMERA_PATHS = ("cartesian", "joint")
-OBJECT_POINT_SOURCES = ("depth", "slam_map")
-ASSOCIATION_MODES = ("naive", "iou", "iou_np", "iou_t", "ensemble")
 STRATEGIES = ("init", "object-driven", "random", "coverage", "expected-gain")
 
 
@@ -589,6 +371,7 @@ def load_run_config(
     if strategy is not None:
         data["strategy"] = strategy
     data["preset"] = chosen_preset
+    data.update(resolve_core_tables({t: data.get(t, {}) for t in CORE_TABLES}))
     cfg = _build(RunConfig, data, "")
     cfg.validate()
     return cfg
@@ -620,10 +403,6 @@ __all__ = [
     "ContactConfig",
     "DepthNoiseConfig",
     "DetectorConfig",
-    "EvalConfig",
-    "ExploreRunConfig",
-    "NaiveMapperConfig",
-    "PriorNoiseConfig",
     "RecordConfig",
     "RobotConfig",
     "RunConfig",

@@ -23,6 +23,7 @@ renamed), so a failed write never truncates what was already complete; the map s
 
 from __future__ import annotations
 
+import copy
 import gc
 import json
 import os
@@ -103,10 +104,8 @@ def grey_of(rgb: np.ndarray) -> np.ndarray:
 
 def active_config(cfg: RunConfig) -> dict[str, Any]:
     """The core's ``ActiveConfig`` JSON from a run config."""
-    e = to_dict(cfg.explore)
-    e["lambda"] = e.pop("utility_lambda")
     # A Python strategy decides in Python; the core session only keeps the grids and the history.
-    return {"strategy": "init" if cfg.python_strategy else cfg.strategy, "seed": cfg.seed, **e}
+    return {**cfg.explore, "strategy": "init" if cfg.python_strategy else cfg.strategy, "seed": cfg.seed}
 
 
 def _log_decision(rec: Any, decision: dict[str, Any]) -> None:
@@ -147,7 +146,7 @@ def _python_decision(
         rng=rng,
         table_center=(float(scene.table.center[0]), float(scene.table.center[1])),
         table_size=(float(scene.table.size[0]), float(scene.table.size[1])),
-        explore=to_dict(cfg.explore),
+        explore=dict(cfg.explore),
     )
     view = as_view(strategy.next_view(step), f"{cfg.python_strategy}.next_view")
     if view is None:
@@ -314,70 +313,39 @@ def _log_robot(rec: Any, world: SimWorld) -> None:
     rec.log_robot_pose({link.name: pose_to_matrix(link.entity_pose) for link in world.robot.get_links()})
 
 
+def mapper_config(cfg: RunConfig, table: tuple[float, float, float], seeds: dict[str, int] | None) -> dict[str, Any]:
+    """The core's ``PipelineConfig``: the run's ``[map]`` table with the episode's inputs filled in:
+    the table plane the cell's calibration gives (``[table]``: the local clouds cut the table around
+    it, and with ``param.support_snap_m`` > 0 estimates resting near it are extended down to it),
+    and, with ``seed_algorithms``, the iForest and cylinder-fit seeds."""
+    m = copy.deepcopy(cfg.map)
+    m.setdefault("local", {})["table_prior"] = list(table)
+    param = m.setdefault("param", {})
+    if param.get("support_snap_m", 0.0) > 0.0:
+        param["support_z_m"] = table[2]
+        param["support_slope"] = [table[0], table[1]]
+    if seeds:
+        param.setdefault("iforest", {})["seed"] = seeds["iforest"]
+        param.setdefault("cylinder", {})["seed"] = seeds["cylinder"]
+    return m
+
+
 def new_mapper(cfg: RunConfig, scene: SceneSpec) -> Any:
     """A fresh :class:`_native.ActiveMapper` (association, parameterization, grids, tracker) for
     a run config and scene (also used for the local re-observation maps of :mod:`objslam.grasp`)."""
     seeds = algorithm_seeds(cfg.seed, scene.seed) if cfg.seed_algorithms else None
     table = episode_table_plane(cfg, scene)
     return _native.ActiveMapper(
-        mapper_config_json=json.dumps(
-            {
-                "association_mode": cfg.association_mode,
-                "parameterize": cfg.parameterize,
-                "consolidate": cfg.consolidate,
-                "consolidate_cloud_overlap": cfg.consolidate_cloud_overlap,
-                "relabel_vote_ratio": cfg.relabel_vote_ratio,
-                "min_observations": cfg.min_observations,
-                "follow_slam_gauge": cfg.follow_slam_gauge,
-                # Only when not the default, so a core built before the option still loads.
-                **({"object_points": cfg.object_points} if cfg.object_points != "depth" else {}),
-                "naive": to_dict(cfg.naive),
-                # The table plane the mapper is given ([table]): local clouds cut the table around it.
-                "local": {"table_prior": list(table)},
-                "param": {
-                    "iforest": {
-                        **({"seed": seeds["iforest"]} if seeds else {}),
-                        "passes": cfg.param.iforest_passes,
-                        "readmit_rings": cfg.param.iforest_readmit_rings,
-                        "readmit_gap_factor": cfg.param.iforest_readmit_gap,
-                    },
-                    "window_keep": cfg.param.window_keep,
-                    # The table plane as the cell's calibration gives it ([table]); 0 = no support snap.
-                    **(
-                        {
-                            "support_z_m": table[2],
-                            "support_slope": [table[0], table[1]],
-                            "support_snap_m": cfg.param.support_snap_m,
-                        }
-                        if cfg.param.support_snap_m > 0.0
-                        else {}
-                    ),
-                    "cylinder": {
-                        **({"seed": seeds["cylinder"]} if seeds else {}),
-                        "enabled": cfg.param.cylinder_fit,
-                        "consensus_iterations": cfg.param.cylinder_consensus_iterations,
-                        "top_from_face": cfg.param.cylinder_top_from_face,
-                    },
-                    "refine": {
-                        "refine_center": cfg.param.refine_center,
-                        "prior_px_per_m": cfg.param.refine_prior_px_per_m,
-                    },
-                },
-            }
-        ),
+        mapper_config_json=json.dumps(mapper_config(cfg, table, seeds)),
         active_config_json=json.dumps(active_config(cfg)),
         table=(*scene.table.center, *scene.table.size),
         tracker_config_json=None
         if cfg.pose_source == "fk"
         else json.dumps(
             {
+                **cfg.slam,
                 "pose_source": cfg.pose_source,
-                "motion_gate_floor_m": cfg.slam_motion_gate_m,
-                "motion_gate_floor_deg": cfg.slam_motion_gate_deg,
-                "motion_gate_references": cfg.slam_motion_gate_references,
-                "extend_after_unmapped": cfg.slam_extend_after_unmapped,
-                "prior_noise": to_dict(cfg.prior_noise),
-                **({"ransac": {"seed": seeds["ransac"]}} if seeds else {}),
+                **({"ransac": {**cfg.slam.get("ransac", {}), "seed": seeds["ransac"]}} if seeds else {}),
             }
         ),
     )
@@ -431,7 +399,7 @@ def run_episode(
     try:
         mapper = new_mapper(cfg, scene)
     except _native.InputError as e:
-        raise ConfigError(_run_config_names(str(e))) from None
+        raise ConfigError(str(e)) from None
     run_dir = _make_run_dir(cfg, scene)
     import tomli_w
 
@@ -469,7 +437,7 @@ def run_episode(
         if cfg.record.robot:
             _log_robot(rec, world)
         init_views = mapper.initial_views()
-        budget = len(init_views) + (0 if cfg.strategy == "init" else cfg.explore.max_views)
+        budget = len(init_views) + (0 if cfg.strategy == "init" else cfg.explore["max_views"])
         bar = None
         if progress:
             from tqdm import tqdm
@@ -491,7 +459,7 @@ def run_episode(
                 depth=frame.depth_m,
                 world_from_camera=prior,
                 detections=[d.as_tuple() for d in dets],
-                grey=grey_of(frame.rgb) if (cfg.parameterize or cfg.pose_source != "fk") else None,
+                grey=grey_of(frame.rgb) if (cfg.map["parameterize"] or cfg.pose_source != "fk") else None,
                 world_from_camera_gt=frame.world_from_camera_gt,
                 view_index=view_counter[0],
             )
@@ -538,7 +506,7 @@ def run_episode(
             map_json = mapper.map_json()
             ev = json.loads(
                 _native.evaluate_map(
-                    json.dumps(gt_objects(scene, world.ground_truth())), map_json, json.dumps(to_dict(cfg.eval))
+                    json.dumps(gt_objects(scene, world.ground_truth())), map_json, json.dumps(cfg.eval)
                 )
             )
             accuracy_curve.append(
@@ -641,12 +609,12 @@ def run_episode(
         if cfg.record.estimator_inputs:
             inputs = json.loads(mapper.estimator_inputs_json())
             _write_atomic(run_dir / "estimator_inputs.json", json.dumps({"objects": inputs, "ground_truth": gt}))
-        evaluation = json.loads(_native.evaluate_map(json.dumps(gt), map_json, json.dumps(to_dict(cfg.eval))))
+        evaluation = json.loads(_native.evaluate_map(json.dumps(gt), map_json, json.dumps(cfg.eval)))
         stages = {}
         for stage in ("raw", "iforest", "lines", "refined"):
             ev = json.loads(
                 _native.evaluate_map(
-                    json.dumps(gt), mapper.stage_map_json(stage), json.dumps(to_dict(cfg.eval))
+                    json.dumps(gt), mapper.stage_map_json(stage), json.dumps(cfg.eval)
                 )
             )
             stages[stage] = ev["mean"]
@@ -667,7 +635,7 @@ def run_episode(
             "objects": evaluation["objects"],
             "n_matched": evaluation["n_matched"],
             "nbv_views": mapper.views_taken(),
-            "association_mode": cfg.association_mode,
+            "association_mode": cfg.map["association_mode"],
             "pose_source": cfg.pose_source,
             **(mapper.pose_metrics() or {}),
             "prior_error": prior_error_summary(prior_errors),
@@ -730,31 +698,6 @@ def run_episode(
     finally:
         if previous_sigterm is not None:
             signal.signal(signal.SIGTERM, previous_sigterm)
-
-
-#: Core config field names and the run config's names for them (``config.py``), so an error the
-#: core raises names the key the user wrote.
-_CORE_NAMES = (
-    ("param.iforest.passes", "param.iforest_passes"),
-    ("param.iforest.readmit_rings", "param.iforest_readmit_rings"),
-    ("param.iforest.readmit_gap_factor", "param.iforest_readmit_gap"),
-    ("param.cylinder.consensus_iterations", "param.cylinder_consensus_iterations"),
-    ("param.refine.prior_px_per_m", "param.refine_prior_px_per_m"),
-    ("config field cell_size_m", "explore.cell_m"),
-    ("config field discovery.", "explore.discovery_"),
-    ("config field lambda", "explore.utility_lambda"),
-    ("config field ", "explore."),
-    ("kinematic_noise", "pose_noise"),
-    ("motion_gate_floor_m", "slam_motion_gate_m"),
-    ("motion_gate_floor_deg", "slam_motion_gate_deg"),
-)
-
-
-def _run_config_names(message: str) -> str:
-    """A core config error re-worded with the run config's key names."""
-    for core, ours in _CORE_NAMES:
-        message = message.replace(core, ours)
-    return message
 
 
 def _stop_status(e: BaseException) -> str:

@@ -374,7 +374,7 @@ class GraspSession:
                     depth=frame.depth_m,
                     world_from_camera=self.arm.prior(frame.world_from_camera_fk, vi, frame.index),
                     detections=[d.as_tuple() for d in dets],
-                    grey=grey_of(frame.rgb) if (rc.parameterize or rc.pose_source != "fk") else None,
+                    grey=grey_of(frame.rgb) if (rc.map["parameterize"] or rc.pose_source != "fk") else None,
                     world_from_camera_gt=frame.world_from_camera_gt,
                     view_index=vi,
                 )

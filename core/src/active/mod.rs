@@ -48,7 +48,7 @@ use nalgebra::Point3;
 #[serde(default, deny_unknown_fields)]
 pub struct ActiveConfig {
     /// Strategy name: object-driven | random | coverage | init | expected-gain.
-    pub strategy: String,
+    pub strategy: Strategy,
     /// Seeds candidate sampling and random views.
     pub seed: u64,
     /// Views after Init, at most (paper: 10).
@@ -123,7 +123,7 @@ impl Default for ActiveConfig {
         let e = ExploreConfig::default();
         let c = CandidateConfig::default();
         Self {
-            strategy: Strategy::ObjectDriven.as_str().into(),
+            strategy: Strategy::ObjectDriven,
             seed: 0,
             max_views: e.max_views,
             lambda: e.lambda,
@@ -250,7 +250,7 @@ pub struct ActiveSession {
 impl ActiveSession {
     /// A session for a table; validates the config.
     pub fn new(config: ActiveConfig, table: TableRect) -> Result<Self, ExploreError> {
-        let strategy = Strategy::parse(&config.strategy)?;
+        let strategy = config.strategy;
         let mut explore =
             ExploreConfig { lambda: config.lambda, max_views: config.max_views, ..ExploreConfig::default() };
         explore.grid.cell_size_m = config.cell_m;

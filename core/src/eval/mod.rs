@@ -39,6 +39,7 @@ use crate::map::{Label, ObjectMap};
 
 /// Configuration of the evaluation.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct EvalConfig {
     /// Estimates farther than this from a GT centre are not matched to it (metres). Default 0.10:
     /// about the size of the smallest benchmark objects' footprint; the paper gives no value.

@@ -86,7 +86,7 @@ pub struct DiscoveryConfig {
     /// w: weight of the discovery gain added to every candidate's utility; 0 = no mixed term.
     pub weight: f64,
     /// Do not stop on "every object done" while a view would still see `min_new_cells` unseen
-    /// cells (false = the paper's stopping rule).
+    /// cells (default true; false = the paper's stopping rule).
     pub before_stop: bool,
     /// Table cell side, metres, in [1 mm, 1 m]; the table must give at most [`MAX_TABLE_CELLS`] cells.
     pub cell_m: f64,
@@ -101,8 +101,8 @@ pub struct DiscoveryConfig {
     /// at the table.
     pub targets: usize,
     /// Budget reserve: take a discovery view now when the views left in the budget are no more
-    /// than the discovery views still worth taking ([`greedy_discovery_views`]); false = spend
-    /// the budget on the objects until the stopping rule.
+    /// than the discovery views still worth taking ([`greedy_discovery_views`]); default true;
+    /// false = spend the budget on the objects until the stopping rule.
     pub reserve: bool,
     /// A cell counts as seen once depth returns landed in it in this many frames (the map
     /// confirms an object after `pipeline.min_observations` untruncated detections: a cell seen
@@ -120,8 +120,8 @@ pub struct DiscoveryConfig {
     /// counted as seen from the pixels inside `margin_frac`.
     pub exclude_truncated_px: f64,
     /// Returns more than this above the table top are object evidence, not a sight of the table
-    /// (they do not mark the cell seen); 0 = off (the default; every return up to `max_height_m`
-    /// marks its cell). Metres.
+    /// (they do not mark the cell seen). Metres, default 0.02; 0 = off (every return up to
+    /// `max_height_m` marks its cell).
     pub evidence_height_m: f64,
     /// An unexplained cell (evidence, not seen, farther than `evidence_explained_m` from every
     /// mapped object) counts as this many unseen cells in the discovery count, gain and reserve.
@@ -137,17 +137,17 @@ impl Default for DiscoveryConfig {
     fn default() -> Self {
         Self {
             weight: 0.0,
-            before_stop: false,
+            before_stop: true,
             cell_m: 0.02,
             min_new_cells: 25,
             pixel_stride: 4,
             max_height_m: 0.4,
             targets: 4,
-            reserve: false,
+            reserve: true,
             min_frames: 3,
             margin_frac: 0.1,
             exclude_truncated_px: 0.0,
-            evidence_height_m: 0.0,
+            evidence_height_m: 0.02,
             evidence_weight: 10.0,
             evidence_explained_m: 0.025,
             evidence_max_views: 2,

@@ -272,8 +272,9 @@ pub enum EntropyScope {
     Object,
 }
 
-/// Exploration strategies (names as in the benchmark report).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
+/// Exploration strategies (names as in the benchmark report and the run config).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
 pub enum Strategy {
     /// The paper's utility over candidate views ("object-driven").
     ObjectDriven,
@@ -467,15 +468,15 @@ impl Default for CandidateConfig {
         Self {
             views_per_object: 12,
             distance_m: [0.35, 0.6],
-            elevation_deg: [25.0, 75.0],
+            elevation_deg: [45.0, 80.0],
             min_camera_height_m: 0.1,
             collision_margin_m: 0.05,
-            init_height_m: 0.45,
-            init_inset_m: 0.15,
-            init_tilt_deg: 0.0,
+            init_height_m: 0.5,
+            init_inset_m: 0.3,
+            init_tilt_deg: 20.0,
             coverage_height_m: 0.45,
             coverage_overlap: 0.3,
-            coverage_inset_m: 0.1,
+            coverage_inset_m: 0.15,
             random_height_m: [0.3, 0.6],
             max_attempts_per_view: 50,
         }

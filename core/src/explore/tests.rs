@@ -442,7 +442,14 @@ fn look_at_points_z_at_target_with_image_up_along_world_z() {
 #[test]
 fn baseline_generators() {
     let table = TableRect { center_m: [0.5, 0.0], size_m: [0.8, 1.2], height_m: 0.0 };
-    let cc = CandidateConfig::default();
+    // The paper's Init: straight down, 0.45 m high, corners inset 0.15 m.
+    let cc = CandidateConfig {
+        init_height_m: 0.45,
+        init_inset_m: 0.15,
+        init_tilt_deg: 0.0,
+        coverage_inset_m: 0.1,
+        ..CandidateConfig::default()
+    };
     let init = init_views(&table, &cc).unwrap();
     assert_eq!(init.len(), 4);
     for v in &init {
@@ -582,7 +589,7 @@ fn a_top_down_view_sees_its_footprint_of_the_table() {
     let depth = DepthImage::new(640, 480, vec![h as f32; 640 * 480]).unwrap();
     // One frame marks a cell and the whole image counts (the closed form below); the default
     // rules (3 frames, 10 % border) are checked at the end.
-    let cfg = on(DiscoveryConfig { min_frames: 1, margin_frac: 0.0, ..DiscoveryConfig::default() });
+    let cfg = on(DiscoveryConfig { min_frames: 1, margin_frac: 0.0, ..paper_discovery() });
     let mut cov = TableCoverage::new(&table(), &cfg).unwrap();
     assert_eq!(cov.len(), 40 * 60);
     let newly = cov.integrate_depth(&cam, &pose, &depth, &cfg).unwrap();
@@ -605,7 +612,7 @@ fn a_top_down_view_sees_its_footprint_of_the_table() {
     let small = DepthImage::new(64, 48, vec![0.5; 64 * 48]).unwrap();
     assert!(matches!(cov2.integrate_depth(&cam, &pose, &small, &cfg), Err(ExploreError::Degenerate { .. })));
     // Defaults: nothing is seen after two frames, the inner 80 % × 80 % footprint after three.
-    let strict = on(DiscoveryConfig::default());
+    let strict = on(paper_discovery());
     let mut cov3 = TableCoverage::new(&table(), &strict).unwrap();
     for k in 0..3 {
         let n = cov3.integrate_depth(&cam, &pose, &depth, &strict).unwrap();
@@ -615,7 +622,7 @@ fn a_top_down_view_sees_its_footprint_of_the_table() {
     let seen3 = cov3.seen_cells() as f64;
     assert!(seen3 >= (a3 - 1.0) * (b3 - 1.0) && seen3 <= (a3 + 2.0) * (b3 + 2.0), "seen {seen3}, {a3} × {b3}");
     // A bad rule is a typed error naming the field.
-    let bad = DiscoveryConfig { min_frames: 0, ..DiscoveryConfig::default() };
+    let bad = DiscoveryConfig { min_frames: 0, ..paper_discovery() };
     assert!(matches!(
         TableCoverage::new(&table(), &bad),
         Err(ExploreError::InvalidConfig { field: "discovery.min_frames", .. })
@@ -625,7 +632,7 @@ fn a_top_down_view_sees_its_footprint_of_the_table() {
 #[test]
 fn unseen_cells_are_counted_where_the_camera_looks_and_not_behind_objects() {
     let cam = camera();
-    let cfg = on(DiscoveryConfig { min_frames: 1, margin_frac: 0.0, ..DiscoveryConfig::default() });
+    let cfg = on(DiscoveryConfig { min_frames: 1, margin_frac: 0.0, ..paper_discovery() });
     let grid = GridConfig::default();
     let mut cov = TableCoverage::new(&table(), &cfg).unwrap();
     // See the y < 0 half from above (depth 0.5 over the view's footprint).
@@ -674,7 +681,7 @@ fn discovery_keeps_an_empty_map_looking_at_the_table() {
     let cam = camera();
     let here = view(Point3::new(0.3, 0.0, 0.5), [0.5, 0.0, 0.0]);
     let map = ObjectMap::new();
-    let paper = ActiveConfig::default();
+    let paper = paper_active();
     let mut s = ActiveSession::new(paper.clone(), table()).unwrap();
     let d = s.next_view(&map, &cam, &here, &AlwaysReachable).unwrap();
     assert_eq!(d, NextView::Stop { reason: SessionStop::NoReachableView });
@@ -734,11 +741,11 @@ fn before_stop_looks_at_the_unseen_table_when_every_object_is_done() {
         let d = s.next_view(&map, &cam, &poses[0], &AlwaysReachable).unwrap();
         (d, known, s.table_known_curve().len())
     };
-    let (paper, known, n) = run(ActiveConfig::default());
+    let (paper, known, n) = run(paper_active());
     assert_eq!(paper, NextView::Stop { reason: SessionStop::AllExplored }, "the block is done");
     assert_eq!(n, poses.len());
     assert!(known > 0.05 && known < 0.6, "the small camera saw part of the table: {known}");
-    let (disc, _, _) = run(ActiveConfig { discovery_before_stop: true, ..ActiveConfig::default() });
+    let (disc, _, _) = run(ActiveConfig { discovery_before_stop: true, ..paper_active() });
     let NextView::Move { world_from_camera, utility, candidates } = disc else { panic!("expected a move: {disc:?}") };
     assert!(utility >= 4.0 * 25.0, "{utility}");
     assert!(candidates.iter().all(|c| c.utility.is_finite()));
@@ -786,18 +793,15 @@ fn the_budget_reserve_takes_the_last_view_for_the_unseen_table() {
         let d = s.next_view(&map, &cam, &top, &AlwaysReachable).unwrap();
         let NextView::Move { world_from_camera, .. } = d else { panic!("expected a move: {d:?}") };
         let occ = Occluders::from_map(&map, &grid);
-        (
-            world_from_camera,
-            visible_unknown_cells(&unknown, &cam, &world_from_camera, &occ, &grid, &DiscoveryConfig::default()),
-        )
+        (world_from_camera, visible_unknown_cells(&unknown, &cam, &world_from_camera, &occ, &grid, &paper_discovery()))
     };
-    let reserve = ActiveConfig { discovery_reserve: true, ..ActiveConfig::default() };
+    let reserve = ActiveConfig { discovery_reserve: true, ..paper_active() };
     // Plenty of budget left: the object NBV, exactly the paper's choice.
-    let (paper_pose, _) = decide(ActiveConfig::default(), 0);
+    let (paper_pose, _) = decide(paper_active(), 0);
     let (early_pose, _) = decide(reserve.clone(), 0);
     assert_eq!(paper_pose, early_pose, "objects first");
     // One view left, and the unseen table needs at least one: a discovery view.
-    let (paper_last, _) = decide(ActiveConfig::default(), 9);
+    let (paper_last, _) = decide(paper_active(), 9);
     let (reserve_last, new_cells) = decide(reserve, 9);
     assert_ne!(paper_last, reserve_last);
     assert!(new_cells >= 25, "the reserve view sees {new_cells} unseen cells");
@@ -818,7 +822,7 @@ fn truncated_detections_do_not_mark_table_cells() {
     let inner = Box2::new(240.0, 160.0, 400.0, 320.0);
     assert_eq!(truncated_boxes([edge, inner], 640, 480, 2.0), vec![edge]);
     assert!(truncated_boxes([edge, inner], 640, 480, 0.0).is_empty());
-    let cfg = on(DiscoveryConfig { min_frames: 1, margin_frac: 0.0, ..DiscoveryConfig::default() });
+    let cfg = on(DiscoveryConfig { min_frames: 1, margin_frac: 0.0, ..paper_discovery() });
     let seen_with = |excluded: &[Box2]| {
         let mut cov = TableCoverage::new(&table(), &cfg).unwrap();
         cov.integrate_depth_excluding(&cam, &pose, &depth, excluded, &cfg).unwrap();
@@ -831,7 +835,7 @@ fn truncated_detections_do_not_mark_table_cells() {
     assert!(lost >= (side - 2.0).powi(2) && lost <= (side + 1.0).powi(2), "lost {lost}, side {side}");
     assert_eq!(seen_with(&truncated_boxes([inner], 640, 480, 2.0)), all);
     // A bad margin is a typed error naming the field.
-    let bad = DiscoveryConfig { exclude_truncated_px: -1.0, ..DiscoveryConfig::default() };
+    let bad = DiscoveryConfig { exclude_truncated_px: -1.0, ..paper_discovery() };
     assert!(matches!(
         TableCoverage::new(&table(), &bad),
         Err(ExploreError::InvalidConfig { field: "discovery.exclude_truncated_px", .. })
@@ -858,7 +862,7 @@ fn object_evidence_keeps_its_cells_unknown_until_a_mapped_object_explains_them()
     let h = 0.5;
     let pose = view(Point3::new(0.5, 0.0, h), [0.5, 0.0, 0.0]);
     let depth = flat_with_top(h, 280..360, 0.45);
-    let base = on(DiscoveryConfig { min_frames: 1, margin_frac: 0.0, ..DiscoveryConfig::default() });
+    let base = on(DiscoveryConfig { min_frames: 1, margin_frac: 0.0, ..paper_discovery() });
     let evidence = DiscoveryConfig { evidence_height_m: 0.02, ..base.clone() };
     let empty = Occluders::from_map(&ObjectMap::new(), &GridConfig::default());
     let cells_with = |cfg: &DiscoveryConfig, occ: &Occluders| {
@@ -897,7 +901,7 @@ fn object_evidence_keeps_its_cells_unknown_until_a_mapped_object_explains_them()
     let (a, b) = (48.0 * 0.45 / cam.fx / base.cell_m, 80.0 * 0.45 / cam.fy / base.cell_m);
     assert!(n >= a.floor() * b.floor() && n <= (a.ceil() + 1.0) * (b.ceil() + 1.0), "{n} cells, {a} × {b}");
     // A height above max_height_m is a typed error naming the field.
-    let bad = DiscoveryConfig { evidence_height_m: 0.5, ..DiscoveryConfig::default() };
+    let bad = DiscoveryConfig { evidence_height_m: 0.5, ..paper_discovery() };
     assert!(matches!(
         TableCoverage::new(&table(), &bad),
         Err(ExploreError::InvalidConfig { field: "discovery.evidence_height_m", .. })
@@ -950,7 +954,7 @@ fn unexplained_evidence_draws_a_view_centred_on_the_unmapped_object() {
         let before = s.clone();
         (s.next_view(&map, &cam, &poses[0], &AlwaysReachable).unwrap(), n, before)
     };
-    let before_stop = ActiveConfig { discovery_before_stop: true, discovery_reserve: true, ..ActiveConfig::default() };
+    let before_stop = ActiveConfig { discovery_before_stop: true, discovery_reserve: true, ..paper_active() };
     let all_explored = NextView::Stop { reason: SessionStop::AllExplored };
     let (d, n, _) = run(before_stop.clone());
     assert_eq!((d, n), (all_explored.clone(), 0), "without evidence B's cells count as seen");
@@ -1010,7 +1014,7 @@ fn the_decision_step_view_reproduces_the_built_in_utility_strategies() {
     let cam = PinholeCamera::from_fovy(96, 72, 0.8).unwrap();
     let top = view(Point3::new(0.5, 0.0, 0.5), [0.5, 0.0, 0.04]);
     for strategy in [Strategy::ObjectDriven, Strategy::ExpectedGain] {
-        let config = ActiveConfig { strategy: strategy.as_str().into(), seed: 7, ..ActiveConfig::default() };
+        let config = ActiveConfig { strategy, seed: 7, ..paper_active() };
         let mut s = ActiveSession::new(config, table()).unwrap();
         for id in 0..2 {
             let (depth, points) = render(&map, &cam, &top, id);
@@ -1044,4 +1048,19 @@ fn the_decision_step_view_reproduces_the_built_in_utility_strategies() {
         }
         assert_eq!(s.paper_stop(&map, &cam).unwrap(), Some(SessionStop::MaxViews));
     }
+}
+
+/// The paper's session: no table discovery (before stop, budget reserve, object evidence).
+fn paper_active() -> crate::active::ActiveConfig {
+    crate::active::ActiveConfig {
+        discovery_before_stop: false,
+        discovery_reserve: false,
+        discovery_evidence_height_m: 0.0,
+        ..crate::active::ActiveConfig::default()
+    }
+}
+
+/// Table discovery settings with before-stop, the reserve and object evidence off.
+fn paper_discovery() -> DiscoveryConfig {
+    DiscoveryConfig { before_stop: false, reserve: false, evidence_height_m: 0.0, ..DiscoveryConfig::default() }
 }

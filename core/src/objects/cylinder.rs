@@ -76,8 +76,7 @@ pub struct CylinderFitConfig {
     /// Seed of the consensus start's point draws (default 0).
     pub seed: u64,
     /// Top of the cylinder from the median height of its top face's points instead of the
-    /// highest point (module docs). Default false here (the library keeps the highest point);
-    /// the simulator's run config turns it on (`param.cylinder_top_from_face`, default true).
+    /// highest point (module docs). Default true; false = the highest point (the paper).
     pub top_from_face: bool,
     /// Top-face points lie horizontally within this fraction of the fitted radius of the axis
     /// (default 0.7).
@@ -100,7 +99,7 @@ impl Default for CylinderFitConfig {
             max_radius_ratio: 1.5,
             consensus_iterations: 200,
             seed: 0,
-            top_from_face: false,
+            top_from_face: true,
             top_face_interior_frac: 0.7,
             top_face_min_points: 20,
         }
@@ -465,7 +464,8 @@ mod tests {
         let highest = pts.iter().map(|p| p.z).fold(f64::NEG_INFINITY, f64::max);
         assert!(highest - h > 2.5 * sigma, "max only {} σ above", (highest - h) / sigma);
         let bottom = pts.iter().map(|p| p.z).fold(f64::INFINITY, f64::min);
-        let old = fit_cylinder(&pts, &CylinderFitConfig::default()).expect("rejected");
+        let old =
+            fit_cylinder(&pts, &CylinderFitConfig { top_from_face: false, ..Default::default() }).expect("rejected");
         assert!(((old.center.z + old.half_extents.z) - highest).abs() < 1e-12, "{old:?}");
         let cfg = CylinderFitConfig { top_from_face: true, ..Default::default() };
         let new = fit_cylinder(&pts, &cfg).expect("rejected");

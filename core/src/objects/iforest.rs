@@ -50,7 +50,7 @@ pub struct IForestConfig {
     pub min_points: usize,
     /// Seed of the ChaCha8 stream that draws subsamples and splits.
     pub seed: u64,
-    /// Fit-score-remove passes (default 4; the paper does 1; the run config uses 1). Each pass re-fits the forest on the
+    /// Fit-score-remove passes (default 1, the paper's Algorithm 1). Each pass re-fits the forest on the
     /// points kept so far and stops early when nothing is removed. With heavy contamination (20 %
     /// uniform background) one pass at 0.6 removes only ~60 % of the outliers (masking: the
     /// outliers make up a fifth of every subsample; scikit-learn's IsolationForest behaves the
@@ -58,8 +58,8 @@ pub struct IForestConfig {
     /// 1 pass ≈ 60 %, several passes ≥ 95 % of outliers removed, < 2 % of inliers dropped; passes
     /// stop as soon as one removes nothing, so clean clouds cost one or two fits.
     pub passes: usize,
-    /// Beyond the paper: rings of re-admission after the last pass (default 0 = the paper's plain
-    /// removal). On a clean, connected surface cloud the forest isolates the cloud's own
+    /// Beyond the paper: rings of re-admission after the last pass (default 3; 0 = the paper's
+    /// plain removal). On a clean, connected surface cloud the forest isolates the cloud's own
     /// extremes (corners and rims score above 0.6), so removal shrinks the extent that is already
     /// short of the object's (only visible surfaces are sampled). Each ring re-admits every
     /// removed point that lies within [`Self::readmit_gap_factor`] × the kept cloud's median
@@ -79,8 +79,8 @@ impl Default for IForestConfig {
             score_threshold: 0.6,
             min_points: 16,
             seed: 0x1f0e_5700,
-            passes: 4,
-            readmit_rings: 0,
+            passes: 1,
+            readmit_rings: 3,
             readmit_gap_factor: 4.0,
         }
     }
@@ -465,7 +465,8 @@ mod tests {
     fn removes_injected_outliers_keeps_inliers() {
         for seed in [5u64, 6, 7] {
             let (pts, truth) = contaminated_cloud(seed);
-            let est = robust_centroid_scale(&pts, &IForestConfig::default()).unwrap();
+            let four = IForestConfig { passes: 4, readmit_rings: 0, ..Default::default() };
+            let est = robust_centroid_scale(&pts, &four).unwrap();
             let outliers = truth.iter().filter(|t| !**t).count();
             let removed_out = truth.iter().zip(&est.inlier).filter(|(t, k)| !**t && !**k).count();
             let inliers = truth.len() - outliers;
@@ -487,7 +488,8 @@ mod tests {
         // in the range scikit-learn gives on such data (≈ 50–75 %).
         for seed in [5u64, 6, 7] {
             let (pts, truth) = contaminated_cloud(seed);
-            let one = robust_centroid_scale(&pts, &IForestConfig { passes: 1, ..Default::default() }).unwrap();
+            let one = robust_centroid_scale(&pts, &IForestConfig { passes: 1, readmit_rings: 0, ..Default::default() })
+                .unwrap();
             let removed = truth.iter().zip(&one.inlier).filter(|(t, k)| !**t && !**k).count();
             assert!((40..=85).contains(&removed), "seed {seed}: one pass removed {removed}/100");
         }
@@ -505,7 +507,7 @@ mod tests {
         // Over ten clean clouds: the forest isolates the surface's own corners and rims, so plain
         // removal drops inliers and shrinks the extent (the raw extent is the true 5/3/4 cm + up
         // to 2 mm noise); readmission gives (nearly) all of them back.
-        let plain = IForestConfig { passes: 1, ..Default::default() };
+        let plain = IForestConfig { passes: 1, readmit_rings: 0, ..Default::default() };
         let readmit = IForestConfig { readmit_rings: 3, readmit_gap_factor: 3.0, ..plain };
         let (mut dropped, mut dropped_re, mut shrink, mut shrink_re) = (0usize, 0usize, 0.0, 0.0);
         for seed in 0..10u64 {
@@ -530,7 +532,7 @@ mod tests {
         // Gap 4 is the run default (experiments/configs/default.toml), 3 the unit tests' choice.
         for (seed, gap) in [(5u64, 3.0), (6, 3.0), (7, 3.0), (5, 4.0), (6, 4.0), (7, 4.0)] {
             let (pts, truth) = contaminated_cloud(seed);
-            let config = IForestConfig { readmit_rings: 3, readmit_gap_factor: gap, ..Default::default() };
+            let config = IForestConfig { passes: 4, readmit_rings: 3, readmit_gap_factor: gap, ..Default::default() };
             let est = robust_centroid_scale(&pts, &config).unwrap();
             let removed_out = truth.iter().zip(&est.inlier).filter(|(t, k)| !**t && !**k).count();
             let dropped_in = truth.iter().zip(&est.inlier).filter(|(t, k)| **t && !**k).count();

@@ -76,8 +76,9 @@
 //! - iForest score: the paper prints `s = 2 exp(−E(h)/C)` with `C` normalised by `|X|`; that is a
 //!   typesetting slip of Liu et al.'s `s = 2^(−E(h)/c(ψ))`, `c(n) = 2H(n − 1) − 2(n − 1)/n`, which
 //!   we implement (checked against scikit-learn: mean |Δs| 0.002 on 500 points).
-//! - iForest passes ([`iforest::IForestConfig::passes`], default 4, paper 1): one pass at 0.6
-//!   removes only ~60 % of a 20 % uniform contamination (masking, scikit-learn alike).
+//! - iForest passes ([`iforest::IForestConfig::passes`], default 1 = the paper): one pass at 0.6
+//!   removes only ~60 % of a 20 % uniform contamination (masking, scikit-learn alike); more
+//!   passes suit heavily contaminated clouds.
 //! - Segment-to-edge association and the meaning of `e` and ξ ([`yaw`]); cube extents per
 //!   candidate yaw from the inlier points ([`yaw::oriented_extent`]).
 //! - The refinement's residual weights, gates, robust kernels, hidden-edge removal, the point terms

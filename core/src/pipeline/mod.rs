@@ -51,9 +51,6 @@ pub enum PipelineError {
         /// Grey height.
         actual_height: u32,
     },
-    /// Unknown association mode.
-    #[error("association_mode: unknown {0:?} (naive, iou, iou_np, iou_t, ensemble)")]
-    UnknownMode(String),
     /// A config value out of its range ([`PipelineConfig::validate`]).
     #[error("{field}: {reason}")]
     InvalidConfig {
@@ -119,7 +116,7 @@ impl PipelineConfig {
 #[serde(default, deny_unknown_fields)]
 pub struct PipelineConfig {
     /// `naive`, `iou`, `iou_np`, `iou_t` or `ensemble` (default: ensemble, the paper's method).
-    pub association_mode: String,
+    pub association_mode: PipelineMode,
     /// Run parameterization (iForest, line-alignment yaw, refinement). Off = the association's raw
     /// axis-aligned estimates.
     pub parameterize: bool,
@@ -191,7 +188,7 @@ pub struct PipelineConfig {
 impl Default for PipelineConfig {
     fn default() -> Self {
         Self {
-            association_mode: "ensemble".into(),
+            association_mode: PipelineMode::Ensemble,
             parameterize: true,
             naive: NaiveConfig::default(),
             association: AssociationConfig::default(),
@@ -212,6 +209,23 @@ impl Default for PipelineConfig {
             follow_slam_gauge: true,
         }
     }
+}
+
+/// How the pipeline associates detections ([`PipelineConfig::association_mode`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PipelineMode {
+    /// The foundation's baseline ([`crate::naive`]): 2D IoU against projected objects.
+    Naive,
+    /// IoU test only.
+    Iou,
+    /// IoU and the non-parametric test.
+    IouNp,
+    /// IoU and the t-test.
+    IouT,
+    /// The paper's ensemble of all tests (default).
+    #[default]
+    Ensemble,
 }
 
 /// Source of the local object point clouds ([`PipelineConfig::object_points`]).
@@ -323,16 +337,17 @@ impl ObjectPipeline {
     /// A pipeline with an empty map.
     pub fn new(mut config: PipelineConfig) -> Result<Self, PipelineError> {
         config.validate()?;
-        let mapper = match config.association_mode.as_str() {
-            "naive" => Mapper::Naive(NaiveMapper::new(config.naive)),
-            m => {
-                config.association.mode = match m {
-                    "iou" => AssociationMode::Iou,
-                    "iou_np" => AssociationMode::IouNp,
-                    "iou_t" => AssociationMode::IouT,
-                    "ensemble" => AssociationMode::Ensemble,
-                    other => return Err(PipelineError::UnknownMode(other.into())),
-                };
+        let mode = match config.association_mode {
+            PipelineMode::Naive => None,
+            PipelineMode::Iou => Some(AssociationMode::Iou),
+            PipelineMode::IouNp => Some(AssociationMode::IouNp),
+            PipelineMode::IouT => Some(AssociationMode::IouT),
+            PipelineMode::Ensemble => Some(AssociationMode::Ensemble),
+        };
+        let mapper = match mode {
+            None => Mapper::Naive(NaiveMapper::new(config.naive)),
+            Some(m) => {
+                config.association.mode = m;
                 Mapper::Ensemble(Box::new(Associator::new(config.association)?))
             }
         };
@@ -782,21 +797,25 @@ mod tests {
 
     #[test]
     fn every_mode_tracks_one_block_and_reports_its_points() {
-        for mode in ["naive", "iou", "iou_np", "iou_t", "ensemble"] {
-            let cfg = PipelineConfig { association_mode: mode.into(), ..PipelineConfig::default() };
+        for mode in
+            [PipelineMode::Naive, PipelineMode::Iou, PipelineMode::IouNp, PipelineMode::IouT, PipelineMode::Ensemble]
+        {
+            let cfg = PipelineConfig { association_mode: mode, ..PipelineConfig::default() };
             let mut p = ObjectPipeline::new(cfg).unwrap();
             for (i, x) in [0.0, 0.005, 0.01, 0.015].iter().enumerate() {
                 let up = p.update(&frame(i as u32, *x), None).unwrap();
                 assert_eq!(up.assigned.len(), 1);
-                let id = up.assigned[0].unwrap_or_else(|| panic!("{mode}: frame {i} unassigned"));
-                assert!(up.observed.get(&id).is_some_and(|v| !v.is_empty()), "{mode}");
+                let id = up.assigned[0].unwrap_or_else(|| panic!("{mode:?}: frame {i} unassigned"));
+                assert!(up.observed.get(&id).is_some_and(|v| !v.is_empty()), "{mode:?}");
             }
             p.refresh_estimates();
             let map = p.map();
-            assert_eq!(map.len(), 1, "{mode}: {} objects", map.len());
+            assert_eq!(map.len(), 1, "{mode:?}: {} objects", map.len());
             let g = map.objects[0].geometry();
-            assert!((g.center.x).abs() < 0.02 && (g.center.y).abs() < 0.02, "{mode}: {:?}", g.center);
-            assert!(map.objects[0].stage != EstimateStage::Raw || mode == "naive" || !p.config().parameterize);
+            assert!((g.center.x).abs() < 0.02 && (g.center.y).abs() < 0.02, "{mode:?}: {:?}", g.center);
+            assert!(
+                map.objects[0].stage != EstimateStage::Raw || mode == PipelineMode::Naive || !p.config().parameterize
+            );
             let raw = p.stage_map(EstimateStage::Raw);
             assert_eq!(raw.len(), 1);
         }
@@ -881,8 +900,8 @@ mod tests {
 
     #[test]
     fn bad_mode_and_grey_size_are_typed_errors() {
-        let cfg = PipelineConfig { association_mode: "teleport".into(), ..PipelineConfig::default() };
-        assert!(matches!(ObjectPipeline::new(cfg), Err(PipelineError::UnknownMode(_))));
+        let unknown: Result<PipelineConfig, _> = serde_json::from_str(r#"{"association_mode": "teleport"}"#);
+        assert!(unknown.is_err_and(|e| e.to_string().contains("teleport")));
         let mut p = ObjectPipeline::new(PipelineConfig::default()).unwrap();
         let grey = GreyImage::new(10, 10, vec![0; 100]).unwrap();
         assert!(matches!(p.update(&frame(0, 0.0), Some(&grey)), Err(PipelineError::GreySize { .. })));

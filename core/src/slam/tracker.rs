@@ -110,7 +110,7 @@ pub struct TrackerConfig {
     /// `motion_disagreement`) and dead-reckoned from the last tracked frame instead. This catches
     /// what the prior gate is too wide for: a frame that shows little of the scene (the camera
     /// facing the robot's own link, a sliver of table left) and tracks to a consensus 2 cm off,
-    /// then corrupts the map as a keyframe. 0 disables; the first frame of a view is never gated
+    /// then corrupts the map as a keyframe. Default 0.01 m and 2°; 0 disables; the first frame of a view is never gated
     /// (the bias changes between views). The prediction is made from each of the last
     /// [`Self::motion_gate_references`] tracked frames of the view and the pose passes when it
     /// agrees with any of them.
@@ -173,8 +173,8 @@ impl Default for TrackerConfig {
             anchor_to_prior_mean: true,
             anchor_huber: 3.5,
             prior_gate_sigmas: 3.0,
-            motion_gate_floor_m: 0.0,
-            motion_gate_floor_deg: 0.0,
+            motion_gate_floor_m: 0.01,
+            motion_gate_floor_deg: 2.0,
             motion_gate_references: 2,
             reset_after_lost: 10,
             extend_after_unmapped: 3,

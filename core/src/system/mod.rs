@@ -26,6 +26,9 @@
 //! the tracker's `ground_truth` ablation pose source; it never reaches the estimate otherwise.
 
 pub mod capture;
+mod config;
+
+pub use config::{ConfigError, SystemConfig};
 
 use std::collections::BTreeMap;
 
