@@ -114,10 +114,8 @@ pub struct DiscoveryConfig {
     pub margin_frac: f64,
     /// Pixels inside a detection box that comes within this many pixels of the image edge (a
     /// *truncated* detection, as the association defines it) do not mark cells: the object there
-    /// may be one the map never confirms, since truncated detections do not seed objects. 0 = off
-    /// (default; the reports were made without it). Measured: scene06, seed 6, 35° camera, exact
-    /// poses: a block seen truncated in all but two frames was never mapped while its cells
-    /// counted as seen from the pixels inside `margin_frac`.
+    /// may be one the map never confirms, since truncated detections do not seed objects. Pixels,
+    /// default 0 = off (object evidence, `evidence_height_m`, covers the same case from the depth).
     pub exclude_truncated_px: f64,
     /// Returns more than this above the table top are object evidence, not a sight of the table
     /// (they do not mark the cell seen). Metres, default 0.02; 0 = off (every return up to
