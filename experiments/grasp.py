@@ -83,16 +83,9 @@ def _session(scene: Any, cfg: Any, map_objects: list[dict], source: str, run_dir
     return path
 
 
-def _grasp_config(a: argparse.Namespace, source: str) -> Any:
-    from objslam.grasp import GraspRunConfig
-
-    extra = {} if a.contact_retries is None else {"contact_retries": a.contact_retries}
-    return GraspRunConfig(
-        reobserve=source in a.reobserve,
-        reobserve_register=not a.reobserve_unregistered,
-        reobserve_return_ready=not a.reobserve_from_view,
-        **extra,
-    )
+def _grasp_config(a: argparse.Namespace, source: str, cfg: Any) -> Any:
+    """The run's ``[grasp]`` settings, re-observing when ``--reobserve`` names the map source."""
+    return dataclasses.replace(cfg.grasp, reobserve=cfg.grasp.reobserve or source in a.reobserve)
 
 
 def _map_objects(source: str, scene: Any, run_dir: Path) -> list[dict]:
@@ -138,7 +131,7 @@ def regrasp(a: argparse.Namespace, command: str) -> list[str]:
         cfg = load_run_config(overlays=a.config, overrides=overrides, strategy="object-driven")
         scene = load_scene(REPO / rel)
         objs = _map_objects(d["map_source"], scene, run_dir)
-        path = _session(scene, cfg, objs, d["map_source"], run_dir, _grasp_config(a, d["map_source"]), a.tag, a.centre_error_mm)
+        path = _session(scene, cfg, objs, d["map_source"], run_dir, _grasp_config(a, d["map_source"], cfg), a.tag, a.centre_error_mm)
         sessions.append(str(path))
         _print_session(path, "reused map, ")
         _write_manifest(sessions, command, Path(a.manifest))
@@ -150,7 +143,7 @@ def _grasp_on(a: argparse.Namespace, scene: Any, cfg: Any, source: str, run_dir:
     (said on stderr: one failed session never stops the sweep)."""
     try:
         objs = _map_objects(source, scene, run_dir)
-        path = _session(scene, cfg, objs, source, run_dir, _grasp_config(a, source), a.tag, a.centre_error_mm)
+        path = _session(scene, cfg, objs, source, run_dir, _grasp_config(a, source, cfg), a.tag, a.centre_error_mm)
     except Exception as e:  # noqa: BLE001 - one failed session never stops the sweep
         print(f"{scene.name} seed {cfg.seed} {source}: grasp session failed: {type(e).__name__}: {e}", file=sys.stderr)
         return None
@@ -473,22 +466,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--reobserve", nargs="*", default=[], choices=SOURCES,
         help=(
             "map sources whose grasps re-observe the target from close views first (default: none; "
-            "reports/grasping_reobserve/ compares the two)"
+            "the grasp settings themselves: --set grasp.<key>=<value>, [grasp] in the run config)"
         ),
-    )
-    ap.add_argument(
-        "--reobserve-unregistered", action="store_true",
-        help="use the re-observation's local map as it is, not registered to the map (GraspRunConfig.reobserve_register = false)",
-    )
-    # Registration is the default; the flag of older commands is still accepted.
-    ap.add_argument("--reobserve-register", action="store_true", help=argparse.SUPPRESS)
-    ap.add_argument(
-        "--reobserve-from-view", action="store_true",
-        help="plan the grasp from the last close view instead of the ready posture (GraspRunConfig.reobserve_return_ready = false)",
-    )
-    ap.add_argument(
-        "--contact-retries", type=int, default=None, metavar="N",
-        help="descents after a finger lands on something (GraspRunConfig.contact_retries; default: 2; 0 = blind approach)",
     )
     ap.add_argument(
         "--centre-error-mm", type=float, default=0.0, metavar="D",

@@ -5,7 +5,7 @@
 
 ``--run`` grasps on the ground-truth maps of the exploration benchmark's scenes (the map's only
 error is the one injected) with ``experiments/grasp.py --sources ground_truth --centre-error-mm D
---contact-retries N`` for every D and N (two processes, the scenes split between them; manifests
+--set grasp.contact_retries=N`` for every D and N (two processes, the scenes split between them; manifests
 under ``runs/grasp_robustness/``), then reports. Otherwise it reads the sessions of the given
 manifests. Writes ``robustness.md`` / ``.json`` and ``robustness.png`` / ``.pdf``: success per centre error and
 approach, and per class.
@@ -142,7 +142,7 @@ def run_sweeps(a: argparse.Namespace) -> list[str]:
                 cmd = [
                     sys.executable, str(REPO / "experiments" / "grasp.py"), "--maps-from-benchmark", a.maps_from_benchmark,
                     "--sources", "ground_truth", "--scenes", *half, "--seeds", *map(str, a.seeds),
-                    "--centre-error-mm", f"{e:g}", "--contact-retries", str(n), "--tag", tag,
+                    "--centre-error-mm", f"{e:g}", "--set", f"grasp.contact_retries={n}", "--tag", tag,
                     "--manifest", str(m), "--out", str(REPO / "runs" / "grasp_robustness" / f"report{tag}_{i}"),
                 ]
                 procs.append(subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.DEVNULL))

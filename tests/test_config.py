@@ -69,3 +69,10 @@ def test_core_keys_change_with_set_and_reach_the_core_tables() -> None:
 def test_bad_core_values_name_the_key(override: str, field: str) -> None:
     with pytest.raises(ConfigError, match=field.replace(".", r"\.")):
         load_run_config(overrides=[override])
+
+
+def test_grasp_and_place_settings_are_run_config_tables() -> None:
+    cfg = load_run_config(overrides=["grasp.contact_retries=0", "place.feel_support=false"])
+    assert cfg.grasp.contact_retries == 0 and cfg.place.feel_support is False
+    with pytest.raises(ConfigError, match=r"grasp\.contact_retry"):
+        load_run_config(overrides=["grasp.contact_retry=1"])

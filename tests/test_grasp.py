@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 from objslam import _native
 from objslam.config import load_run_config
-from objslam.grasp import GraspRunConfig, GraspSession, run_grasp_session
+from objslam.grasp import GraspSession, run_grasp_session
 from objslam.scene import gt_objects, load_scene
+from objslam.task_config import GraspRunConfig
 from objslam.world import READY_QPOS, panda_urdf_path
 
 from .conftest import SCENES

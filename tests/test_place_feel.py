@@ -7,8 +7,9 @@ import numpy as np
 import pytest
 from objslam.config import load_run_config
 from objslam.grasp import GraspSession
-from objslam.place import PlaceConfig, Placer, free_line, height
+from objslam.place import Placer, free_line, height
 from objslam.scene import gt_objects, load_scene
+from objslam.task_config import PlaceConfig
 from objslam.world import PHYSICS_HZ, SimWorld
 
 from .conftest import SCENES
@@ -52,7 +53,7 @@ def test_a_bottle_is_let_go_once_the_hand_feels_the_table(ci_overlay, feel) -> N
     # The ideal world: the release gap is checked to the millimetre against an exact table.
     cfg = load_run_config(overlays=[ci_overlay], overrides=['preset="ideal"'], strategy="init")
     pcfg = PlaceConfig(feel_support=feel)
-    session = GraspSession(scene, cfg, pcfg.grasp)
+    session = GraspSession(scene, cfg, cfg.grasp)
     placer = Placer(session, pcfg)
     gt = gt_objects(scene, session.world.ground_truth())
     bottle = max((g for g in gt if g["label"] == "bottle"), key=lambda g: height(g["geometry"]))

@@ -3,7 +3,8 @@
 import itertools
 import math
 
-from objslam.place import PlaceConfig, free_line
+from objslam.place import free_line
+from objslam.task_config import PlaceConfig
 
 
 def _box(x: float, y: float, half: float = 0.03) -> dict:

@@ -28,6 +28,7 @@ import tomllib
 from .calibration import ContactConfig, RobotConfig, TableConfig
 from .camera import CalibrationConfig, CameraConfig, ColourConfig, DepthNoiseConfig, StereoDepthConfig
 from .detector import DetectorConfig
+from .task_config import GraspRunConfig, PlaceConfig
 from .textures import TextureConfig
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
@@ -171,6 +172,8 @@ class RunConfig:
     table: TableConfig = field(default_factory=TableConfig)
     contact: ContactConfig = field(default_factory=ContactConfig)
     record: RecordConfig = field(default_factory=RecordConfig)
+    grasp: GraspRunConfig = field(default_factory=GraspRunConfig)
+    place: PlaceConfig = field(default_factory=PlaceConfig)
     slam: dict[str, Any] = field(default_factory=dict)
     """Visual tracking (core ``TrackerConfig``; ``pose_source`` comes from the top level)."""
     map: dict[str, Any] = field(default_factory=dict)

@@ -36,91 +36,17 @@ import itertools
 import json
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
 from .config import RunConfig
-from .grasp import MAX_GRASP_WIDTH_M, GraspRunConfig, GraspSession, match_gt, narrowest_width
+from .grasp import MAX_GRASP_WIDTH_M, GraspSession, match_gt, narrowest_width
 from .scene import SceneSpec, gt_objects
+from .task_config import PlaceConfig
 from .world import GRIPPER_OPEN_M, PHYSICS_HZ, READY_QPOS
 
 TASKS = ("block_in_cup", "cups_by_volume", "bottles_by_height")
-
-
-@dataclass
-class PlaceConfig:
-    """Placement settings."""
-
-    slot_spacing_m: float = 0.10
-    """Distance between neighbouring slots of a line, metres."""
-    tall_slot_spacing_m: float = 0.20
-    """Slot spacing when the tallest item of the line is at least ``tall_item_height_m`` (estimated):
-    the hand holds a tall item 4 cm below its top, so its body comes down beside a standing
-    neighbour taller than the fingers and knocked it over at 10 cm (bottles_by_height 0/6 with
-    10 cm, 4/6 with 20 cm on the maps of reports/grasping; cups keep 10 cm)."""
-    tall_item_height_m: float = 0.14
-    """Estimated height from which an item counts as tall, metres."""
-    slot_clearance_m: float = 0.02
-    """A slot is free when no map object's footprint comes closer than this to the item standing
-    there (the line's widest estimated footprint), metres."""
-    slot_tolerance_m: float = 0.04
-    """A true object counts as at its slot within this x-y distance, metres."""
-    preplace_height_m: float = 0.12
-    """Pre-place pose above the place pose, metres."""
-    release_gap_m: float = 0.01
-    """The held object's estimated bottom stops this far above its support, metres."""
-    tall_release_gap_m: float = 0.005
-    """The release gap of a tall item (estimated height ≥ ``tall_item_height_m``): a 21.5 cm bottle
-    5.2 cm wide dropped from 1 cm landed rocking, leaned on the opened fingers as they rose and
-    fell over (bottles_by_height 9/12 with 1 cm on the maps of reports/grasping, 12/12 with 5 mm;
-    cups and blocks keep 1 cm: with 5 mm the later grasps of a cups_by_volume run started from
-    other arm configurations and one finger met a cup with 3 mm of clearance: 7/8)."""
-    feel_support: bool = True
-    """Beyond the paper: the descent stops ``feel_start_m`` above the release-gap pose and the hand
-    goes on down slowly until it feels the support through the held item, then lets go there
-    (nothing felt ``feel_depth_m`` below the release-gap pose: it lets go at the end; no slow
-    descent plannable: it goes on to the release gap as without). The sense is the hand stalling
-    while the upward force of :meth:`~objslam.world.SimWorld.external_wrench` rises by
-    ``feel_force_n`` within ``feel_window_s`` (a guarded move). A rise, not a level: the estimate
-    carries the joints' friction (PhysX joint friction, proportional to the joint loads), which it
-    does not model: 17-66 N of apparent upward force in the middle of the descent before, 38-139 N
-    held at the start of the slow descent, drifting by up to 2.6 N per 0.05 s during it (six slow
-    descents: scene04 seed 8's bottles, scene03 seed 0's cups, on their maps). When the item
-    meets its support the rise over the window is 4.3-77 N (medians: blocks 8, cups 8, bottles
-    22; ``reports/placement.json``). Default true; false: let go at the release gap."""
-    feel_start_m: float = 0.01
-    """The slow descent starts this far above the release-gap pose, metres."""
-    feel_depth_m: float = 0.02
-    """The slow descent ends this far below the release-gap pose, metres."""
-    feel_speed_m_s: float = 0.02
-    """Speed of the slow descent, m/s."""
-    feel_window_s: float = 0.05
-    """Stall and force rise are measured over this window, seconds."""
-    feel_stall_ratio: float = 0.5
-    """The TCP has stalled when it descends less than this fraction of the commanded descent."""
-    feel_armed_m: float = 0.001
-    """Contact is sensed only once the TCP has descended this far: at the start the arm stands
-    still until its drives overcome the joints' static friction (15-31 physics steps in seven slow
-    descents of scene04 seed 8, scene03 seed 0 and scene02 seed 0), metres."""
-    feel_stuck_m: float = 0.012
-    """Not armed when this much descent has been commanded: the item stands on its support already,
-    let go, metres. The breakaway above takes 1.3-2.6 mm of commanded descent. A slow descent
-    planned from the measured joints instead of the planned end of the descent before it starts
-    without the drives' preload and took 4.7-7.4 mm (six descents of scenes 02, 04, 05, 07, seed 0);
-    with this at 5 mm, 53 of 161 descents stopped as stuck, the hand still 1-2 cm above the support."""
-    feel_force_n: float = 4.0
-    """Rise of the upward force within ``feel_window_s`` that means the item stands on its support,
-    newtons."""
-    clear_blockers: bool = True
-    """``block_in_cup``: when the chosen block has no collision-free grasp, the neighbour without
-    which it would have one is first put down elsewhere on the table (:meth:`Placer.move_aside`)."""
-    place_yaw_rad: float = math.pi / 2
-    """Hand yaw when putting an item down (π/2: fingers closing along x, so the 20 cm hand body lies
-    across a line along y, not toward the neighbouring slots); the grasp's yaw is the fallback."""
-    grasp: GraspRunConfig = field(default_factory=GraspRunConfig)
-    """Grasp settings (re-observation etc.)."""
 
 
 def volume(g: dict[str, Any]) -> float:
@@ -392,11 +318,11 @@ def run_place_task(
     failed grasp, place or plan)."""
     if task not in TASKS:
         raise ValueError(f"task: expected one of {TASKS}, got {task!r}")
-    session = GraspSession(scene, run_cfg, cfg.grasp)
+    session = GraspSession(scene, run_cfg, run_cfg.grasp)
     placer = Placer(session, cfg)
     gt = gt_objects(scene, session.world.ground_truth())
     gt_by_id = {g["id"]: g for g in gt}
-    match = match_gt(map_objects, gt, cfg.grasp.match_radius_m)
+    match = match_gt(map_objects, gt, run_cfg.grasp.match_radius_m)
     out: dict[str, Any] = {"task": task, "success": False, "reason": None, "steps": []}
     objs = [dict(o) for o in map_objects]
 
