@@ -1,0 +1,324 @@
+//! Local mapping: keyframes and map points (insertion with new points from depth, local bundle
+//! adjustment over a window of keyframes, culling), map reset and extension.
+
+use std::collections::BTreeMap;
+
+use nalgebra::Point3;
+
+use super::tracking::{FrameData, PointMatch};
+use super::{PoseSource, Tracker};
+use crate::geometry::{PinholeCamera, Se3};
+use crate::slam::ba::{BundleObservation, BundleProblem};
+use crate::slam::features::Descriptor;
+
+#[derive(Debug, Clone)]
+pub(super) struct MapPoint {
+    pub(super) p_in_map: Point3<f64>,
+    pub(super) descriptor: Descriptor,
+    pub(super) level: u8,
+    pub(super) keyframes: Vec<usize>,
+    pub(super) created_kf: usize,
+    pub(super) n_visible: u32,
+    pub(super) n_found: u32,
+}
+
+#[derive(Debug, Clone, Copy)]
+pub(super) struct KfObservation {
+    pub(super) point_id: u64,
+    pub(super) pixel: [f64; 2],
+    pub(super) depth_m: Option<f64>,
+    pub(super) sigma_px: f64,
+}
+
+#[derive(Debug, Clone)]
+pub(super) struct KeyFrame {
+    pub(super) map_from_camera: Se3,
+    pub(super) observations: Vec<KfObservation>,
+    /// Inserted at an estimated pose without tracking ([`TrackerConfig::extend_after_unmapped`]):
+    /// held fixed in bundle adjustment.
+    pub(super) fixed: bool,
+}
+
+impl Tracker {
+    /// Insert a fixed keyframe at `world_from_camera` (the frame's output pose) so tracking goes
+    /// on where the map has no points ([`TrackerConfig::extend_after_unmapped`]).
+    pub(super) fn extend_map(
+        &mut self,
+        frame: &FrameData,
+        camera: &PinholeCamera,
+        world_from_camera: &Se3,
+        prior: &Se3,
+        view_index: u64,
+    ) {
+        let map_from_camera = self.world_from_map().inverse() * world_from_camera;
+        let (map_from_camera, _) = self.insert_keyframe_with(frame, camera, map_from_camera, &[], true);
+        self.n_extensions += 1;
+        self.unmapped_streak = 0;
+        // The next frame is seeded from here by the prior's motion, as from a tracked frame; the
+        // motion gate predicts from it too (within the view the estimate's error is the last
+        // tracked frame's plus the jitter).
+        if self.last.is_some_and(|(_, _, v)| v != view_index) {
+            self.view_tracked.clear();
+        }
+        self.view_tracked.push_back((map_from_camera, *prior));
+        while self.view_tracked.len() > self.config.motion_gate_references.max(1) {
+            self.view_tracked.pop_front();
+        }
+        self.last = Some((map_from_camera, *prior, view_index));
+    }
+
+    /// Drop the map's points and keyframes. The map frame, the world ← map gauge (with every view
+    /// it was fitted to) and the last tracked frame stay: the next frame with depth starts the new
+    /// map at its pose estimate in the same frame (dead-reckoned from the last tracked frame
+    /// within its view, else the prior through the gauge), so the object map, placed with the
+    /// gauge, stays where it is.
+    pub(super) fn reset_map(&mut self) {
+        self.points.clear();
+        self.keyframes.clear();
+        self.view_tracked.clear();
+        self.n_resets += 1;
+        self.lost_streak = 0;
+        self.unmapped_streak = 0;
+    }
+
+    /// Bookkeeping after a successful pose: visibility counts, keyframe insertion (new points,
+    /// local BA, culling). Returns the (possibly BA-refined) pose, the observed points and whether
+    /// a keyframe was inserted.
+    pub(super) fn after_tracking(
+        &mut self,
+        frame: &FrameData,
+        camera: &PinholeCamera,
+        map_from_camera: Se3,
+        matches: &[PointMatch],
+    ) -> (Se3, Vec<PointMatch>, bool) {
+        let camera_from_map = map_from_camera.inverse();
+        for p in self.points.values_mut() {
+            let x = camera_from_map * p.p_in_map;
+            if camera.project(&x).is_some_and(|uv| camera.contains(uv)) {
+                p.n_visible += 1;
+            }
+        }
+        for m in matches {
+            if let Some(p) = self.points.get_mut(&m.point_id) {
+                p.n_found += 1;
+            }
+        }
+        self.frames_since_keyframe += 1;
+        let need_kf = self.keyframes.is_empty()
+            || self.frames_since_keyframe >= self.config.keyframe_max_interval
+            || (matches.len() as f64) < self.config.keyframe_inlier_ratio * self.last_keyframe_tracked as f64;
+        if !need_kf {
+            return (map_from_camera, matches.to_vec(), false);
+        }
+        let (pose, observed) = self.insert_keyframe_with(frame, camera, map_from_camera, matches, false);
+        (pose, observed, true)
+    }
+
+    /// Insert a keyframe (`fixed`: held fixed in bundle adjustment) with new points from the
+    /// unmatched keypoints with depth, then bundle-adjust and cull.
+    pub(super) fn insert_keyframe_with(
+        &mut self,
+        frame: &FrameData,
+        camera: &PinholeCamera,
+        map_from_camera: Se3,
+        matches: &[PointMatch],
+        fixed: bool,
+    ) -> (Se3, Vec<PointMatch>) {
+        let kf_index = self.keyframes.len();
+        let kps = &frame.features.keypoints;
+        let mut observations = Vec::with_capacity(matches.len() + self.config.max_new_points);
+        let mut observed = matches.to_vec();
+        let mut used = vec![false; kps.len()];
+        for m in matches {
+            let Some(k) = kps.get(m.keypoint) else {
+                continue;
+            };
+            if let Some(u) = used.get_mut(m.keypoint) {
+                *u = true;
+            }
+            if let Some(p) = self.points.get_mut(&m.point_id) {
+                p.keyframes.push(kf_index);
+            }
+            observations.push(KfObservation {
+                point_id: m.point_id,
+                pixel: k.image_point(),
+                depth_m: frame.depth_m.get(m.keypoint).copied().flatten(),
+                sigma_px: f64::from(k.scale),
+            });
+        }
+        // New points from unmatched keypoints with depth, closest first.
+        let mut fresh: Vec<(usize, f64)> = (0..kps.len())
+            .filter(|&i| !used.get(i).copied().unwrap_or(true))
+            .filter_map(|i| Some((i, frame.depth_m.get(i).copied().flatten()?)))
+            .collect();
+        fresh.sort_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));
+        for &(i, d) in fresh.iter().take(self.config.max_new_points) {
+            let (Some(k), Some(desc)) = (kps.get(i), frame.features.descriptors.get(i)) else {
+                continue;
+            };
+            let [ku, kv] = k.image_point();
+            let p_in_camera = camera.unproject(ku, kv, d);
+            let id = self.next_point_id;
+            self.next_point_id += 1;
+            self.points.insert(
+                id,
+                MapPoint {
+                    p_in_map: map_from_camera * p_in_camera,
+                    descriptor: *desc,
+                    level: k.level,
+                    keyframes: vec![kf_index],
+                    created_kf: kf_index,
+                    n_visible: 1,
+                    n_found: 1,
+                },
+            );
+            observations.push(KfObservation {
+                point_id: id,
+                pixel: k.image_point(),
+                depth_m: Some(d),
+                sigma_px: f64::from(k.scale),
+            });
+            observed.push(PointMatch { point_id: id, keypoint: i });
+        }
+        self.keyframes.push(KeyFrame { map_from_camera, observations, fixed });
+        self.frames_since_keyframe = 0;
+        self.last_keyframe_tracked = matches.len().max(
+            self.keyframes.last().map_or(0, |k| k.observations.len()).min(matches.len() + self.config.max_new_points),
+        );
+        if self.config.pose_source == PoseSource::Slam && self.keyframes.len() > 1 {
+            self.local_bundle_adjustment(camera);
+        }
+        self.cull();
+        observed.retain(|m| self.points.contains_key(&m.point_id));
+        let pose = self.keyframes.last().map_or(map_from_camera, |k| k.map_from_camera);
+        (pose, observed)
+    }
+
+    pub(super) fn local_bundle_adjustment(&mut self, camera: &PinholeCamera) {
+        let n_kf = self.keyframes.len();
+        let first_local = n_kf.saturating_sub(self.config.local_keyframes);
+        // Points seen by the local window.
+        let mut point_index: BTreeMap<u64, usize> = BTreeMap::new();
+        for kf in &self.keyframes[first_local..] {
+            for o in &kf.observations {
+                if self.points.contains_key(&o.point_id) {
+                    let n = point_index.len();
+                    point_index.entry(o.point_id).or_insert(n);
+                }
+            }
+        }
+        // Keyframes involved: the window plus fixed ones observing its points.
+        let mut kf_set: BTreeMap<usize, usize> = BTreeMap::new();
+        for id in point_index.keys() {
+            if let Some(p) = self.points.get(id) {
+                for &k in &p.keyframes {
+                    let n = kf_set.len();
+                    kf_set.entry(k).or_insert(n);
+                }
+            }
+        }
+        for k in first_local..n_kf {
+            let n = kf_set.len();
+            kf_set.entry(k).or_insert(n);
+        }
+        let kf_list: Vec<usize> = {
+            let mut v: Vec<(usize, usize)> = kf_set.iter().map(|(k, i)| (*i, *k)).collect();
+            v.sort_unstable();
+            v.into_iter().map(|(_, k)| k).collect()
+        };
+        let mut fixed: Vec<bool> = kf_list
+            .iter()
+            .map(|&k| k < first_local || k == 0 || self.keyframes.get(k).is_some_and(|kf| kf.fixed))
+            .collect();
+        if !fixed.iter().any(|&f| f) {
+            if let Some(f) = kf_list.iter().position(|&k| k == first_local) {
+                fixed[f] = true;
+            }
+        }
+        let mut observations = Vec::new();
+        let mut obs_src = Vec::new();
+        for (pi, &k) in kf_list.iter().enumerate() {
+            let Some(kf) = self.keyframes.get(k) else {
+                continue;
+            };
+            for (oi, o) in kf.observations.iter().enumerate() {
+                if let Some(&pt) = point_index.get(&o.point_id) {
+                    observations.push(BundleObservation {
+                        pose: pi,
+                        point: pt,
+                        pixel: o.pixel,
+                        depth_m: o.depth_m,
+                        sigma_px: o.sigma_px,
+                    });
+                    obs_src.push((k, oi));
+                }
+            }
+        }
+        let mut points = vec![Point3::origin(); point_index.len()];
+        for (id, &i) in &point_index {
+            if let Some(p) = self.points.get(id) {
+                points[i] = p.p_in_map;
+            }
+        }
+        let mut problem = BundleProblem {
+            camera_from_world: kf_list
+                .iter()
+                .filter_map(|&k| self.keyframes.get(k).map(|kf| kf.map_from_camera.inverse()))
+                .collect(),
+            fixed,
+            points,
+            observations,
+        };
+        if problem.camera_from_world.len() != kf_list.len() {
+            return;
+        }
+        problem.optimize(camera, &self.config.bundle);
+        for (pi, &k) in kf_list.iter().enumerate() {
+            if !problem.fixed[pi] {
+                if let (Some(kf), Some(p)) = (self.keyframes.get_mut(k), problem.camera_from_world.get(pi)) {
+                    kf.map_from_camera = p.inverse();
+                }
+            }
+        }
+        for (id, &i) in &point_index {
+            if let (Some(p), Some(q)) = (self.points.get_mut(id), problem.points.get(i)) {
+                p.p_in_map = *q;
+            }
+        }
+        // Drop outlier observations.
+        let flags = problem.inlier_flags(camera, &self.config.bundle);
+        let mut drop: BTreeMap<usize, Vec<usize>> = BTreeMap::new();
+        for (flag, &(k, oi)) in flags.iter().zip(&obs_src) {
+            if !flag {
+                drop.entry(k).or_default().push(oi);
+            }
+        }
+        for (k, list) in drop {
+            let Some(kf) = self.keyframes.get_mut(k) else {
+                continue;
+            };
+            for &oi in list.iter().rev() {
+                if oi < kf.observations.len() {
+                    let o = kf.observations.remove(oi);
+                    if let Some(p) = self.points.get_mut(&o.point_id) {
+                        p.keyframes.retain(|&x| x != k);
+                    }
+                }
+            }
+        }
+    }
+
+    pub(super) fn cull(&mut self) {
+        let n_kf = self.keyframes.len();
+        let c = &self.config;
+        self.points.retain(|_, p| {
+            if p.keyframes.is_empty() {
+                return false;
+            }
+            if p.n_visible >= c.cull_min_visible && f64::from(p.n_found) < c.cull_found_ratio * f64::from(p.n_visible) {
+                return false;
+            }
+            !(c.cull_after_keyframes > 0 && n_kf >= p.created_kf + 1 + c.cull_after_keyframes && p.keyframes.len() < 2)
+        });
+    }
+}
