@@ -156,6 +156,20 @@ def _cell(text: str) -> str:
     return text.replace("|", "\\|")
 
 
+def world(data: dict) -> str:
+    """The world preset(s) a report was made in: its own ``preset``, its resolved config's, or its
+    rows'; a report made before the presets existed ran in the world the ``ideal`` preset keeps."""
+    config = data.get("config") if isinstance(data.get("config"), dict) else {}
+    found = data.get("preset") or config.get("preset")
+    if found:
+        return str(found)
+    rows = data.get("rows") if isinstance(data.get("rows"), list) else []
+    presets = sorted({str(r["preset"]) for r in rows if isinstance(r, dict) and r.get("preset")})
+    if presets:
+        return ", ".join(presets)
+    return "ideal (predates presets)" if "provenance_note" in data else "?"
+
+
 def entry(path: Path, reports: Path, targets: dict[str, str]) -> str:
     data = json.loads(path.read_text())
     name = path.stem
@@ -172,7 +186,7 @@ def entry(path: Path, reports: Path, targets: dict[str, str]) -> str:
     link = md.relative_to(reports).as_posix() if md.exists() else path.relative_to(reports).as_posix()
     if "provenance_note" in data:
         commit += " (backfilled)"
-    return f"| [{name}]({link}) | {_cell(question)} | {_cell(headline)} | {command} | {commit} |"
+    return f"| [{name}]({link}) | {_cell(question)} | {_cell(headline)} | {_cell(world(data))} | {command} | {commit} |"
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -191,8 +205,8 @@ def main(argv: list[str] | None = None) -> int:
         "provenance was reconstructed from git history (its `provenance_note` says how). One-off experiments are",
         "in [`studies/`](../studies/README.md).",
         "",
-        "| report | question | headline | made by | commit |",
-        "|---|---|---|---|---|",
+        "| report | question | headline | world | made by | commit |",
+        "|---|---|---|---|---|---|",
         *(entry(p, reports, targets) for p in files),
         "",
     ]
