@@ -38,11 +38,12 @@ import numpy as np
 import sapien
 from objslam import _native
 from objslam.camera import SAPIEN_FROM_CV
+from objslam.camera_path import look_at
 from objslam.config import load_run_config, to_dict
 from objslam.episode import run_episode
 from objslam.provenance import commit, machine, report_files
 from objslam.scene import gt_objects, load_scene
-from objslam.world import SimWorld, look_at
+from objslam.world import SimWorld
 
 REPO = Path(__file__).resolve().parents[1]
 

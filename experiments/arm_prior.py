@@ -46,7 +46,7 @@ def robot_overrides(preset: str) -> list[str]:
 def tour(scene: Any) -> list[np.ndarray]:
     """The camera poses visited: the Init views (corners inset 0.3 m, 0.5 m high, looking at the
     table centre), the centre from 0.45 m above, the first corner again."""
-    from objslam.world import look_at
+    from objslam.camera_path import look_at
 
     cx, cy = scene.table.center
     sx, sy = scene.table.size

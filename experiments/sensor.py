@@ -140,9 +140,10 @@ def frame_metrics(depth: np.ndarray, z_true: np.ndarray, table: np.ndarray, k: n
 
 def measure(preset: str, scene: str, seed: int, distances: list[float], frames: int) -> dict:
     """Rows of one preset (module docs)."""
+    from objslam.camera_path import look_at
     from objslam.config import load_run_config, to_dict
     from objslam.scene import load_scene
-    from objslam.world import SimWorld, look_at
+    from objslam.world import SimWorld
 
     cfg = load_run_config(preset=preset, overrides=[f'scene="{scene}"', f"seed={seed}"])
     spec = load_scene(REPO / cfg.scene)

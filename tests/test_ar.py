@@ -11,9 +11,10 @@ import pytest
 import sapien
 from objslam import _native
 from objslam.camera import SAPIEN_FROM_CV, CameraConfig
+from objslam.camera_path import look_at
 from objslam.scene import gt_objects, load_scene
 from objslam.topo import map_json_from_gt
-from objslam.world import SimWorld, look_at
+from objslam.world import SimWorld
 from scipy.spatial.transform import Rotation
 
 TABLE = {"center_xy_m": [0.0, 0.0], "size_xy_m": [1.0, 1.0]}

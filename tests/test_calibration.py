@@ -94,7 +94,8 @@ def test_the_true_camera_differs_from_the_prior_by_the_drawn_errors(ci_overlay) 
     # A robot with only a hand-eye error: at rest the prior (nominal FK of the readings) differs from
     # the rendered camera by exactly that error. With joint offsets the readings are the true joints
     # plus the offsets, and the arm still goes where it is commanded in readings.
-    from objslam.world import SimWorld, look_at
+    from objslam.camera_path import look_at
+    from objslam.world import SimWorld
 
     scene = load_scene(SCENES[0])
     cam = load_run_config(overlays=[ci_overlay]).camera

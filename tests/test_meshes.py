@@ -160,7 +160,8 @@ def test_mesh_scene_renders_and_depth_matches_the_ground_truth() -> None:
     """A scene of four meshes in SAPIEN: each is visible, stands where its file says, and the points
     its depth pixels back-project to lie inside its ground-truth primitive (grown by 4 mm for the
     settling and the depth quantisation) and reach its top."""
-    from objslam.world import SimWorld, look_at
+    from objslam.camera_path import look_at
+    from objslam.world import SimWorld
 
     objects = [
         {"class": "can", "asset": "alphabet_soup", "scale": 0.9, "yaw_deg": 30.0, "position": [0.45, -0.12]},

@@ -169,8 +169,9 @@ def test_varied_textures_are_not_axis_aligned() -> None:
 def test_realistic_render_in_sapien() -> None:
     """One real frame under the realistic preset: depth has silhouette / shadow holes and range
     like the model, colour is noisy, the frame carries the assumed intrinsics."""
+    from objslam.camera_path import look_at
     from objslam.scene import load_scene
-    from objslam.world import SimWorld, look_at
+    from objslam.world import SimWorld
 
     cfg = load_run_config()
     cam = CameraConfig(width=W, height=H)

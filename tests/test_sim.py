@@ -9,8 +9,9 @@ import numpy as np
 import objslam
 import pytest
 from objslam.camera import CameraConfig, DepthNoiseConfig
+from objslam.camera_path import look_at
 from objslam.scene import load_scene
-from objslam.world import SimWorld, UnreachablePoseError, look_at
+from objslam.world import SimWorld, UnreachablePoseError
 
 from .conftest import SCENES
 

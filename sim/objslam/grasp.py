@@ -68,6 +68,7 @@ import numpy as np
 
 from . import _native
 from .calibration import arm_error_seed, draw_arm_errors
+from .camera_path import look_at
 from .config import RunConfig
 from .detector import SimulatedDetector
 from .scene import SceneSpec, gt_objects
@@ -79,7 +80,6 @@ from .world import (
     MotionError,
     SimWorld,
     UnreachablePoseError,
-    look_at,
     panda_urdf_path,
 )
 
