@@ -45,7 +45,7 @@ struct Occluder {
 /// Whether the segment `o + t·d`, t ∈ [0, `max_t`], meets the solid box |x| ≤ h.x, |y| ≤ h.y,
 /// |z| ≤ h.z (slab test).
 #[inline]
-fn segment_hits_box(o: &Vector3<f64>, d: &Vector3<f64>, h: &Vector3<f64>, max_t: f64) -> bool {
+pub(super) fn segment_hits_box(o: &Vector3<f64>, d: &Vector3<f64>, h: &Vector3<f64>, max_t: f64) -> bool {
     let (mut t0, mut t1) = (0.0f64, max_t);
     for a in 0..3 {
         if d[a].abs() < 1e-15 {
@@ -68,7 +68,7 @@ fn segment_hits_box(o: &Vector3<f64>, d: &Vector3<f64>, h: &Vector3<f64>, max_t:
 /// Whether the segment `o + t·d`, t ∈ [0, `max_t`], meets the solid cylinder x² + y² ≤ r²,
 /// |z| ≤ `half_height` (closed form: the z slab intersected with the quadratic's interval).
 #[inline]
-fn segment_hits_cylinder(o: &Vector3<f64>, d: &Vector3<f64>, r: f64, half_height: f64, max_t: f64) -> bool {
+pub(super) fn segment_hits_cylinder(o: &Vector3<f64>, d: &Vector3<f64>, r: f64, half_height: f64, max_t: f64) -> bool {
     let (mut t0, mut t1) = (0.0f64, max_t);
     if d.z.abs() < 1e-15 {
         if o.z.abs() > half_height {
