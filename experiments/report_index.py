@@ -116,8 +116,13 @@ def _bench(d: dict[str, Any]) -> str:
 
 def _foundation_run(d: dict[str, Any]) -> str:
     t = d["timings_ms_median"]
-    per_frame = ", ".join(f"{k} {v:.1f} ms" for k, v in t.items())
-    return f"{d['strategy']} on {d['scene']}: mean 3D IoU {d['mean']['iou3d']:.3f}; per frame (median): {per_frame}"
+    per_frame = ", ".join(f"{k} {v:.1f} ms" for k, v in t.items() if v is not None)
+    b = d.get("frame_budget_ms_median") or {}
+    budget = f"; core + sensor + record / render {b['ratio']:.2f}" if b.get("ratio") is not None else ""
+    return (
+        f"{d['strategy']} on {d['scene']}: mean 3D IoU {d['mean']['iou3d']:.3f}; "
+        f"per frame (median): {per_frame}{budget}"
+    )
 
 
 HEADLINES: dict[str, Callable[[dict[str, Any]], str]] = {

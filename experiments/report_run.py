@@ -20,6 +20,22 @@ from objslam.episode import format_table
 from objslam.provenance import machine, provenance, report_files
 
 
+def _ms(v: float | None) -> str:
+    return "-" if v is None else f"{v:.1f}"
+
+
+def _budget_lines(b: dict | None) -> list[str]:
+    """The per-frame budget line: median over frames of core + sensor + recording beside the median
+    render (target: at most one third)."""
+    if not b or b.get("ratio") is None:
+        return []
+    line = (
+        f"Per frame (medians over frames): core + sensor + recording {b['core_sensor_record']:.1f} ms, "
+        f"render {b['render']:.1f} ms, ratio {b['ratio']:.2f} (target ≤ 0.33)."
+    )
+    return [line, ""]
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=HelpFormatter)
     ap.add_argument("run_dir", nargs="?", default=str(REPO / "runs" / "latest"), help="run folder (default: runs/latest)")
@@ -49,6 +65,7 @@ def main(argv: list[str] | None = None) -> int:
         "frames": metrics["frames"],
         "wall_s": metrics["wall_s"],
         "timings_ms_median": metrics["timings_ms_median"],
+        "frame_budget_ms_median": metrics.get("frame_budget_ms_median"),
     }
     (report_files(out, a.name)[0]).write_text(json.dumps(summary, indent=2) + "\n")
     t = metrics["timings_ms_median"]
@@ -60,10 +77,11 @@ def main(argv: list[str] | None = None) -> int:
         "",
         "## Median time per frame (ms)",
         "",
-        "| render | detector | core update | recording |",
-        "|---:|---:|---:|---:|",
-        f"| {t['render']:.1f} | {t['detect']:.1f} | {t['core']:.1f} | {t['record']:.1f} |",
+        "| render | sensor model | arm motion | detector | core update | recording |",
+        "|---:|---:|---:|---:|---:|---:|",
+        "| " + " | ".join(_ms(t.get(k)) for k in ("render", "sensor", "motion", "detect", "core", "record")) + " |",
         "",
+        *_budget_lines(summary["frame_budget_ms_median"]),
         "## Objects",
         "",
         "```",

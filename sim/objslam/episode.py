@@ -52,7 +52,7 @@ from .strategy import DecisionStep, as_view, make_strategy
 from .world import MotionError, SensorFrame, SimWorld, UnreachablePoseError, panda_urdf_path, pose_to_matrix
 
 #: Timing stages reported per frame (milliseconds).
-STAGES = ("render", "detect", "core", "record")
+STAGES = ("render", "sensor", "motion", "detect", "core", "record")
 
 
 @dataclass
@@ -202,6 +202,18 @@ class _Terminated(BaseException):
 
 def _on_sigterm(signum: int, frame: Any) -> None:
     raise _Terminated()
+
+
+def frame_budget(times: dict[str, list[float]]) -> dict[str, float | None]:
+    """The per-frame budget: medians over frames of core + sensor + record (the work beside the
+    renderer on the robot's side of every frame) and of render, ms, and their ratio (target: at most
+    1/3)."""
+    n = min(len(times.get(s, [])) for s in ("render", "sensor", "core", "record"))
+    if n == 0:
+        return {"core_sensor_record": None, "render": None, "ratio": None}
+    own = statistics.median(times["core"][i] + times["sensor"][i] + times["record"][i] for i in range(n))
+    render = statistics.median(times["render"][:n])
+    return {"core_sensor_record": own, "render": render, "ratio": own / render if render > 0 else None}
 
 
 def _make_run_dir(cfg: RunConfig, scene: SceneSpec) -> Path:
@@ -538,9 +550,13 @@ def run_episode(
                         frame = next(it)
                     except StopIteration:
                         break
-                    times["render"].append((time.perf_counter() - t0) * 1e3)
+                    step_ms = (time.perf_counter() - t0) * 1e3
+                    times["render"].append(world.last_timings_ms["render"])
+                    times["sensor"].append(world.last_timings_ms["sensor"])
+                    times["motion"].append(max(step_ms - times["render"][-1] - times["sensor"][-1], 0.0))
                     rec.set_frame(frame.index, frame.sim_time_s)
-                    rec.log_scalar("timings/render_ms", times["render"][-1])
+                    for s in ("render", "sensor", "motion"):
+                        rec.log_scalar(f"timings/{s}_ms", times[s][-1])
                     process(frame)
                 ok = True
                 move_paths[world.last_move_path] += 1
@@ -654,6 +670,7 @@ def run_episode(
             "table_unexplained_curve": mapper.table_unexplained_curve(),
             "accuracy_curve": accuracy_curve,
             "timings_ms_median": {s: (statistics.median(v) if v else None) for s, v in times.items()},
+            "frame_budget_ms_median": frame_budget(times),
             "events": events,
         }
         _write_json(run_dir / "metrics.json", metrics)

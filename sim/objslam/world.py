@@ -25,6 +25,7 @@ import importlib.util
 import json
 import math
 import os
+import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -157,6 +158,9 @@ class SimWorld:
         self.rng = rng
         self.sensor = RgbdSensor(camera, int(rng.integers(1 << 62))) if camera.model == "d435" else None
         self.frame_index = 0
+        self.last_timings_ms: dict[str, float] = {"render": 0.0, "sensor": 0.0}
+        """Wall time of the last :meth:`render`, ms: ``render`` (scene update, picture, buffer
+        read-back) and ``sensor`` (buffer conversion and the sensor model)."""
         self.sim_time_s = 0.0
         self.camera_path_length_m = 0.0
         """Length of the camera's path so far, metres (forward kinematics sampled at 30 Hz)."""
@@ -515,16 +519,20 @@ class SimWorld:
 
     # ----- sensing --------------------------------------------------------------------------------
     def render(self) -> SensorFrame:
-        """Render the hand camera now and apply the sensor model (:attr:`CameraConfig.model`)."""
+        """Render the hand camera now and apply the sensor model (:attr:`CameraConfig.model`).
+        :attr:`last_timings_ms` says how long each part took."""
+        t0 = time.perf_counter()
         self.scene.update_render()
         self.camera.take_picture()
         rgba = self.camera.get_picture("Color")
         pos = self.camera.get_picture("Position")
         seg = self.camera.get_picture("Segmentation")[..., 1].astype(np.uint32)
+        normals_gl = self.camera.get_picture("Normal") if self.sensor is not None else None
+        t1 = time.perf_counter()
         rgb = (np.clip(rgba[..., :3], 0, 1) * 255 + 0.5).astype(np.uint8)
         robot = np.isin(seg, list(self.robot_actor_ids)) if self.camera_config.mask_robot_depth else None
         q = self.qpos_delayed()
-        if self.sensor is None:
+        if self.sensor is None or normals_gl is None:
             depth = np.where(pos[..., 3] < 1, -pos[..., 2], 0.0).astype(np.float32)
             depth[depth > self.camera_config.far_m] = 0.0
             if robot is not None:
@@ -538,10 +546,11 @@ class SimWorld:
             if robot is not None:
                 gone |= robot
             points[gone] = 0.0
-            normals = self.camera.get_picture("Normal")[..., :3] * CV_FROM_GL
+            normals = normals_gl[..., :3] * CV_FROM_GL
             rgb, depth = self.sensor.apply(
                 points, normals, rgb, frame_index=self.frame_index, camera_end_from_start=self._exposure_motion(self.qpos())
             )
+        self.last_timings_ms = {"render": (t1 - t0) * 1e3, "sensor": (time.perf_counter() - t1) * 1e3}
         world_from_camera_gt = self.world_from_camera_gt()
         frame = SensorFrame(
             index=self.frame_index,

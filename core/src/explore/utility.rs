@@ -6,7 +6,7 @@ use std::collections::BTreeMap;
 use nalgebra::{Point3, Vector3};
 
 use super::grid::{binary_entropy_bits, log_odds, plogp_bits, probability_from_log_odds, GridStats};
-use super::visibility::{check_pose, point_visibility, CellVisibility, Occluders, Viewpoint};
+use super::visibility::{check_pose, point_visibility_cos, CellVisibility, Occluders, Viewpoint};
 use super::{EntropyScope, ExplorationGrids, ExploreConfig, ExploreError, IouMode, Strategy};
 use crate::geometry::project_geometry;
 use crate::geometry::{iou3d, Box2, ObjectGeometry, PinholeCamera, Se3};
@@ -219,6 +219,8 @@ struct PreparedObject {
     geometry: ObjectGeometry,
     features: ObjectFeatures,
     cells: Vec<CellSample>,
+    /// Largest distance of a cell centre from `geometry.center`, metres.
+    cells_radius_m: f64,
 }
 
 /// Everything needed to score many candidate views against one map state; build once per
@@ -276,7 +278,10 @@ impl UtilityContext {
                     });
                 }
             }
-            objects.push(PreparedObject { id: o.id, geometry: o.geometry(), features: f, cells });
+            let geometry = o.geometry();
+            let center = Point3::from(geometry.center);
+            let cells_radius_m = cells.iter().map(|c| (c.p_in_world - center).norm()).fold(0.0, f64::max);
+            objects.push(PreparedObject { id: o.id, geometry, features: f, cells, cells_radius_m });
         }
         Ok(Self { camera: *camera, config: config.clone(), objects, occluders: Occluders::from_map(map, &config.grid) })
     }
@@ -358,18 +363,27 @@ impl UtilityContext {
             let mut visible_cells = 0usize;
             let entropy_term = match strategy {
                 Strategy::ExpectedGain => {
+                    // The occluders that can hide any of this object's cells from the eye.
+                    let among = self.occluders.near_segments_to(
+                        &eye,
+                        &Point3::from(o.geometry.center),
+                        o.cells_radius_m + cfg.grid.surface_offset_m.abs(),
+                        Some(o.id),
+                    );
                     let mut g = 0.0;
                     for c in &o.cells {
                         if c.expected_gain_bits <= 0.0 {
                             continue;
                         }
-                        let vis = point_visibility(
+                        let vis = point_visibility_cos(
                             &c.p_in_world,
                             &c.n_in_world,
                             o.id,
                             &viewpoint,
                             &self.occluders,
                             &cfg.grid,
+                            cos_max,
+                            Some(&among),
                         );
                         if matches!(vis, CellVisibility::Visible { .. }) {
                             g += c.expected_gain_bits;

@@ -11,7 +11,7 @@
 //! the cell by more than [`GridConfig::depth_tolerance_m`] (an unmodelled occluder) and is not
 //! missing. Only visible cells are updated, so "free" always means seen-and-empty.
 
-use nalgebra::{Point3, Vector3};
+use nalgebra::{Matrix3, Point3, Vector3};
 use parry3d_f64::math::Vector as PVec;
 use parry3d_f64::query::{Ray, RayCast};
 use parry3d_f64::shape::{Cuboid, Cylinder};
@@ -33,9 +33,69 @@ enum OccluderShape {
 struct Occluder {
     object_id: u32,
     object_from_world: Se3,
+    /// `object_from_world` as a rotation matrix and translation (segment tests transform many
+    /// points per occluder; a matrix product is cheaper than a quaternion rotation).
+    rot_from_world: Matrix3<f64>,
+    trans_from_world: Vector3<f64>,
     center_in_world: Point3<f64>,
     bounding_radius_m: f64,
     shape: OccluderShape,
+}
+
+/// Whether the segment `o + t·d`, t ∈ [0, `max_t`], meets the solid box |x| ≤ h.x, |y| ≤ h.y,
+/// |z| ≤ h.z (slab test).
+#[inline]
+pub(super) fn segment_hits_box(o: &Vector3<f64>, d: &Vector3<f64>, h: &Vector3<f64>, max_t: f64) -> bool {
+    let (mut t0, mut t1) = (0.0f64, max_t);
+    for a in 0..3 {
+        if d[a].abs() < 1e-15 {
+            if o[a].abs() > h[a] {
+                return false;
+            }
+        } else {
+            let inv = 1.0 / d[a];
+            let (ta, tb) = ((-h[a] - o[a]) * inv, (h[a] - o[a]) * inv);
+            t0 = t0.max(ta.min(tb));
+            t1 = t1.min(ta.max(tb));
+            if t0 > t1 {
+                return false;
+            }
+        }
+    }
+    true
+}
+
+/// Whether the segment `o + t·d`, t ∈ [0, `max_t`], meets the solid cylinder x² + y² ≤ r²,
+/// |z| ≤ `half_height` (closed form: the z slab intersected with the quadratic's interval).
+#[inline]
+pub(super) fn segment_hits_cylinder(o: &Vector3<f64>, d: &Vector3<f64>, r: f64, half_height: f64, max_t: f64) -> bool {
+    let (mut t0, mut t1) = (0.0f64, max_t);
+    if d.z.abs() < 1e-15 {
+        if o.z.abs() > half_height {
+            return false;
+        }
+    } else {
+        let inv = 1.0 / d.z;
+        let (ta, tb) = ((-half_height - o.z) * inv, (half_height - o.z) * inv);
+        t0 = t0.max(ta.min(tb));
+        t1 = t1.min(ta.max(tb));
+        if t0 > t1 {
+            return false;
+        }
+    }
+    let a = d.x * d.x + d.y * d.y;
+    let b = o.x * d.x + o.y * d.y;
+    let c = o.x * o.x + o.y * o.y - r * r;
+    if a < 1e-30 {
+        return c <= 0.0;
+    }
+    let disc = b * b - a * c;
+    if disc < 0.0 {
+        return false;
+    }
+    let s = disc.sqrt();
+    let (ra, rb) = ((-b - s) / a, (-b + s) / a);
+    t0.max(ra) <= t1.min(rb)
 }
 
 /// The map's primitives as ray-cast occluders, plus the table plane.
@@ -108,6 +168,50 @@ impl Occluders {
     /// Whether the open segment `from → to` is blocked by the table plane or by any object other
     /// than `ignore_id`.
     pub fn segment_blocked(&self, from: &Point3<f64>, to: &Point3<f64>, ignore_id: Option<u32>) -> bool {
+        self.segment_blocked_among(from, to, self.items.iter().filter(|o| Some(o.object_id) != ignore_id))
+    }
+
+    /// Indices of the occluders (other than `ignore_id`) that can block some segment from `from` to
+    /// a point within `radius_m` of `center`: those whose bounding sphere comes within `radius_m`
+    /// of the segment `from → center` (every such segment stays within `radius_m` of it). A
+    /// superset of the occluders [`Self::segment_blocked`] tests exactly, so passing it to
+    /// [`Self::segment_blocked_by`] gives the same answers for those segments.
+    pub(crate) fn near_segments_to(
+        &self,
+        from: &Point3<f64>,
+        center: &Point3<f64>,
+        radius_m: f64,
+        ignore_id: Option<u32>,
+    ) -> Vec<usize> {
+        let d = center - from;
+        let len = d.norm();
+        let dir = if len > 0.0 { d / len } else { Vector3::zeros() };
+        (0..self.items.len())
+            .filter(|&i| {
+                let o = &self.items[i];
+                if Some(o.object_id) == ignore_id {
+                    return false;
+                }
+                let oc = o.center_in_world - from;
+                let t = oc.dot(&dir).clamp(0.0, len);
+                let reach = o.bounding_radius_m + radius_m + 1e-9;
+                (oc - dir * t).norm_squared() <= reach * reach
+            })
+            .collect()
+    }
+
+    /// [`Self::segment_blocked`] testing only the occluders `among` (indices from
+    /// [`Self::near_segments_to`]).
+    pub(crate) fn segment_blocked_by(&self, from: &Point3<f64>, to: &Point3<f64>, among: &[usize]) -> bool {
+        self.segment_blocked_among(from, to, among.iter().filter_map(|&i| self.items.get(i)))
+    }
+
+    fn segment_blocked_among<'a>(
+        &'a self,
+        from: &Point3<f64>,
+        to: &Point3<f64>,
+        items: impl Iterator<Item = &'a Occluder>,
+    ) -> bool {
         let eps = 1e-6;
         if from.z < self.table_height_m - eps || to.z < self.table_height_m - eps {
             // Both ends above the plane never cross it; an end below it is behind the table.
@@ -119,25 +223,22 @@ impl Occluders {
             return false;
         }
         let dir = d / len;
-        for o in &self.items {
-            if Some(o.object_id) == ignore_id {
-                continue;
-            }
+        for o in items {
             // Bounding-sphere cull: distance from the sphere centre to the segment.
-            let t = (o.center_in_world - from).dot(&dir).clamp(0.0, len);
-            let closest = from + dir * t;
-            if (o.center_in_world - closest).norm() > o.bounding_radius_m {
+            let oc = o.center_in_world - from;
+            let t = oc.dot(&dir).clamp(0.0, len);
+            if (oc - dir * t).norm_squared() > o.bounding_radius_m * o.bounding_radius_m {
                 continue;
             }
-            let origin = o.object_from_world * from;
-            let dir_o = o.object_from_world.rotation * dir;
+            let origin = o.rot_from_world * from.coords + o.trans_from_world;
+            let dir_o = o.rot_from_world * dir;
             let hit = match &o.shape {
                 OccluderShape::Cuboid(c) => {
-                    c.intersects_local_ray(&Ray::new(pvec(&origin.coords, false), pvec(&dir_o, false)), len)
+                    let h = c.half_extents;
+                    segment_hits_box(&origin, &dir_o, &Vector3::new(h.x, h.y, h.z), len)
                 }
-                OccluderShape::Cylinder(c) => {
-                    c.intersects_local_ray(&Ray::new(pvec(&origin.coords, true), pvec(&dir_o, true)), len)
-                }
+                // Object z is the cylinder's axis (parry's local y, see `pvec`).
+                OccluderShape::Cylinder(c) => segment_hits_cylinder(&origin, &dir_o, c.radius, c.half_height, len),
             };
             if hit {
                 return true;
@@ -179,9 +280,12 @@ fn occluder_of(o: &MapObject) -> Option<Occluder> {
         Shape::Cuboid => OccluderShape::Cuboid(Cuboid::new(PVec::new(h.x, h.y, h.z))),
         Shape::Cylinder => OccluderShape::Cylinder(Cylinder::new(h.z, (h.x + h.y) / 2.0)),
     };
+    let object_from_world = o.world_from_object.inverse();
     Some(Occluder {
         object_id: o.id,
-        object_from_world: o.world_from_object.inverse(),
+        object_from_world,
+        rot_from_world: object_from_world.rotation.to_rotation_matrix().into_inner(),
+        trans_from_world: object_from_world.translation.vector,
         center_in_world: Point3::from(t),
         bounding_radius_m: h.norm(),
         shape,
@@ -242,10 +346,28 @@ pub fn point_visibility(
     occluders: &Occluders,
     config: &GridConfig,
 ) -> CellVisibility {
+    let cos_max = config.max_incidence_deg.to_radians().cos();
+    point_visibility_cos(p_in_world, n_in_world, object_id, view, occluders, config, cos_max, None)
+}
+
+/// [`point_visibility`] with `cos_max` = cos([`GridConfig::max_incidence_deg`]) given (hoisted out
+/// of per-cell loops) and, optionally, the occluders that can block the point
+/// ([`Occluders::near_segments_to`] from the eye, with `object_id` ignored).
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn point_visibility_cos(
+    p_in_world: &Point3<f64>,
+    n_in_world: &Vector3<f64>,
+    object_id: u32,
+    view: &Viewpoint,
+    occluders: &Occluders,
+    config: &GridConfig,
+    cos_max: f64,
+    among: Option<&[usize]>,
+) -> CellVisibility {
     let (camera, camera_from_world, eye) = (&view.camera, &view.camera_from_world, view.eye_in_world);
     let to_eye = eye - p_in_world;
     let dist = to_eye.norm();
-    if dist.is_nan() || dist <= 0.0 || n_in_world.dot(&to_eye) < dist * config.max_incidence_deg.to_radians().cos() {
+    if dist.is_nan() || dist <= 0.0 || n_in_world.dot(&to_eye) < dist * cos_max {
         return CellVisibility::BackFacing;
     }
     let p_c = camera_from_world * p_in_world;
@@ -259,7 +381,11 @@ pub fn point_visibility(
         return CellVisibility::OutOfView;
     }
     let start = p_in_world + n_in_world * config.surface_offset_m;
-    if occluders.segment_blocked(&eye, &start, Some(object_id)) {
+    let blocked = match among {
+        Some(idx) => occluders.segment_blocked_by(&eye, &start, idx),
+        None => occluders.segment_blocked(&eye, &start, Some(object_id)),
+    };
+    if blocked {
         return CellVisibility::Occluded;
     }
     CellVisibility::Visible { u: uv[0] as u32, v: uv[1] as u32 }
@@ -328,6 +454,7 @@ pub fn integrate_object(
     }
     out.hits = hit_cells.len();
     let cells: Vec<CellRef> = grid.cells().collect();
+    let cos_max = config.max_incidence_deg.to_radians().cos();
     for c in cells {
         if hit_cells.binary_search(&c).is_ok() {
             continue;
@@ -337,7 +464,7 @@ pub fn integrate_object(
         };
         let p_w = object.world_from_object * pose.p_in_object;
         let n_w = object.world_from_object.rotation * pose.normal_in_object;
-        let vis = point_visibility(&p_w, &n_w, object.id, &view, occluders, config);
+        let vis = point_visibility_cos(&p_w, &n_w, object.id, &view, occluders, config, cos_max, None);
         let CellVisibility::Visible { u, v } = vis else {
             continue;
         };

@@ -139,6 +139,13 @@ fn inverse_normal_cdf(p: f64) -> f64 {
     }
 }
 
+/// `(x + n / 2) / n` for `x < 2^16`, `1 <= n <= 64` by a multiply and a shift (exact: the
+/// reciprocal's error stays below 1 / n over that range).
+#[inline]
+fn div_round(x: u32, n: u32, recip: u64) -> u8 {
+    (((x + n / 2) as u64 * recip) >> 32) as u8
+}
+
 fn blur(cfg: &ColourConfig, unit: &SensorUnit, frame: &RenderedFrame<'_>, m: &Matrix4<f64>) -> Vec<u8> {
     const FAR_M: f64 = 10.0;
     let (w, h) = (frame.width, frame.height);
@@ -146,6 +153,11 @@ fn blur(cfg: &ColourConfig, unit: &SensorUnit, frame: &RenderedFrame<'_>, m: &Ma
     let src = frame.rgb;
     let pts = frame.points_in_camera;
     let mut out = vec![0u8; 3 * w * h];
+    // The three channels of each source pixel in 16-bit lanes of one word: a tap is one load and
+    // one add (sums of at most 64 taps of 255 fit a lane).
+    let packed: Vec<u64> =
+        src.chunks_exact(3).map(|p| p[0] as u64 | (p[1] as u64) << 16 | (p[2] as u64) << 32).collect();
+    let recip: Vec<u64> = (0..=64u64).map(|n| if n == 0 { 0 } else { (1u64 << 32) / n + 1 }).collect();
     let rot = m.fixed_view::<3, 3>(0, 0).into_owned();
     let t = m.fixed_view::<3, 1>(0, 3).into_owned();
     // Ray direction (x / z, y / z, 1) of each pixel centre, rotated: r = rot · (ax, ay, 1).
@@ -178,20 +190,27 @@ fn blur(cfg: &ColourConfig, unit: &SensorUnit, frame: &RenderedFrame<'_>, m: &Ma
             let (mut fx, mut fy) =
                 (((x as f64 + 0.5 - 0.5 * du) * 65536.0) as i64, ((y as f64 + 0.5 - 0.5 * dv) * 65536.0) as i64);
             let (sx, sy) = ((du * step * 65536.0) as i64, (dv * step * 65536.0) as i64);
-            let mut acc = [0u32; 3];
-            for _ in 0..taps {
-                let (px, py) = ((fx >> 16).clamp(0, wi) as usize, (fy >> 16).clamp(0, hi) as usize);
-                let j = 3 * (py * w + px);
-                acc[0] += src[j] as u32;
-                acc[1] += src[j + 1] as u32;
-                acc[2] += src[j + 2] as u32;
-                fx += sx;
-                fy += sy;
+            let mut acc = 0u64;
+            // The path is a line: inside the image at both ends means inside throughout.
+            let (ex, ey) = (fx + (taps as i64 - 1) * sx, fy + (taps as i64 - 1) * sy);
+            let inside = |a: i64, b: i64, hi: i64| (0..=hi).contains(&(a >> 16)) && (0..=hi).contains(&(b >> 16));
+            if inside(fx, ex, wi) && inside(fy, ey, hi) {
+                for _ in 0..taps {
+                    acc += packed[(fy >> 16) as usize * w + (fx >> 16) as usize];
+                    fx += sx;
+                    fy += sy;
+                }
+            } else {
+                for _ in 0..taps {
+                    acc += packed[(fy >> 16).clamp(0, hi) as usize * w + (fx >> 16).clamp(0, wi) as usize];
+                    fx += sx;
+                    fy += sy;
+                }
             }
-            let n = taps as u32;
-            for c in 0..3 {
-                out[3 * i + c] = ((acc[c] + n / 2) / n) as u8;
-            }
+            let (n, rc) = (taps as u32, recip[taps]);
+            out[3 * i] = div_round((acc & 0xFFFF) as u32, n, rc);
+            out[3 * i + 1] = div_round((acc >> 16 & 0xFFFF) as u32, n, rc);
+            out[3 * i + 2] = div_round((acc >> 32 & 0xFFFF) as u32, n, rc);
         }
     }
     out
@@ -248,6 +267,16 @@ mod tests {
             // Rounding adds 1/12.
             let want = cfg.shot_gain * level as f64 + cfg.read_noise.powi(2) + 1.0 / 12.0;
             assert!((var / want - 1.0).abs() < 0.1, "level {level}: var {var} vs {want}");
+        }
+    }
+
+    #[test]
+    fn rounded_division_by_reciprocal_is_exact() {
+        for n in 1..=64u32 {
+            let recip = (1u64 << 32) / n as u64 + 1;
+            for x in 0..=255 * n {
+                assert_eq!(u32::from(div_round(x, n, recip)), (x + n / 2) / n, "{x} / {n}");
+            }
         }
     }
 

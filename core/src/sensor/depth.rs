@@ -164,69 +164,31 @@ pub struct DepthStats {
     pub valid_out: usize,
 }
 
-/// A unit-variance, spatially correlated field: independent normals on a grid of spacing
-/// `cell_px` pixels, interpolated bilinearly and divided by the interpolation's standard
-/// deviation at each pixel (so every pixel has variance 1).
-pub(crate) fn correlated_field(width: usize, height: usize, cell_px: f64, rng: &mut SplitMix64) -> Vec<f32> {
-    let gw = (width as f64 / cell_px).ceil() as usize + 2;
-    let gh = (height as f64 / cell_px).ceil() as usize + 2;
-    let grid: Vec<f32> = (0..gw * gh).map(|_| rng.normal() as f32).collect();
-    let axis = |n: usize| -> Vec<(usize, f32, f32)> {
-        (0..n)
-            .map(|i| {
-                let g = (i as f64 + 0.5) / cell_px;
-                let k = g.floor();
-                let a = (g - k) as f32;
-                (k as usize, a, 1.0 / ((1.0 - a) * (1.0 - a) + a * a).sqrt())
-            })
-            .collect()
-    };
-    let (xs, ys) = (axis(width), axis(height));
-    let mut out = vec![0.0f32; width * height];
-    for (y, &(j, b, ny)) in ys.iter().enumerate() {
-        let (r0, r1) = (&grid[j * gw..(j + 1) * gw], &grid[(j + 1) * gw..(j + 2) * gw]);
-        let row = &mut out[y * width..(y + 1) * width];
-        for (o, &(i, a, nx)) in row.iter_mut().zip(xs.iter()) {
-            let top = r0[i] * (1.0 - a) + r0[i + 1] * a;
-            let bot = r1[i] * (1.0 - a) + r1[i + 1] * a;
-            *o = (top * (1.0 - b) + bot * b) * (nx * ny);
+/// Per pixel of a row, the minimum (`lo`) and maximum (`hi`) of the positive values of `z` within
+/// `r` pixels along the row; `(inf, 0)` where there are none. `pad` is scratch space.
+fn row_min_max(z: &[f32], r: usize, pad: &mut Vec<f32>, lo: &mut [f32], hi: &mut [f32]) {
+    let w = z.len();
+    pad.clear();
+    pad.resize(w + 2 * r, 0.0);
+    pad[r..r + w].copy_from_slice(z);
+    // Invalid values (0) never win a maximum; for the minimum they count as +inf.
+    hi.copy_from_slice(&pad[..w]);
+    for k in 1..=2 * r {
+        for (o, v) in hi.iter_mut().zip(&pad[k..k + w]) {
+            *o = o.max(*v);
         }
     }
-    out
-}
-
-/// Minimum and maximum of the positive values of `z` within `r` pixels (a square window), per pixel;
-/// `(inf, 0)` where there are none.
-fn window_min_max(z: &[f32], w: usize, h: usize, r: usize) -> (Vec<f32>, Vec<f32>) {
-    let mut row_lo = vec![f32::INFINITY; w * h];
-    let mut row_hi = vec![0.0f32; w * h];
-    for y in 0..h {
-        let row = &z[y * w..(y + 1) * w];
-        for x in 0..w {
-            let (mut l, mut u) = (f32::INFINITY, 0.0f32);
-            for &v in &row[x.saturating_sub(r)..(x + r + 1).min(w)] {
-                if v > 0.0 {
-                    l = l.min(v);
-                    u = u.max(v);
-                }
-            }
-            row_lo[y * w + x] = l;
-            row_hi[y * w + x] = u;
+    for v in pad.iter_mut() {
+        if *v <= 0.0 {
+            *v = f32::INFINITY;
         }
     }
-    let mut lo = vec![f32::INFINITY; w * h];
-    let mut hi = vec![0.0f32; w * h];
-    for y in 0..h {
-        for yy in y.saturating_sub(r)..(y + r + 1).min(h) {
-            let (src_lo, src_hi) = (&row_lo[yy * w..(yy + 1) * w], &row_hi[yy * w..(yy + 1) * w]);
-            let (dst_lo, dst_hi) = (&mut lo[y * w..(y + 1) * w], &mut hi[y * w..(y + 1) * w]);
-            for x in 0..w {
-                dst_lo[x] = dst_lo[x].min(src_lo[x]);
-                dst_hi[x] = dst_hi[x].max(src_hi[x]);
-            }
+    lo.copy_from_slice(&pad[..w]);
+    for k in 1..=2 * r {
+        for (o, v) in lo.iter_mut().zip(&pad[k..k + w]) {
+            *o = o.min(*v);
         }
     }
-    (lo, hi)
 }
 
 /// Invalid-pixel causes on the rendered grid.
@@ -235,6 +197,12 @@ const NONE: u8 = 1;
 const RANGE: u8 = 2;
 const SHADOW: u8 = 3;
 const GRAZING: u8 = 4;
+
+/// Sub-streams of a frame's depth draws (one per effect, so that the passes need not run in a
+/// fixed pixel order across effects).
+const SUB_GRAZING: u64 = 1;
+const SUB_MIXED: u64 = 2;
+const SUB_FIELD: u64 = 3;
 
 /// The depth model on one frame (module docs); returns the registered depth image and counts.
 /// Buffer lengths are the caller's to check ([`super::simulate_frame`] does).
@@ -247,47 +215,46 @@ pub fn stereo_depth(
 ) -> (Vec<f32>, DepthStats) {
     let (w, h) = (frame.width, frame.height);
     let n = w * h;
-    let mut rng = SplitMix64::new(seed, &[TAG_DEPTH, frame_index]);
     let mut stats = DepthStats::default();
     let pts = frame.points_in_camera;
     let nrm = frame.normals_in_camera;
-    let mut z: Vec<f32> = (0..n)
-        .map(|i| {
-            let v = pts[3 * i + 2];
-            if v.is_finite() && v > 0.0 {
-                v
-            } else {
-                0.0
-            }
-        })
-        .collect();
+    let mut z = vec![0.0f32; n];
     let mut state = vec![OK; n];
-    for i in 0..n {
-        if z[i] <= 0.0 {
-            state[i] = NONE;
-        } else {
-            stats.surface += 1;
-            let zi = z[i] as f64;
-            if zi < cfg.min_range_m || zi > cfg.max_range_m {
-                state[i] = RANGE;
-                stats.out_of_range += 1;
+    // 1-3. Range, the second imager's shadow (in the rendered grid, true colour focal length) and
+    // grazing incidence (squared cosines: a square root only where a dropout is possible), row by
+    // row.
+    let mut rng = SplitMix64::new(seed, &[TAG_DEPTH, frame_index, SUB_GRAZING]);
+    let fb = unit.colour_true.fx * cfg.baseline_m;
+    let (c0, c1) = (cfg.grazing_start_deg.to_radians().cos(), cfg.grazing_end_deg.to_radians().cos());
+    let c0_sq = (c0 * c0) as f32;
+    for y in 0..h {
+        let zr = &mut z[y * w..(y + 1) * w];
+        let sr = &mut state[y * w..(y + 1) * w];
+        let pr = &pts[3 * y * w..3 * (y + 1) * w];
+        for ((zv, st), p) in zr.iter_mut().zip(sr.iter_mut()).zip(pr.chunks_exact(3)) {
+            let v = p[2];
+            if v.is_finite() && v > 0.0 {
+                *zv = v;
+                stats.surface += 1;
+                let zi = v as f64;
+                if zi < cfg.min_range_m || zi > cfg.max_range_m {
+                    *st = RANGE;
+                    stats.out_of_range += 1;
+                }
+            } else {
+                *st = NONE;
             }
         }
-    }
-    // 2. The second imager's shadow, in the rendered grid (true colour focal length).
-    if cfg.shadow {
-        let fb = unit.colour_true.fx * cfg.baseline_m;
-        for y in 0..h {
+        if cfg.shadow {
             let mut m = f64::INFINITY;
             for x in (0..w).rev() {
-                let i = y * w + x;
-                if state[i] == NONE {
+                if sr[x] == NONE {
                     continue;
                 }
-                let r = x as f64 - fb / z[i] as f64;
+                let r = x as f64 - fb / zr[x] as f64;
                 if r > m + 1e-3 {
-                    if state[i] == OK {
-                        state[i] = SHADOW;
+                    if sr[x] == OK {
+                        sr[x] = SHADOW;
                         stats.shadow += 1;
                     }
                 } else {
@@ -295,70 +262,159 @@ pub fn stereo_depth(
                 }
             }
         }
-    }
-    // 3. Grazing incidence (squared cosines: a square root only where a dropout is possible).
-    let (c0, c1) = (cfg.grazing_start_deg.to_radians().cos(), cfg.grazing_end_deg.to_radians().cos());
-    let c0_sq = (c0 * c0) as f32;
-    for i in 0..n {
-        if state[i] != OK {
-            continue;
-        }
-        let (px, py, pz) = (pts[3 * i], pts[3 * i + 1], pts[3 * i + 2]);
-        let (nx, ny, nz) = (nrm[3 * i], nrm[3 * i + 1], nrm[3 * i + 2]);
-        let dot = px * nx + py * ny + pz * nz;
-        let denom = (px * px + py * py + pz * pz) * (nx * nx + ny * ny + nz * nz);
-        if denom.is_nan() || denom <= 0.0 || denom.is_infinite() {
-            continue;
-        }
-        let cos_sq = dot * dot / denom;
-        if cos_sq < c0_sq {
-            let cos = (cos_sq as f64).sqrt();
-            let p_drop = ((c0 - cos) / (c0 - c1)).clamp(0.0, 1.0);
-            if rng.uniform() < p_drop {
-                state[i] = GRAZING;
-                stats.grazing += 1;
-            }
-        }
-    }
-    // 4. Mixed depths at silhouettes, from the true depths of the neighbourhood (separable
-    // min / max over the (2 band + 1)² window, valid depths only).
-    let band = cfg.mixed_band_px;
-    if band > 0 && cfg.mixed_fraction > 0.0 {
-        let (lo, hi) = window_min_max(&z, w, h, band);
-        for i in 0..n {
-            if state[i] != OK {
+        let nr = &nrm[3 * y * w..3 * (y + 1) * w];
+        for ((st, p), nv) in sr.iter_mut().zip(pr.chunks_exact(3)).zip(nr.chunks_exact(3)) {
+            if *st != OK {
                 continue;
             }
-            let (l, u) = (lo[i], hi[i]);
-            if ((u - l) as f64) > cfg.edge_jump_m + cfg.edge_jump_rel * l as f64 && rng.uniform() < cfg.mixed_fraction {
-                z[i] = l + (rng.uniform() as f32) * (u - l);
-                stats.mixed += 1;
+            let (px, py, pz) = (p[0], p[1], p[2]);
+            let (nx, ny, nz) = (nv[0], nv[1], nv[2]);
+            let dot = px * nx + py * ny + pz * nz;
+            let denom = (px * px + py * py + pz * pz) * (nx * nx + ny * ny + nz * nz);
+            if denom.is_nan() || denom <= 0.0 || denom.is_infinite() {
+                continue;
+            }
+            let cos_sq = dot * dot / denom;
+            if cos_sq < c0_sq {
+                let cos = (cos_sq as f64).sqrt();
+                let p_drop = ((c0 - cos) / (c0 - c1)).clamp(0.0, 1.0);
+                if rng.uniform() < p_drop {
+                    *st = GRAZING;
+                    stats.grazing += 1;
+                }
             }
         }
     }
-    // 5. Correlated disparity noise, then the unit's scale error.
-    let cell = cfg.correlation_px * unit.colour_true.fx / cfg.focal_px;
-    let field = correlated_field(w, h, cell.max(1.0), &mut rng);
-    let fb_d = cfg.focal_px * cfg.baseline_m;
-    for i in 0..n {
-        if state[i] != OK {
-            z[i] = 0.0;
-            continue;
+    // 4. Mixed depths at silhouettes, from the true depths of the neighbourhood (min / max over
+    // the (2 band + 1)² window, valid depths only: along rows, then across them per output row).
+    let band = cfg.mixed_band_px;
+    if band > 0 && cfg.mixed_fraction > 0.0 && h > 0 {
+        let mut rng = SplitMix64::new(seed, &[TAG_DEPTH, frame_index, SUB_MIXED]);
+        let (mut row_lo, mut row_hi) = (vec![0.0f32; n], vec![0.0f32; n]);
+        let mut pad = Vec::with_capacity(w + 2 * band);
+        for y in 0..h {
+            let r = y * w..(y + 1) * w;
+            row_min_max(&z[r.clone()], band, &mut pad, &mut row_lo[r.clone()], &mut row_hi[r]);
         }
-        let d = fb_d / z[i] as f64 + cfg.subpixel_rms_px * field[i] as f64;
-        z[i] = if d > 0.0 { (fb_d / d * unit.depth_scale) as f32 } else { 0.0 };
+        let (mut lo, mut hi) = (vec![0.0f32; w], vec![0.0f32; w]);
+        for y in 0..h {
+            let (y0, y1) = (y.saturating_sub(band), (y + band + 1).min(h));
+            lo.copy_from_slice(&row_lo[y0 * w..(y0 + 1) * w]);
+            hi.copy_from_slice(&row_hi[y0 * w..(y0 + 1) * w]);
+            for yy in y0 + 1..y1 {
+                for (o, v) in lo.iter_mut().zip(&row_lo[yy * w..(yy + 1) * w]) {
+                    *o = o.min(*v);
+                }
+                for (o, v) in hi.iter_mut().zip(&row_hi[yy * w..(yy + 1) * w]) {
+                    *o = o.max(*v);
+                }
+            }
+            for x in 0..w {
+                let i = y * w + x;
+                if state[i] != OK {
+                    continue;
+                }
+                let (l, u) = (lo[x], hi[x]);
+                if ((u - l) as f64) > cfg.edge_jump_m + cfg.edge_jump_rel * l as f64
+                    && rng.uniform() < cfg.mixed_fraction
+                {
+                    z[i] = l + (rng.uniform() as f32) * (u - l);
+                    stats.mixed += 1;
+                }
+            }
+        }
+    }
+    // 5. Correlated disparity noise, then the unit's scale error:
+    // z' = f·B / (f·B / z + s·e) · scale = z · scale / (1 + s·e·z / (f·B)).
+    let cell = (cfg.correlation_px * unit.colour_true.fx / cfg.focal_px).max(1.0);
+    let mut rng = SplitMix64::new(seed, &[TAG_DEPTH, frame_index, SUB_FIELD]);
+    let mut field = CorrelatedField::new(w, h, cell, &mut rng);
+    let k_noise = (cfg.subpixel_rms_px / (cfg.focal_px * cfg.baseline_m)) as f32;
+    let scale = unit.depth_scale as f32;
+    let mut row = vec![0.0f32; w];
+    for y in 0..h {
+        field.row(y, &mut row);
+        let zr = &mut z[y * w..(y + 1) * w];
+        let sr = &state[y * w..(y + 1) * w];
+        for ((zv, st), e) in zr.iter_mut().zip(sr).zip(&row) {
+            if *st != OK {
+                *zv = 0.0;
+                continue;
+            }
+            let den = 1.0 + k_noise * *e * *zv;
+            *zv = if den > 0.0 { *zv * scale / den } else { 0.0 };
+        }
     }
     // 6. Registration to the colour image by the assumed calibration.
-    let out = register(cfg, unit, &z, w, h);
-    stats.valid_out = out.iter().filter(|v| **v > 0.0).count();
+    let (out, valid) = register(cfg, unit, &z, w, h);
+    stats.valid_out = valid;
     (out, stats)
+}
+
+/// A unit-variance, spatially correlated field: independent normals on a grid of spacing
+/// `cell_px` pixels, interpolated bilinearly and divided by the interpolation's standard
+/// deviation at each pixel (so every pixel has variance 1). Evaluated a row at a time.
+pub(crate) struct CorrelatedField {
+    width: usize,
+    gw: usize,
+    grid: Vec<f32>,
+    /// Per column: grid column, interpolation weight, normalisation.
+    xs: Vec<(usize, f32, f32)>,
+    /// Per row: grid row, interpolation weight, normalisation.
+    ys: Vec<(usize, f32, f32)>,
+    /// Scratch: the current row interpolated between its two grid rows.
+    between: Vec<f32>,
+}
+
+impl CorrelatedField {
+    pub(crate) fn new(width: usize, height: usize, cell_px: f64, rng: &mut SplitMix64) -> Self {
+        let gw = (width as f64 / cell_px).ceil() as usize + 2;
+        let gh = (height as f64 / cell_px).ceil() as usize + 2;
+        let grid: Vec<f32> = (0..gw * gh).map(|_| rng.normal() as f32).collect();
+        let axis = |n: usize| -> Vec<(usize, f32, f32)> {
+            (0..n)
+                .map(|i| {
+                    let g = (i as f64 + 0.5) / cell_px;
+                    let k = g.floor();
+                    let a = (g - k) as f32;
+                    (k as usize, a, 1.0 / ((1.0 - a) * (1.0 - a) + a * a).sqrt())
+                })
+                .collect()
+        };
+        Self { width, gw, grid, xs: axis(width), ys: axis(height), between: vec![0.0; gw] }
+    }
+
+    /// Row `y` of the field into `out` (length `width`).
+    pub(crate) fn row(&mut self, y: usize, out: &mut [f32]) {
+        let (j, b, ny) = self.ys[y];
+        let gw = self.gw;
+        let (r0, r1) = (&self.grid[j * gw..(j + 1) * gw], &self.grid[(j + 1) * gw..(j + 2) * gw]);
+        let between = &mut self.between;
+        for ((o, v0), v1) in between.iter_mut().zip(r0).zip(r1) {
+            *o = (v0 * (1.0 - b) + v1 * b) * ny;
+        }
+        for (o, &(i, a, nx)) in out[..self.width].iter_mut().zip(&self.xs) {
+            *o = (between[i] * (1.0 - a) + between[i + 1] * a) * nx;
+        }
+    }
+}
+
+/// The whole field as an image (tests).
+#[cfg(test)]
+pub(crate) fn correlated_field(width: usize, height: usize, cell_px: f64, rng: &mut SplitMix64) -> Vec<f32> {
+    let mut f = CorrelatedField::new(width, height, cell_px, rng);
+    let mut out = vec![0.0f32; width * height];
+    for (y, row) in out.chunks_exact_mut(width).enumerate() {
+        f.row(y, row);
+    }
+    out
 }
 
 /// Widening of each registered pixel's rectangle, pixels (no pinholes from rounding).
 const EPS: f64 = 0.02;
 
-/// Registration (step 6) and quantisation (step 7).
-fn register(cfg: &StereoDepthConfig, unit: &SensorUnit, z: &[f32], w: usize, h: usize) -> Vec<f32> {
+/// Registration (step 6) and quantisation (step 7); also the count of pixels with a depth.
+fn register(cfg: &StereoDepthConfig, unit: &SensorUnit, z: &[f32], w: usize, h: usize) -> (Vec<f32>, usize) {
     let e = &unit.registration_error;
     let r = Matrix3::new(e[0][0], e[0][1], e[0][2], e[1][0], e[1][1], e[1][2], e[2][0], e[2][1], e[2][2]);
     let k = unit.depth_focal_ratio;
@@ -371,37 +427,36 @@ fn register(cfg: &StereoDepthConfig, unit: &SensorUnit, z: &[f32], w: usize, h: 
     let (c0, c1, c2) = (m.column(0).into_owned(), m.column(1).into_owned(), m.column(2).into_owned());
     let col_dir: Vec<Vector3<f64>> = (0..=w).map(|x| c0 * ((x as f64 - kt.cx) / kt.fx)).collect();
     let row_dir: Vec<Vector3<f64>> = (0..=h).map(|y| c1 * ((y as f64 - kt.cy) / kt.fy) + c2).collect();
-    let project = |dir: Vector3<f64>, zv: f64| -> Option<(f64, f64, f64)> {
-        let q = dir * zv + t;
-        if q.z <= 1e-6 {
-            return None;
-        }
-        let inv = 1.0 / q.z;
-        Some((ka.fx * q.x * inv + ka.cx, ka.fy * q.y * inv + ka.cy, q.z))
-    };
     let mut out = vec![f32::INFINITY; w * h];
+    let (wf, hf) = (w as f64, h as f64);
     for y in 0..h {
-        for x in 0..w {
-            let zv = z[y * w + x];
+        let (ra, rb) = (row_dir[y], row_dir[y + 1]);
+        for (x, &zv) in z[y * w..(y + 1) * w].iter().enumerate() {
             if zv <= 0.0 {
                 continue;
             }
             let zv = zv as f64;
-            let (Some(a), Some(b)) =
-                (project(col_dir[x] + row_dir[y], zv), project(col_dir[x + 1] + row_dir[y + 1], zv))
-            else {
+            // The pixel's two corners (x, y) and (x + 1, y + 1) at its depth, in the colour frame.
+            let qa = (col_dir[x] + ra) * zv + t;
+            let qb = (col_dir[x + 1] + rb) * zv + t;
+            if qa.z <= 1e-6 || qb.z <= 1e-6 {
                 continue;
-            };
+            }
+            let inv = 1.0 / (qa.z * qb.z);
+            let (ia, ib) = (qb.z * inv, qa.z * inv);
+            let (ax, ay) = (ka.fx * qa.x * ia + ka.cx, ka.fy * qa.y * ia + ka.cy);
+            let (bx, by) = (ka.fx * qb.x * ib + ka.cx, ka.fy * qb.y * ib + ka.cy);
             // Pixel (x, y) spans [x, x + 1) in continuous coordinates; fill the target pixels whose
-            // centres the projected corners enclose.
-            let zq = ((a.2 + b.2) * 0.5) as f32;
-            // A hair wider than the corners, so rounding leaves no pinholes between neighbours.
-            let x0 = round_fast(a.0.min(b.0) - EPS).max(0.0) as usize;
-            let x1 = round_fast(a.0.max(b.0) + EPS).clamp(0.0, w as f64) as usize;
-            let y0 = round_fast(a.1.min(b.1) - EPS).max(0.0) as usize;
-            let y1 = round_fast(a.1.max(b.1) + EPS).clamp(0.0, h as f64) as usize;
+            // centres the projected corners enclose, a hair wider than the corners so rounding
+            // leaves no pinholes between neighbours.
+            let zq = ((qa.z + qb.z) * 0.5) as f32;
+            let x0 = round_fast(ax.min(bx) - EPS).max(0.0) as usize;
+            let x1 = round_fast(ax.max(bx) + EPS).clamp(0.0, wf) as usize;
+            let y0 = round_fast(ay.min(by) - EPS).max(0.0) as usize;
+            let y1 = round_fast(ay.max(by) + EPS).clamp(0.0, hf) as usize;
+            let x0 = x0.min(x1);
             for ty in y0..y1 {
-                for o in &mut out[ty * w + x0.min(x1)..ty * w + x1] {
+                for o in &mut out[ty * w + x0..ty * w + x1] {
                     if zq < *o {
                         *o = zq;
                     }
@@ -410,14 +465,19 @@ fn register(cfg: &StereoDepthConfig, unit: &SensorUnit, z: &[f32], w: usize, h: 
         }
     }
     let q = cfg.unit_m;
+    let inv_q = if q > 0.0 { 1.0 / q } else { 0.0 };
+    let mut valid = 0usize;
     for v in out.iter_mut() {
         if !v.is_finite() {
             *v = 0.0;
-        } else if q > 0.0 {
-            *v = ((*v as f64 / q + 0.5) as i64 as f64 * q) as f32;
+            continue;
         }
+        if q > 0.0 {
+            *v = ((*v as f64 * inv_q + 0.5) as i64 as f64 * q) as f32;
+        }
+        valid += usize::from(*v > 0.0);
     }
-    out
+    (out, valid)
 }
 
 #[cfg(test)]
