@@ -26,8 +26,20 @@ pub fn orb_extract<'py>(
     check_elements("grey", a.shape())?;
     let image =
         GreyImage { width: a.shape()[1] as u32, height: a.shape()[0] as u32, data: a.iter().copied().collect() };
-    let features =
-        py.detach(|| OrbExtractor::new(config).and_then(|mut orb| orb.extract(&image))).map_err(input_err)?;
+    let features = py
+        .detach(|| {
+            // One extractor kept between calls (its pattern tables and pyramid buffers), rebuilt
+            // when the configuration changes.
+            let mut cached = CACHE.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+            if cached.as_ref().is_none_or(|o| *o.config() != config) {
+                *cached = Some(OrbExtractor::new(config)?);
+            }
+            match cached.as_mut() {
+                Some(orb) => orb.extract(&image),
+                None => Ok(Default::default()),
+            }
+        })
+        .map_err(input_err)?;
     let n = features.keypoints.len();
     let kp: Vec<f32> = features
         .keypoints
