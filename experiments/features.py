@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import shlex
 import statistics
 import sys
 import time
@@ -305,7 +306,7 @@ def main(argv: list[str] | None = None) -> int:
             f"{o['precision']:.3f} vs {c['precision']:.3f}, {o['ms']:.2f} vs {c['ms']:.2f} ms"
         ),
         "commit": commit(),
-        "command": "python experiments/features.py " + " ".join(sys.argv[1:] if argv is None else argv),
+        "command": shlex.join(["python", "experiments/features.py", *(sys.argv[1:] if argv is None else argv)]),
         "machine": machine(),
         "config": {
             **SETTINGS,
