@@ -14,7 +14,7 @@ ROBUSTNESS_ARGS ?=
 RUNS_ARGS ?=
 AR_ARGS ?=
 
-.PHONY: help setup run runs test test-fast test-rust test-rust-unit test-py fuzz bench benchmark associate parameterize slam grasp grasp-robustness place match match-sim ar report sensor reports-index view lint fmt clean
+.PHONY: help setup run runs test test-fast test-rust test-rust-unit test-py fuzz bench benchmark associate parameterize slam grasp grasp-robustness place match match-sim ar features report sensor reports-index view lint fmt clean
 
 help: ## List the targets
 	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*## "}; {printf "  \033[1m%-12s\033[0m %s\n", $$1, $$2}'
@@ -78,6 +78,9 @@ match: ## Scene matching vs shared-object ratio (500 trials per row) → reports
 
 match-sim: setup ## Scene matching, part (b): maps of two simulator runs per scene (7 scenes × 2 Init episodes) → sim_pairs in reports/scene_matching.json
 	$(PY) experiments/match_sim.py $(MATCH_SIM_ARGS)
+
+features: setup ## ORB features vs OpenCV (repeatability, match precision, time) on photographs and SAPIEN renders → reports/features.json
+	$(PY) experiments/features.py $(FEATURES_ARGS)
 
 ar: setup ## AR on exploration maps vs the simulator's truth: occlusion IoU, drop rest error → reports/ar.json
 	$(PY) experiments/ar.py $(AR_ARGS)

@@ -32,6 +32,7 @@ QUESTIONS = {
     "scene_matching": "Are two maps of the same scene matched, and how many objects must they share?",
     "bench": "How fast are the core's stages, against reference libraries?",
     "foundation_run": "Where does the time of one episode go?",
+    "features": "Does the core's ORB match OpenCV's repeatability, match precision and time under known warps?",
 }
 
 

@@ -140,3 +140,23 @@ def test_tcp_jacobian_is_the_derivative_of_forward_tcp() -> None:
             np.testing.assert_allclose(jac[3:, i], w, atol=1e-5)
     with pytest.raises(ValueError, match="q"):
         planner.tcp_jacobian(np.zeros(6))
+
+
+def test_orb_extract_matches_itself_under_a_shift() -> None:
+    """The ORB binding: shapes and dtypes; an image shifted by 7 px gives mostly the same descriptors."""
+    from objslam import _native
+
+    rng = np.random.default_rng(0)
+    img = np.full((240, 320), 100, np.uint8)
+    for _ in range(120):
+        x, y, s = rng.integers(0, 300), rng.integers(0, 220), rng.integers(4, 20)
+        img[y : y + s, x : x + s] = rng.integers(0, 256)
+    kp, desc = _native.orb_extract(img)
+    assert kp.dtype == np.float32 and kp.shape[1] == 5 and desc.shape == (len(kp), 32) and len(kp) > 100
+    shifted = np.roll(img, 7, axis=1)
+    kp2, desc2 = _native.orb_extract(shifted)
+    same = {tuple(d) for d, k in zip(desc, kp) if k[2] == 0}
+    moved = {tuple(d) for d, k in zip(desc2, kp2) if k[2] == 0}
+    assert len(same & moved) >= 0.5 * len(same)
+    with pytest.raises(objslam.InputError, match="config_json"):
+        _native.orb_extract(img, '{"scale_factor": 1.0, "nope": 1}')

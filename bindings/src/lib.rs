@@ -17,6 +17,7 @@ use objslam_core::naive::{NaiveConfig, NaiveMapper};
 use objslam_core::record::{DrawnObject, RecordError, RecordOptions, Recorder};
 mod active;
 mod ar;
+mod features;
 mod plan;
 mod sensor;
 mod topo;
@@ -505,6 +506,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(topo::match_maps, m)?)?;
     m.add_function(wrap_pyfunction!(topo::relocalise, m)?)?;
     m.add_function(wrap_pyfunction!(sensor::sensor_model, m)?)?;
+    m.add_function(wrap_pyfunction!(features::orb_extract, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }

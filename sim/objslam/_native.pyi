@@ -183,6 +183,12 @@ def sensor_model(
     """The RGB-D sensor model (``objslam_core::sensor``) on one rendered frame: ``(depth, rgb,
     info_json)``; without ``points`` only the unit's calibration state (``info_json["unit"]``)."""
 
+def orb_extract(
+    grey: npt.NDArray[np.uint8], config_json: str | None = None
+) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.uint8]]:
+    """The core's ORB extractor on one uint8 (H, W) image: keypoints float32 (N, 5) as x, y, level,
+    angle (rad), FAST score; descriptors uint8 (N, 32)."""
+
 class PlanningError(ObjslamError): ...
 
 class Planner:

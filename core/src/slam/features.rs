@@ -301,76 +301,44 @@ impl OrbExtractor {
         if w <= 2 * EDGE_PX || h <= 2 * EDGE_PX {
             return;
         }
-        let img = &level.image;
-        let t_min = i16::from(self.config.fast_min_threshold);
-        let offsets: [isize; 16] = CIRCLE.map(|(dx, dy)| dy * w as isize + dx);
         let cell = self.config.cell_size_px;
-        let ncx = (w - 2 * EDGE_PX).div_ceil(cell);
-        let n = w - 2 * EDGE_PX;
-        let t8 = self.config.fast_min_threshold;
-        let offsets25: [isize; 25] = std::array::from_fn(|k| offsets[k % 16]);
-        for y in EDGE_PX..h - EDGE_PX {
-            let row = y * w;
-            // Segment test on 16 pixels at once (OpenCV's SIMD FAST): walk the circle 25 times
-            // (16 + 9 to wrap), counting consecutive brighter / darker pixels per lane.
-            let mut x0 = EDGE_PX;
-            let mut done_to = EDGE_PX;
-            while done_to < EDGE_PX + n {
-                if x0 + LANES > EDGE_PX + n {
-                    x0 = (EDGE_PX + n).saturating_sub(LANES).max(EDGE_PX);
-                }
-                let flags = segment_test_lanes(img, row + x0, &offsets25, t8);
-                let any = u128::from_le_bytes(flags) != 0;
-                for (j, &f) in flags.iter().enumerate().filter(|_| any) {
-                    let x = x0 + j;
-                    if f == 0 || x < done_to || x >= EDGE_PX + n {
-                        continue;
-                    }
-                    let i = (row + x) as isize;
-                    let c = i16::from(img[row + x]);
-                    let mut diff = [0i16; 16];
-                    for (k, o) in offsets.iter().enumerate() {
-                        diff[k] = i16::from(img[(i + o) as usize]) - c;
-                    }
-                    // Flag bit 0: bright arc, bit 1: dark arc (never both for 9 of 16).
-                    let score = if f & 1 != 0 { arc_score(&diff) } else { arc_score(&diff.map(|v| -v)) };
-                    if score < t_min {
-                        continue;
-                    }
-                    let cid = ((y - EDGE_PX) / cell) * ncx + (x - EDGE_PX) / cell;
-                    self.corners.push(Corner { x: x as u32, y: y as u32, score: score as u16, key: cid as u32 });
-                    self.score_buf[row + x] = score as u16;
-                }
-                done_to = (x0 + LANES).min(EDGE_PX + n);
-                x0 += LANES;
-                if n < LANES {
-                    break;
-                }
-            }
-        }
-        // Weak corners (score below the FAST threshold) only count in cells without a strong one
-        // (decided before suppression, which is then skipped for the dropped ones).
-        let strong = u16::from(self.config.fast_threshold);
-        let n_cells = self.corners.iter().map(|c| c.key as usize + 1).max().unwrap_or(0);
-        let mut has_strong = vec![false; n_cells];
-        for c in &self.corners {
-            if c.score >= strong {
+        let (nx, ny) = (w - 2 * EDGE_PX, h - 2 * EDGE_PX);
+        let (ncx, ncy) = (nx.div_ceil(cell), ny.div_ceil(cell));
+        let strong = self.config.fast_threshold;
+        let weak = self.config.fast_min_threshold;
+        // Strong corners over the level; weak ones (score below the FAST threshold) only in the
+        // cells without a strong one.
+        let geometry = ScanArea { width: w, cell, ncx };
+        scan_fast(&level.image, &geometry, (EDGE_PX, EDGE_PX + nx), (EDGE_PX, EDGE_PX + ny), strong, &mut self.corners);
+        if weak < strong {
+            let mut has_strong = vec![false; ncx * ncy];
+            for c in &self.corners {
                 if let Some(f) = has_strong.get_mut(c.key as usize) {
                     *f = true;
                 }
+            }
+            for (cid, _) in has_strong.iter().enumerate().filter(|(_, s)| !**s) {
+                let (x0, y0) = (EDGE_PX + (cid % ncx) * cell, EDGE_PX + (cid / ncx) * cell);
+                let xs = (x0, (x0 + cell).min(EDGE_PX + nx));
+                let ys = (y0, (y0 + cell).min(EDGE_PX + ny));
+                scan_fast(&level.image, &geometry, xs, ys, weak, &mut self.corners);
+            }
+        }
+        for c in &self.corners {
+            if let Some(s) = self.score_buf.get_mut(c.y as usize * w + c.x as usize) {
+                *s = c.score;
             }
         }
         // 3x3 non-maximum suppression (ties: the first in raster order wins).
         let buf = &self.score_buf;
         self.corners.retain(|c| {
-            if c.score < strong && has_strong.get(c.key as usize).copied().unwrap_or(false) {
-                return false;
-            }
             let i = c.y as usize * w + c.x as usize;
             let s = c.score;
             match (buf.get(i - w - 1..i - w + 2), buf.get(i - 1..i + 2), buf.get(i + w - 1..i + w + 2)) {
                 (Some(a), Some(m), Some(b)) => {
-                    a[0] < s && a[1] < s && a[2] < s && m[0] < s && m[2] <= s && b[0] <= s && b[1] <= s && b[2] <= s
+                    // Raster order of the neighbours decides ties.
+                    let (before, after) = ([a[0], a[1], a[2], m[0]], [m[2], b[0], b[1], b[2]]);
+                    before.iter().all(|&v| v < s) && after.iter().all(|&v| v <= s)
                 }
                 _ => false,
             }
@@ -466,6 +434,66 @@ impl OrbExtractor {
                 score: c.score,
             });
             out.descriptors.push(desc);
+        }
+    }
+}
+
+/// Where [`scan_fast`] looks: the level's width and its grid of cells.
+struct ScanArea {
+    width: usize,
+    cell: usize,
+    ncx: usize,
+}
+
+/// FAST-9 corners at threshold `t` in columns `xs.0..xs.1` and rows `ys.0..ys.1` (inside the level
+/// by [`EDGE_PX`]), appended to `out` with their cell as `key`.
+fn scan_fast(img: &[u8], area: &ScanArea, xs: (usize, usize), ys: (usize, usize), t: u8, out: &mut Vec<Corner>) {
+    let w = area.width;
+    let offsets: [isize; 16] = CIRCLE.map(|(dx, dy)| dy * w as isize + dx);
+    let offsets25: [isize; 25] = std::array::from_fn(|k| offsets[k % 16]);
+    let (x_from, x_to) = xs;
+    if x_to <= x_from {
+        return;
+    }
+    let n = x_to - x_from;
+    for y in ys.0..ys.1 {
+        let row = y * w;
+        // Segment test on 16 pixels at once (OpenCV's SIMD FAST): walk the circle 25 times
+        // (16 + 9 to wrap), counting consecutive brighter / darker pixels per lane. The last
+        // chunk overlaps the previous one (back from the row end) rather than leave the row.
+        let mut x0 = x_from;
+        let mut done_to = x_from;
+        while done_to < x_to {
+            if x0 + LANES > x_to {
+                x0 = x_to.saturating_sub(LANES).max(EDGE_PX);
+            }
+            let flags = segment_test_lanes(img, row + x0, &offsets25, t);
+            if u128::from_le_bytes(flags) != 0 {
+                for (j, &f) in flags.iter().enumerate() {
+                    let x = x0 + j;
+                    if f == 0 || x < done_to || x >= x_to {
+                        continue;
+                    }
+                    let i = (row + x) as isize;
+                    let c = i16::from(img[row + x]);
+                    let mut diff = [0i16; 16];
+                    for (k, o) in offsets.iter().enumerate() {
+                        diff[k] = i16::from(img[(i + o) as usize]) - c;
+                    }
+                    // Flag bit 0: bright arc, bit 1: dark arc (never both for 9 of 16).
+                    let score = if f & 1 != 0 { arc_score(&diff) } else { arc_score(&diff.map(|v| -v)) };
+                    if score < i16::from(t) {
+                        continue;
+                    }
+                    let cid = ((y - EDGE_PX) / area.cell) * area.ncx + (x - EDGE_PX) / area.cell;
+                    out.push(Corner { x: x as u32, y: y as u32, score: score as u16, key: cid as u32 });
+                }
+            }
+            done_to = (x0 + LANES).min(x_to);
+            x0 += LANES;
+            if n < LANES {
+                break;
+            }
         }
     }
 }
