@@ -13,8 +13,9 @@ PLACE_ARGS ?=
 ROBUSTNESS_ARGS ?=
 RUNS_ARGS ?=
 AR_ARGS ?=
+RELOC_ARGS ?=
 
-.PHONY: help setup run runs test test-fast test-rust test-rust-unit test-py fuzz bench benchmark associate parameterize slam grasp grasp-robustness place match match-sim ar report sensor reports-index view lint fmt clean
+.PHONY: help setup run runs test test-fast test-rust test-rust-unit test-py fuzz bench benchmark associate parameterize slam grasp grasp-robustness place match match-sim reloc ar report sensor reports-index view lint fmt clean
 
 help: ## List the targets
 	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*## "}; {printf "  \033[1m%-12s\033[0m %s\n", $$1, $$2}'
@@ -78,6 +79,9 @@ match: ## Scene matching vs shared-object ratio (500 trials per row) → reports
 
 match-sim: setup ## Scene matching, part (b): maps of two simulator runs per scene (7 scenes × 2 Init episodes) → sim_pairs in reports/scene_matching.json
 	$(PY) experiments/match_sim.py $(MATCH_SIM_ARGS)
+
+reloc: setup ## Relocalisation vs parallax, objects vs appearance (hard + test scenes; RELOC_ARGS) → reports/relocalisation.json
+	nice -n 10 $(PY) experiments/reloc.py $(RELOC_ARGS)
 
 ar: setup ## AR on exploration maps vs the simulator's truth: occlusion IoU, drop rest error → reports/ar.json
 	$(PY) experiments/ar.py $(AR_ARGS)
