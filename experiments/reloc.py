@@ -4,15 +4,17 @@ parallax, object-level vs appearance-based → ``reports/relocalisation.json`` (
 
 Per scene (the realistic world, one SAPIEN process, scenes one after another):
 
-1. Prior: one object-driven exploration episode (run seed ``--seed``); its run folder keeps the map
+1. Prior: one object-driven exploration episode (run seed ``--seed``) of the 4 Init views and
+   ``--prior-views`` next-best views (default 3: a prior that has not seen the scene from every side,
+   so that queries can have large parallax to it); its run folder keeps the map
    and ``keyframes.npz`` (:class:`objslam.reloc.KeyframeRecorder`: grey, depth and estimated pose of
    every frame that moved ≥ 5 cm or turned ≥ 10° since the last kept one).
 2. Query pool: in a fresh world of the same scene (another session: run seed ``--seed`` + 1000, its
    own arm errors and sensor and detector noise), the hand camera is placed on rings around the
-   table centre (elevations 30°, 50° and 70° at 0.55, 0.5 and 0.45 m, azimuth every 10°; poses the
-   arm cannot reach are skipped) and one frame is rendered and detected at each.
-3. Trials: a query trajectory is ``--keyframes`` consecutive reachable ring poses (10° apart) from
-   every start on every ring (rings: :data:`RINGS`). Its parallax is the smallest angle between the optical axis of one of
+   table centre looking at it (:data:`RINGS`: elevations 15°, 30°, 50°, 70°; poses the arm cannot
+   reach are skipped) and one frame is rendered and detected at each.
+3. Trials: a query trajectory is ``--keyframes`` consecutive reachable poses of a ring (4-6 cm
+   apart) from every start on every ring. Its parallax is the smallest angle between the optical axis of one of
    its frames and that of the nearest prior frame (true poses; it only bins the trial).
    - *objects*: the query frames fused by the same per-frame system as the episode (a fresh mapper:
      association, parameterization, SLAM tracking) into an object map, moved by a random similarity
@@ -65,8 +67,9 @@ from objslam.scene import gt_objects, load_scene
 from objslam.topo import similarity_matrix, transform_errors, transform_map_json
 
 REPO = Path(__file__).resolve().parents[1]
-RINGS = [Ring(30.0, 0.55), Ring(50.0, 0.50), Ring(70.0, 0.45)]
-AZIMUTH_STEP_DEG = 10.0
+RINGS = [Ring(15.0, 0.60, 5.0), Ring(30.0, 0.50, 5.0), Ring(50.0, 0.50, 10.0), Ring(70.0, 0.45, 20.0)]
+"""Query rings (elevation °, distance m, azimuth step °): the steps move the camera 4-6 cm between
+neighbouring poses on every ring."""
 QUERY_SEED_OFFSET = 1000
 BINS = [(0.0, 20.0), (20.0, 50.0), (50.0, 100.0)]
 METHODS = ("objects", "appearance")
@@ -97,13 +100,20 @@ def _complete(run_dir: Path) -> bool:
     )
 
 
-def _latest_prior(scene_name: str, seed: int) -> Path | None:
-    """The newest complete prior run folder (with keyframes) of a scene and seed under ``runs/``."""
+def _latest_prior(scene_name: str, seed: int, prior_views: int) -> Path | None:
+    """The newest complete prior run folder (with keyframes) of a scene, seed and view budget under
+    ``runs/``."""
+    import tomllib
+
     runs = sorted((REPO / "runs").glob(f"*/*_object-driven_{scene_name}_{seed}*"), reverse=True)
-    return next((r for r in runs if _complete(r)), None)
+    for r in runs:
+        if _complete(r) and (r / "config.toml").exists():
+            if tomllib.loads((r / "config.toml").read_text())["explore"]["max_views"] == prior_views:
+                return r
+    return None
 
 
-def prior_episode(scene: str, seed: int, reuse: Path | None) -> Path:
+def prior_episode(scene: str, seed: int, reuse: Path | None, prior_views: int = 3) -> Path:
     """The prior's run folder: reused when complete, else a new object-driven episode."""
     if reuse is not None and _complete(reuse):
         print(f"  prior: reusing {_rel(reuse)}", flush=True)
@@ -150,17 +160,23 @@ def _score(estimate: np.ndarray | None, truth: np.ndarray) -> dict[str, Any]:
 
 
 def scene_trials(
-    scene_path: str, index: int, seed: int, ks: list[int], reuse: Path | None, max_trials: int | None
+    scene_path: str,
+    index: int,
+    seed: int,
+    ks: list[int],
+    reuse: Path | None,
+    max_trials: int | None,
+    prior_views: int = 3,
 ) -> tuple[dict[str, Any], list[dict[str, Any]]]:
     """Prior, pool and every trial of one scene."""
     scene = load_scene(REPO / scene_path)
-    prior_dir = prior_episode(scene_path, seed, reuse)
+    prior_dir = prior_episode(scene_path, seed, reuse, prior_views)
     keyframes = dict(np.load(prior_dir / "keyframes.npz"))
     prior_json = (prior_dir / "map.json").read_text()
     qseed = seed + QUERY_SEED_OFFSET
     cfg = load_run_config(overrides=[f'scene="{scene_path}"', f"seed={qseed}"], strategy="object-driven")
     t0 = time.perf_counter()
-    pool = render_pool(cfg, scene, RINGS, AZIMUTH_STEP_DEG, qseed)
+    pool = render_pool(cfg, scene, RINGS, qseed)
     gt_json = json.dumps(gt_objects(scene))
     t_pool = time.perf_counter() - t0
     t0 = time.perf_counter()
@@ -174,9 +190,9 @@ def scene_trials(
     axes = np.asarray(keyframes["axes_gt"], dtype=np.float64)
     par = [parallax_deg(p.world_from_camera_gt, axes) for p in pool]
     where = {(p.ring, round(p.azimuth_deg)): i for i, p in enumerate(pool)}
-    step = round(AZIMUTH_STEP_DEG)
     starts = []
     for (ring, az), i in sorted(where.items()):
+        step = round(RINGS[ring].azimuth_step_deg)
         base = [where.get((ring, (az + j * step) % 360)) for j in range(ks[0])]
         if any(r is None for r in base):
             continue
@@ -280,8 +296,9 @@ def markdown(report: dict[str, Any]) -> str:
         f"Generated by `{report['command']}` (do not edit by hand) at commit `{report['commit']}`.",
         "",
         (
-            f"Prior: one object-driven exploration episode per scene (realistic world, run seed {p['seed']}). "
-            f"Query: {p['keyframes']} consecutive hand-camera poses (10° apart on a ring around the table) "
+            f"Prior: one object-driven exploration episode per scene (realistic world, run seed {p['seed']}, "
+            f"4 Init views + {p['prior_views']} next-best views). "
+            f"Query: {p['keyframes']} consecutive hand-camera poses (4-6 cm apart on a ring around the table) "
             "rendered in another session of the same robot, fused by the same per-frame system into an object "
             "map and moved by a random similarity. *objects*: topological scene matching of the query map "
             "against the prior map; *appearance*: ORB relocalisation of each query frame against the prior's "
@@ -347,9 +364,15 @@ def main(argv: list[str] | None = None) -> int:
         help="scene files (default: scenes/hard/*.toml and scenes/test/*.toml)",
     )
     ap.add_argument("--seed", type=int, default=0, help="run seed of the prior episodes (queries: +1000)")
+    ap.add_argument(
+        "--prior-views",
+        type=int,
+        default=3,
+        help="next-best views of the prior episode after its 4 Init views",
+    )
     ap.add_argument("--keyframes", type=int, default=3, help="query keyframes of a trial")
     ap.add_argument(
-        "--more-keyframes", type=int, nargs="*", default=[5, 8], help="longer queries for the hypothesis rows"
+        "--more-keyframes", type=int, nargs="*", default=[6], help="longer queries for the hypothesis rows"
     )
     ap.add_argument(
         "--max-trials", type=int, default=None, help="at most this many trials per scene (seeded draw)"
@@ -379,9 +402,11 @@ def main(argv: list[str] | None = None) -> int:
         name = Path(scene).stem
         print(f"{name}:", flush=True)
         reuse = (
-            REPO / previous[name] if name in previous else (_latest_prior(name, a.seed) if a.reuse else None)
+            REPO / previous[name]
+            if name in previous
+            else (_latest_prior(name, a.seed, a.prior_views) if a.reuse else None)
         )
-        info, tr = scene_trials(scene, i, a.seed, ks, reuse, a.max_trials)
+        info, tr = scene_trials(scene, i, a.seed, ks, reuse, a.max_trials, a.prior_views)
         infos.append(info)
         trials.extend(tr)
     protocol = {
@@ -390,8 +415,15 @@ def main(argv: list[str] | None = None) -> int:
         "keyframes": a.keyframes,
         "more_keyframes": ks[1:],
         "max_trials": a.max_trials,
-        "rings": [{"elevation_deg": r.elevation_deg, "distance_m": r.distance_m} for r in RINGS],
-        "azimuth_step_deg": AZIMUTH_STEP_DEG,
+        "rings": [
+            {
+                "elevation_deg": r.elevation_deg,
+                "distance_m": r.distance_m,
+                "azimuth_step_deg": r.azimuth_step_deg,
+            }
+            for r in RINGS
+        ],
+        "prior_views": a.prior_views,
         "bins_deg": BINS,
         "similarity": "yaw uniform [-180, 180) deg, scale log-uniform [0.5, 2], translation uniform [-1, 1]^3 m",
         "success": f"rotation error < {ROT_OK_DEG} deg and |t_est - t_true| / s_true < {TRANS_OK_CM} cm",

@@ -129,6 +129,8 @@ class Ring:
     """Elevation of the camera above the table top seen from the centre, degrees."""
     distance_m: float
     """Distance from the table centre, metres."""
+    azimuth_step_deg: float
+    """Azimuth between neighbouring poses, degrees (a query trajectory steps by it)."""
 
 
 def ring_pose(center_xy: tuple[float, float], ring: Ring, azimuth_deg: float) -> np.ndarray:
@@ -142,9 +144,7 @@ def ring_pose(center_xy: tuple[float, float], ring: Ring, azimuth_deg: float) ->
     return look_at(eye, c)
 
 
-def render_pool(
-    cfg: Any, scene: Any, rings: list[Ring], azimuth_step_deg: float, seed: int, progress: bool = True
-) -> list[PoolFrame]:
+def render_pool(cfg: Any, scene: Any, rings: list[Ring], seed: int, progress: bool = True) -> list[PoolFrame]:
     """Render the query pool of one scene (see the module docs). ``cfg`` is the run config of the
     query session (its seed draws the arm errors and the sensor and detector noise)."""
     from .detector import SimulatedDetector
@@ -159,10 +159,10 @@ def render_pool(
     detector = SimulatedDetector(cfg.detector, rng_detector)
     center = (float(scene.table.center[0]), float(scene.table.center[1]))
     pool: list[PoolFrame] = []
-    n_az = round(360.0 / azimuth_step_deg)
     for ri, ring in enumerate(rings):
+        n_az = round(360.0 / ring.azimuth_step_deg)
         for k in range(n_az):
-            az = k * azimuth_step_deg
+            az = k * ring.azimuth_step_deg
             view = ring_pose(center, ring, az)
             try:
                 q = world.solve_ik(view, "query view")
