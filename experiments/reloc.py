@@ -107,9 +107,13 @@ def _latest_prior(scene_name: str, seed: int, prior_views: int) -> Path | None:
 
     runs = sorted((REPO / "runs").glob(f"*/*_object-driven_{scene_name}_{seed}*"), reverse=True)
     for r in runs:
-        if _complete(r) and (r / "config.toml").exists():
-            if tomllib.loads((r / "config.toml").read_text())["explore"]["max_views"] == prior_views:
-                return r
+        config = r / "config.toml"
+        if (
+            _complete(r)
+            and config.exists()
+            and tomllib.loads(config.read_text())["explore"]["max_views"] == prior_views
+        ):
+            return r
     return None
 
 
