@@ -6,8 +6,8 @@
 //! `MapFileError` (map JSON) or `InputError` (config JSON) naming the argument and the field.
 
 use nalgebra::{Matrix3, Matrix4, Similarity3};
-use objslam_core::geometry::se3_from_matrix;
 use numpy::{PyArray1, PyArray2, ToPyArray};
+use objslam_core::geometry::se3_from_matrix;
 use objslam_core::map::ObjectMap;
 use objslam_core::topo::{match_object_maps, MatchConfig, MatchResult, MatchStats, TopoError};
 use pyo3::prelude::*;
@@ -202,8 +202,16 @@ fn frames<'a>(
     let (h, w) = (g.shape()[1] as u32, g.shape()[2] as u32);
     (0..g.shape()[0])
         .map(|i| {
-            let gi = objslam_core::frame::GreyImage::new(w, h, g.index_axis(numpy::ndarray::Axis(0), i).iter().copied().collect());
-            let di = objslam_core::frame::DepthImage::new(w, h, d.index_axis(numpy::ndarray::Axis(0), i).iter().copied().collect());
+            let gi = objslam_core::frame::GreyImage::new(
+                w,
+                h,
+                g.index_axis(numpy::ndarray::Axis(0), i).iter().copied().collect(),
+            );
+            let di = objslam_core::frame::DepthImage::new(
+                w,
+                h,
+                d.index_axis(numpy::ndarray::Axis(0), i).iter().copied().collect(),
+            );
             match (gi, di) {
                 (Ok(gi), Ok(di)) => Ok((gi, di)),
                 (Err(e), _) | (_, Err(e)) => Err(crate::input_err(format!("{field}: {e}"))),
