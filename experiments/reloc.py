@@ -11,7 +11,7 @@ Per scene (the realistic world, one SAPIEN process, scenes one after another):
    every frame that moved ≥ 5 cm or turned ≥ 10° since the last kept one).
 2. Query pool: in a fresh world of the same scene (another session: run seed ``--seed`` + 1000, its
    own arm errors and sensor and detector noise), the hand camera is placed on rings around the
-   table centre looking at it (:data:`RINGS`: elevations 15°, 30°, 50°, 70°; poses the arm cannot
+   table centre looking at it (:data:`RINGS`: elevations 10°, 25°, 50°, 70°; poses the arm cannot
    reach are skipped) and one frame is rendered and detected at each.
 3. Trials: a query trajectory is ``--keyframes`` consecutive reachable poses of a ring (4-6 cm
    apart) from every start on every ring. Its parallax is the smallest angle between the optical axis of one of
@@ -67,7 +67,7 @@ from objslam.scene import gt_objects, load_scene
 from objslam.topo import similarity_matrix, transform_errors, transform_map_json
 
 REPO = Path(__file__).resolve().parents[1]
-RINGS = [Ring(15.0, 0.60, 5.0), Ring(30.0, 0.50, 5.0), Ring(50.0, 0.50, 10.0), Ring(70.0, 0.45, 20.0)]
+RINGS = [Ring(10.0, 0.60, 5.0), Ring(25.0, 0.50, 5.0), Ring(50.0, 0.50, 10.0), Ring(70.0, 0.45, 20.0)]
 """Query rings (elevation °, distance m, azimuth step °): the steps move the camera 4-6 cm between
 neighbouring poses on every ring."""
 QUERY_SEED_OFFSET = 1000

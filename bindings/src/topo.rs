@@ -234,7 +234,7 @@ pub fn relocalise_appearance(
     query_grey: numpy::PyReadonlyArray3<'_, u8>,
     query_depth: numpy::PyReadonlyArray3<'_, f32>,
 ) -> PyResult<String> {
-    use objslam_core::slam::{AppearanceDatabase, RgbdKeyframe, SlamError};
+    use objslam_core::slam::{relocalise_frames, RgbdKeyframe};
     let req: AppearanceRequest = crate::parse_json("request_json", request_json)?;
     let prior = frames(&prior_grey, &prior_depth, "prior")?;
     let query = frames(&query_grey, &query_depth, "query")?;
@@ -255,24 +255,6 @@ pub fn relocalise_appearance(
             .map_err(|e| crate::input_err(format!("request_json.prior_world_from_camera[{i}]: {e}")))?;
         keyframes.push(RgbdKeyframe { grey, depth, camera, world_from_camera: pose });
     }
-    let results = py.detach(|| -> Result<Vec<serde_json::Value>, SlamError> {
-        let mut db = AppearanceDatabase::build(req.config, &keyframes)?;
-        query
-            .iter()
-            .map(|(grey, depth)| match db.relocalise(grey, depth, &camera) {
-                Ok(r) => {
-                    let m = r.world_from_camera.to_homogeneous();
-                    let rows: Vec<Vec<f64>> = (0..4).map(|i| (0..4).map(|j| m[(i, j)]).collect()).collect();
-                    Ok(serde_json::json!({"ok": true, "world_from_camera": rows, "keyframe": r.keyframe,
-                        "matches": r.matches, "inliers": r.inliers, "reason": null}))
-                }
-                Err(SlamError::TooFewInliers { actual, .. }) => Ok(serde_json::json!({"ok": false,
-                    "world_from_camera": null, "keyframe": null, "matches": null, "inliers": actual,
-                    "reason": "too_few_inliers"})),
-                Err(e) => Err(e),
-            })
-            .collect()
-    });
-    let results = results.map_err(crate::input_err)?;
+    let results = py.detach(|| relocalise_frames(req.config, &keyframes, &query, &camera)).map_err(crate::input_err)?;
     serde_json::to_string(&results).map_err(crate::input_err)
 }

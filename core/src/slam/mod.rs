@@ -154,7 +154,9 @@ pub use matcher::{match_brute_force, FeatureMatch, KeypointGrid, MatchConfig};
 pub use metrics::{ate_rmse_m, rpe, Rpe};
 pub use noise::{PriorNoiseConfig, SyntheticPriorError};
 pub use pnp::{refine_pose, solve_pnp_ransac, Correspondence, PoseEstimate, PoseRefineConfig, RansacConfig};
-pub use relocalise::{AppearanceConfig, AppearanceDatabase, Relocalisation, RgbdKeyframe};
+pub use relocalise::{
+    relocalise_frames, AppearanceConfig, AppearanceDatabase, Relocalisation, RelocalisationRecord, RgbdKeyframe,
+};
 pub use tracker::{
     LostReason, ObservedPoint, PoseSource, TrackInput, TrackOutput, Tracker, TrackerConfig, TrackingState,
 };

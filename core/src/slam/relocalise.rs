@@ -103,6 +103,59 @@ pub struct Relocalisation {
     pub inliers: usize,
 }
 
+/// One query frame's outcome, as the bindings report it (JSON).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct RelocalisationRecord {
+    /// Whether the frame relocalised.
+    pub ok: bool,
+    /// Its pose in the prior's frame (4x4, rows), when it did.
+    pub world_from_camera: Option<[[f64; 4]; 4]>,
+    /// The keyframe it was found against, when it did.
+    pub keyframe: Option<usize>,
+    /// Descriptor matches with that keyframe, when it did.
+    pub matches: Option<usize>,
+    /// Inliers (the best count reached when it did not).
+    pub inliers: usize,
+    /// Why not (`too_few_inliers`), when it did not.
+    pub reason: Option<&'static str>,
+}
+
+/// Relocalise every `(grey, depth)` query frame against `keyframes` (one [`AppearanceDatabase`]).
+/// Errors: a bad config or image size; a frame that does not relocalise is a record, not an error.
+pub fn relocalise_frames(
+    config: AppearanceConfig,
+    keyframes: &[RgbdKeyframe],
+    queries: &[(GreyImage, DepthImage)],
+    camera: &PinholeCamera,
+) -> Result<Vec<RelocalisationRecord>, SlamError> {
+    let mut db = AppearanceDatabase::build(config, keyframes)?;
+    queries
+        .iter()
+        .map(|(grey, depth)| match db.relocalise(grey, depth, camera) {
+            Ok(r) => {
+                let m = r.world_from_camera.to_homogeneous();
+                Ok(RelocalisationRecord {
+                    ok: true,
+                    world_from_camera: Some(std::array::from_fn(|i| std::array::from_fn(|j| m[(i, j)]))),
+                    keyframe: Some(r.keyframe),
+                    matches: Some(r.matches),
+                    inliers: r.inliers,
+                    reason: None,
+                })
+            }
+            Err(SlamError::TooFewInliers { actual, .. }) => Ok(RelocalisationRecord {
+                ok: false,
+                world_from_camera: None,
+                keyframe: None,
+                matches: None,
+                inliers: actual,
+                reason: Some("too_few_inliers"),
+            }),
+            Err(e) => Err(e),
+        })
+        .collect()
+}
+
 #[derive(Debug, Clone)]
 struct Entry {
     features: Features,
