@@ -125,7 +125,13 @@ def prior_episode(scene: str, seed: int, reuse: Path | None, prior_views: int = 
     from objslam.episode import run_episode
 
     cfg = load_run_config(
-        overrides=[f'scene="{scene}"', f"seed={seed}", "record.enabled=false"], strategy="object-driven"
+        overrides=[
+            f'scene="{scene}"',
+            f"seed={seed}",
+            f"explore.max_views={prior_views}",
+            "record.enabled=false",
+        ],
+        strategy="object-driven",
     )
     keyframes = KeyframeRecorder()
     t0 = time.perf_counter()
