@@ -11,7 +11,7 @@ Per scene (the realistic world, one SAPIEN process, scenes one after another):
    every frame that moved ≥ 5 cm or turned ≥ 10° since the last kept one).
 2. Query pool: in a fresh world of the same scene (another session: run seed ``--seed`` + 1000, its
    own arm errors and sensor and detector noise), the hand camera is placed on rings around the
-   table centre looking at it (:data:`RINGS`: elevations 10°, 25°, 50°, 70°; poses the arm cannot
+   table centre looking at it (:data:`RINGS`: elevations 5°, 10°, 25°, 50°, 70°; poses the arm cannot
    reach are skipped) and one frame is rendered and detected at each.
 3. Trials: a query trajectory is ``--keyframes`` consecutive reachable poses of a ring (4-6 cm
    apart) from every start on every ring. Its parallax is the smallest angle between the optical axis of one of
@@ -67,7 +67,13 @@ from objslam.scene import gt_objects, load_scene
 from objslam.topo import similarity_matrix, transform_errors, transform_map_json
 
 REPO = Path(__file__).resolve().parents[1]
-RINGS = [Ring(10.0, 0.60, 5.0), Ring(25.0, 0.50, 5.0), Ring(50.0, 0.50, 10.0), Ring(70.0, 0.45, 20.0)]
+RINGS = [
+    Ring(5.0, 0.65, 5.0),
+    Ring(10.0, 0.60, 5.0),
+    Ring(25.0, 0.50, 5.0),
+    Ring(50.0, 0.50, 10.0),
+    Ring(70.0, 0.45, 20.0),
+]
 """Query rings (elevation °, distance m, azimuth step °): the steps move the camera 4-6 cm between
 neighbouring poses on every ring."""
 QUERY_SEED_OFFSET = 1000
@@ -407,18 +413,6 @@ def main(argv: list[str] | None = None) -> int:
     if a.reuse and json_path.exists():
         previous = {s["scene"]: s["prior_run"] for s in json.loads(json_path.read_text()).get("scenes", [])}
     ks = [a.keyframes, *sorted(k for k in set(a.more_keyframes) if k > a.keyframes)]
-    infos, trials = [], []
-    for i, scene in enumerate(scenes):
-        name = Path(scene).stem
-        print(f"{name}:", flush=True)
-        reuse = (
-            REPO / previous[name]
-            if name in previous
-            else (_latest_prior(name, a.seed, a.prior_views) if a.reuse else None)
-        )
-        info, tr = scene_trials(scene, i, a.seed, ks, reuse, a.max_trials, a.prior_views)
-        infos.append(info)
-        trials.extend(tr)
     protocol = {
         "seed": a.seed,
         "query_seed": a.seed + QUERY_SEED_OFFSET,
@@ -441,8 +435,21 @@ def main(argv: list[str] | None = None) -> int:
         "run_config": to_dict(load_run_config(strategy="object-driven")),
     }
     argv_list = ["python", "experiments/reloc.py", *(argv if argv is not None else sys.argv[1:])]
+    prov = provenance(argv_list, protocol)  # the code and tree the run starts from
+    infos, trials = [], []
+    for i, scene in enumerate(scenes):
+        name = Path(scene).stem
+        print(f"{name}:", flush=True)
+        reuse = (
+            REPO / previous[name]
+            if name in previous
+            else (_latest_prior(name, a.seed, a.prior_views) if a.reuse else None)
+        )
+        info, tr = scene_trials(scene, i, a.seed, ks, reuse, a.max_trials, a.prior_views)
+        infos.append(info)
+        trials.extend(tr)
     report = {
-        **provenance(argv_list, protocol),
+        **prov,
         "protocol": protocol,
         "scenes": infos,
         "rows": rows_of(trials, a.keyframes),

@@ -48,18 +48,20 @@ def test_appearance_relocalisation_refuses_inconsistent_input() -> None:
 
 @pytest.mark.slow
 def test_pipeline_on_one_scene(tmp_path: Path) -> None:
-    """One prior episode and a few trials on hard01 (seed 0): the object method relocalises most
-    trials within the report's thresholds, the records are complete and parallax is in range."""
+    """One prior episode and 12 trials on hard01 (seed 0): the object method relocalises most
+    6-keyframe queries within the report's thresholds, the records are complete and parallax is in
+    range."""
     sys.path.insert(0, str(REPO / "experiments"))
     import reloc
 
-    info, trials = reloc.scene_trials("scenes/hard/hard01.toml", 0, 0, [3, 5], None, 12)
+    info, trials = reloc.scene_trials("scenes/hard/hard01.toml", 0, 0, [3, 6], None, 12)
     assert info["trials"] == 12 and info["prior_keyframes"] >= 10
     assert {t["method"] for t in trials} == {"objects", "appearance"}
     assert all(0.0 <= t["parallax_deg"] <= 180.0 for t in trials)
-    objects = [t for t in trials if t["method"] == "objects" and t["query_keyframes"] == 3]
+    # The report's hard scenes: 6-keyframe queries relocalise by objects in 74-92 % of trials per bin.
+    objects = [t for t in trials if t["method"] == "objects" and t["query_keyframes"] == 6]
     assert len(objects) == 12
-    assert sum(t["success"] for t in objects) >= 8
+    assert sum(t["success"] for t in objects) >= 7
     for t in trials:
         if t["success"]:
             assert t["rotation_error_deg"] < 5.0 and t["translation_error_cm"] < 5.0
