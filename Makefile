@@ -13,8 +13,10 @@ PLACE_ARGS ?=
 ROBUSTNESS_ARGS ?=
 RUNS_ARGS ?=
 AR_ARGS ?=
+RELOC_ARGS ?=
+FEATURES_ARGS ?=
 
-.PHONY: help setup run runs test test-fast test-rust test-rust-unit test-py fuzz bench benchmark associate parameterize slam grasp grasp-robustness place match match-sim ar features report sensor reports-index view lint fmt clean
+.PHONY: help setup run runs test test-fast test-rust test-rust-unit test-py fuzz bench benchmark associate parameterize slam grasp grasp-robustness place match match-sim features reloc ar report sensor reports-index view lint fmt clean
 
 help: ## List the targets
 	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*## "}; {printf "  \033[1m%-12s\033[0m %s\n", $$1, $$2}'
@@ -81,6 +83,8 @@ match-sim: setup ## Scene matching, part (b): maps of two simulator runs per sce
 
 features: setup ## ORB features vs OpenCV (repeatability, match precision, time) on photographs and SAPIEN renders → reports/features.json
 	$(PY) experiments/features.py $(FEATURES_ARGS)
+reloc: setup ## Relocalisation vs parallax, objects vs appearance (hard + test scenes; RELOC_ARGS) → reports/relocalisation.json
+	$(PY) experiments/reloc.py $(RELOC_ARGS)
 
 ar: setup ## AR on exploration maps vs the simulator's truth: occlusion IoU, drop rest error → reports/ar.json
 	$(PY) experiments/ar.py $(AR_ARGS)

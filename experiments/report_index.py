@@ -30,6 +30,7 @@ QUESTIONS = {
     "grasping": "Can the arm grasp every object from the map it built?",
     "placement": "Can it do the paper's placement tasks from that map?",
     "scene_matching": "Are two maps of the same scene matched, and how many objects must they share?",
+    "relocalisation": "Does a short query relocalise against a prior map at large parallax, by objects or by appearance?",
     "bench": "How fast are the core's stages, against reference libraries?",
     "foundation_run": "Where does the time of one episode go?",
     "features": "Does the core's ORB match OpenCV's repeatability, match precision and time under known warps?",
@@ -109,6 +110,12 @@ def _scene_matching(d: dict[str, Any]) -> str:
     return text
 
 
+def _relocalisation(d: dict[str, Any]) -> str:
+    return "success rate by parallax: " + ", ".join(
+        f"{r['parallax_bin']}° {r['method']} {r['successes']}/{r['trials']}" for r in d["rows"]
+    )
+
+
 def _bench(d: dict[str, Any]) -> str:
     e = d["entries"]
     keys = [k for k in ("track_frame", "associate_frame_20x10", "utility_100x12", "iforest_500") if k in e]
@@ -134,6 +141,7 @@ HEADLINES: dict[str, Callable[[dict[str, Any]], str]] = {
     "grasping": _grasping,
     "placement": _placement,
     "scene_matching": _scene_matching,
+    "relocalisation": _relocalisation,
     "bench": _bench,
     "foundation_run": _foundation_run,
 }

@@ -505,6 +505,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(map_objects_json, m)?)?;
     m.add_function(wrap_pyfunction!(topo::match_maps, m)?)?;
     m.add_function(wrap_pyfunction!(topo::relocalise, m)?)?;
+    m.add_function(wrap_pyfunction!(topo::relocalise_appearance, m)?)?;
     m.add_function(wrap_pyfunction!(sensor::sensor_model, m)?)?;
     m.add_function(wrap_pyfunction!(features::orb_extract, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;

@@ -5,8 +5,9 @@
 //! (`matched` False, `reason`, `reason_kind`), not an exception; malformed input raises
 //! `MapFileError` (map JSON) or `InputError` (config JSON) naming the argument and the field.
 
-use nalgebra::{Matrix4, Similarity3};
+use nalgebra::{Matrix3, Matrix4, Similarity3};
 use numpy::{PyArray1, PyArray2, ToPyArray};
+use objslam_core::geometry::se3_from_matrix;
 use objslam_core::map::ObjectMap;
 use objslam_core::topo::{match_object_maps, MatchConfig, MatchResult, MatchStats, TopoError};
 use pyo3::prelude::*;
@@ -177,4 +178,83 @@ pub fn relocalise<'py>(
     ids.sort_unstable();
     d.set_item("matched_ids", ids)?;
     Ok(d)
+}
+
+#[derive(serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct AppearanceRequest {
+    #[serde(default)]
+    config: objslam_core::slam::AppearanceConfig,
+    intrinsics: [[f64; 3]; 3],
+    prior_world_from_camera: Vec<[[f64; 4]; 4]>,
+}
+
+fn frames<'a>(
+    grey: &'a numpy::PyReadonlyArray3<'_, u8>,
+    depth: &'a numpy::PyReadonlyArray3<'_, f32>,
+    field: &str,
+) -> PyResult<Vec<(objslam_core::frame::GreyImage, objslam_core::frame::DepthImage)>> {
+    let (g, d) = (grey.as_array(), depth.as_array());
+    if g.shape() != d.shape() {
+        return Err(crate::input_err(format!("{field}: grey {:?} and depth {:?} shapes differ", g.shape(), d.shape())));
+    }
+    crate::check_elements(field, g.shape())?;
+    let (h, w) = (g.shape()[1] as u32, g.shape()[2] as u32);
+    (0..g.shape()[0])
+        .map(|i| {
+            let gi = objslam_core::frame::GreyImage::new(
+                w,
+                h,
+                g.index_axis(numpy::ndarray::Axis(0), i).iter().copied().collect(),
+            );
+            let di = objslam_core::frame::DepthImage::new(
+                w,
+                h,
+                d.index_axis(numpy::ndarray::Axis(0), i).iter().copied().collect(),
+            );
+            match (gi, di) {
+                (Ok(gi), Ok(di)) => Ok((gi, di)),
+                (Err(e), _) | (_, Err(e)) => Err(crate::input_err(format!("{field}: {e}"))),
+            }
+        })
+        .collect()
+}
+
+/// Appearance-based relocalisation (`objslam_core::slam::relocalise`) of query RGB-D frames against
+/// prior keyframes. `request_json`: `{"config": partial AppearanceConfig, "intrinsics": 3x3,
+/// "prior_world_from_camera": [4x4 per keyframe]}`; `prior_grey` / `query_grey` uint8 (N, H, W),
+/// `prior_depth` / `query_depth` float32 (N, H, W) metres. Returns JSON, one record per query
+/// frame: `{"ok", "world_from_camera" (4x4 or null), "keyframe", "matches", "inliers", "reason"}`.
+#[pyfunction]
+pub fn relocalise_appearance(
+    py: Python<'_>,
+    request_json: &str,
+    prior_grey: numpy::PyReadonlyArray3<'_, u8>,
+    prior_depth: numpy::PyReadonlyArray3<'_, f32>,
+    query_grey: numpy::PyReadonlyArray3<'_, u8>,
+    query_depth: numpy::PyReadonlyArray3<'_, f32>,
+) -> PyResult<String> {
+    use objslam_core::slam::{relocalise_frames, RgbdKeyframe};
+    let req: AppearanceRequest = crate::parse_json("request_json", request_json)?;
+    let prior = frames(&prior_grey, &prior_depth, "prior")?;
+    let query = frames(&query_grey, &query_depth, "query")?;
+    if prior.len() != req.prior_world_from_camera.len() {
+        return Err(crate::input_err(format!(
+            "request_json.prior_world_from_camera: {} poses for {} keyframes",
+            req.prior_world_from_camera.len(),
+            prior.len()
+        )));
+    }
+    let (w, h) = prior.first().or(query.first()).map_or((1, 1), |(g, _)| (g.width, g.height));
+    let k = Matrix3::from_fn(|r, c| req.intrinsics[r][c]);
+    let camera = objslam_core::geometry::PinholeCamera::from_matrix(w, h, &k)
+        .map_err(|e| crate::input_err(format!("request_json.intrinsics: {e}")))?;
+    let mut keyframes = Vec::with_capacity(prior.len());
+    for (i, ((grey, depth), m)) in prior.into_iter().zip(&req.prior_world_from_camera).enumerate() {
+        let pose = se3_from_matrix(&Matrix4::from_fn(|r, c| m[r][c]), "prior_world_from_camera")
+            .map_err(|e| crate::input_err(format!("request_json.prior_world_from_camera[{i}]: {e}")))?;
+        keyframes.push(RgbdKeyframe { grey, depth, camera, world_from_camera: pose });
+    }
+    let results = py.detach(|| relocalise_frames(req.config, &keyframes, &query, &camera)).map_err(crate::input_err)?;
+    serde_json::to_string(&results).map_err(crate::input_err)
 }

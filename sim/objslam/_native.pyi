@@ -174,6 +174,13 @@ def ar_run(
 ) -> tuple[str, np.ndarray, np.ndarray | None]: ...
 def match_maps(prior_map_json: str, query_map_json: str, config_json: str | None = None) -> dict[str, Any]: ...
 def relocalise(prior_map_json: str, query_map_json: str, config_json: str | None = None) -> dict[str, Any]: ...
+def relocalise_appearance(
+    request_json: str,
+    prior_grey: npt.NDArray[np.uint8],
+    prior_depth: npt.NDArray[np.float32],
+    query_grey: npt.NDArray[np.uint8],
+    query_depth: npt.NDArray[np.float32],
+) -> str: ...
 def sensor_model(
     request_json: str,
     points: npt.NDArray[np.float32] | None = None,

@@ -401,11 +401,19 @@ def algorithm_seeds(run_seed: int, scene_seed: int) -> dict[str, int]:
 
 
 def run_episode(
-    cfg: RunConfig, *, progress: bool = True, on_frame: Callable[[SensorFrame], None] | None = None
+    cfg: RunConfig,
+    *,
+    progress: bool = True,
+    on_frame: Callable[[SensorFrame], None] | None = None,
+    on_fused: Callable[[SensorFrame, np.ndarray], None] | None = None,
 ) -> EpisodeResult:
     """Run one episode and write its run folder. Raises on failure after marking the folder;
     SIGINT (Ctrl-C) and SIGTERM raise :class:`RunStopped` after marking it ``interrupted`` or
-    ``terminated``. Config values the core refuses raise before any folder is made."""
+    ``terminated``. Config values the core refuses raise before any folder is made.
+
+    ``on_frame(frame)`` is called after each frame is fused; ``on_fused(frame, world_from_camera)``
+    too, with the pose the mapper used for it (its estimate, in the map's frame), e.g. to keep
+    keyframes for relocalisation (:mod:`objslam.reloc`)."""
     cfg.validate()
     scene = load_scene(_scene_path(cfg))
     try:
@@ -508,6 +516,8 @@ def run_episode(
             frames += 1
             if on_frame is not None:
                 on_frame(frame)
+            if on_fused is not None:
+                on_fused(frame, used_pose)
             if bar is not None:
                 bar.set_postfix(frames=frames, objects=len(mapper))
 

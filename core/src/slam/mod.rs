@@ -21,6 +21,8 @@
 //!   evaluation and recording; [`metrics::ate_rmse_m`] and [`metrics::rpe`] score trajectories.
 //! - Building blocks, usable alone: [`OrbExtractor`] (features), [`match_brute_force`] and
 //!   [`KeypointGrid`] (matching), [`solve_pnp_ransac`] / [`refine_pose`] (pose),
+//!   [`AppearanceDatabase`] (prior-free appearance relocalisation against RGB-D keyframes, the
+//!   ORB-SLAM-style baseline of the relocalisation experiment),
 //!   [`BundleProblem`] (Schur-complement LM bundle adjustment),
 //!   [`PriorNoiseConfig`] (the estimator's assumed prior error), [`synthetic`] (seeded textures
 //!   and a ray-cast RGB-D renderer for tests and benchmarks) and [`SyntheticPriorError`] (a
@@ -142,6 +144,7 @@ pub mod matcher;
 pub mod metrics;
 pub mod noise;
 pub mod pnp;
+pub mod relocalise;
 pub mod synthetic;
 pub mod tracker;
 
@@ -151,6 +154,9 @@ pub use matcher::{match_brute_force, FeatureMatch, KeypointGrid, MatchConfig};
 pub use metrics::{ate_rmse_m, rpe, Rpe};
 pub use noise::{PriorNoiseConfig, SyntheticPriorError};
 pub use pnp::{refine_pose, solve_pnp_ransac, Correspondence, PoseEstimate, PoseRefineConfig, RansacConfig};
+pub use relocalise::{
+    relocalise_frames, AppearanceConfig, AppearanceDatabase, Relocalisation, RelocalisationRecord, RgbdKeyframe,
+};
 pub use tracker::{
     LostReason, ObservedPoint, PoseSource, TrackInput, TrackOutput, Tracker, TrackerConfig, TrackingState,
 };
