@@ -82,10 +82,11 @@ def photographs() -> dict[str, np.ndarray]:
 
 def renders(n_views: int) -> dict[str, np.ndarray]:
     """SAPIEN renders of scene01 (grey), the camera looking at the table centre from above."""
+    from objslam.camera_path import look_at
     from objslam.config import load_run_config
     from objslam.episode import grey_of
     from objslam.scene import load_scene
-    from objslam.world import SimWorld, look_at
+    from objslam.world import SimWorld
 
     cfg = load_run_config(overrides=['scene="scenes/scene01.toml"', "seed=0"])
     spec = load_scene(REPO / cfg.scene)

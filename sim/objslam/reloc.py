@@ -136,7 +136,7 @@ class Ring:
 def ring_pose(center_xy: tuple[float, float], ring: Ring, azimuth_deg: float) -> np.ndarray:
     """``world_from_camera`` on ``ring`` at ``azimuth_deg`` (0 = +x from the table centre, away from
     the robot), looking at the table centre."""
-    from .world import look_at
+    from .camera_path import look_at
 
     a, e = math.radians(azimuth_deg), math.radians(ring.elevation_deg)
     c = np.array([center_xy[0], center_xy[1], 0.0])
