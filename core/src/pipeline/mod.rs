@@ -180,13 +180,13 @@ pub struct PipelineConfig {
     /// Label confusions seen from many directions: two objects of different labels that share a
     /// surface (the cloud-overlap test) or whose smaller raw box lies mostly inside the other's
     /// are one object under two labels, whatever their observation counts, when the detector
-    /// boxed them together in at most this share of the less observed one's frames. A learned
+    /// boxed them together in fewer than this share of the less observed one's frames. A learned
     /// detector's wrong label persists over a range of viewing directions, so an object circled
     /// by the exploration collects tens of observations under its look-alike label, never in a
     /// frame where it also has its own; two different objects side by side are boxed together in
     /// nearly every frame that sees the less visible one. The less observed object is folded into
-    /// the other (label = majority vote). Fraction in [0, 1]; default 0.25; 0 requires that they
-    /// were never boxed together. `relabel_vote_ratio` = 0 disables it with the fold.
+    /// the other (label = majority vote). Fraction in [0, 1]; default 0.25; 0 disables (only the
+    /// vote ratio folds then), as does `relabel_vote_ratio` = 0.
     pub relabel_co_observed_share: f64,
     /// Phantoms on another object's surface: an object with at most 1/`relabel_vote_ratio` of the
     /// observations of another, whose raw box intersects the other's, and at least this share of
@@ -591,7 +591,7 @@ impl ObjectPipeline {
             if na < nb || (na == nb && a.id > b.id) { (a, b, ga, gb) } else { (b, a, gb, ga) };
         let (n_minor, n_major) = (na.min(nb), na.max(nb));
         let by_votes = n_minor * ratio <= n_major && !self.boxed_apart(common);
-        let by_frames = common as f64 <= self.config.relabel_co_observed_share * n_minor;
+        let by_frames = (common as f64) < self.config.relabel_co_observed_share * n_minor;
         if !(by_votes || by_frames) {
             return None;
         }
