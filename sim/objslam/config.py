@@ -175,13 +175,11 @@ class ParamRunConfig:
     """Beyond the paper: the ``refined`` stage of cylinders is a circle fitted to their side-wall
     points with the height centred on the points' vertical extent (``core/src/objects/cylinder.rs``);
     False = the paper (cylinders end at the iForest mean and axis-aligned extent)."""
-    support_snap_m: float = 0.025
+    support_snap_m: float = 0.015
     """Beyond the paper: an estimate whose bottom lies within this of the table top (z = 0) is
     extended down to it, its top kept (objects stand on the table; the local clouds cut the
-    points within 5 mm of the table, so bottoms sit ~3 mm high, and flat objects 2-3 cm tall keep
-    little more than their top face after the isolation forest, a slab 1.5-2 cm above the table:
-    ``ParamConfig::support_z_m`` in ``core/src/objects/mod.rs``). 0 = off (the paper). Default
-    0.025 m, metres; measured in ``studies/support_snap/`` (0.015) and ``studies/mesh_oversplit/``."""
+    points within 5 mm of the table, so bottoms sit ~3 mm high: ``ParamConfig::support_z_m`` in
+    ``core/src/objects/mod.rs``). 0 = off (the paper). Default 0.015 m; measured in ``studies/support_snap/``."""
     cylinder_consensus_iterations: int = 200
     """Circles through three random side-wall points tried as a second start of the cylinder fit
     (the one with more points on the circle is kept); 0 = the algebraic start only (a neighbour's points merged into a bottle's cloud can pull that
