@@ -90,7 +90,7 @@ ar: setup ## AR on exploration maps vs the simulator's truth: occlusion IoU, dro
 	$(PY) experiments/ar.py $(AR_ARGS)
 
 report: ## Report of the latest run folder → reports/foundation_run.json
-sensor: setup ## Depth sensor error vs distance per preset (realistic, ideal) from SAPIEN renders → reports/sensor.json
+sensor: setup ## Depth sensor error vs distance and the arm prior's pose error, per preset (realistic, ideal), from SAPIEN renders → reports/sensor.json
 	$(PY) experiments/sensor.py $(SENSOR_ARGS)
 
 report: ## Report of the latest run folder → reports/foundation_run.{md,json}

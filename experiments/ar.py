@@ -486,6 +486,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument(
         "--runs", nargs="+", help="reuse these run folders (their config.toml and map.json) instead"
     )
+    ap.add_argument(
+        "--episodes-too", action="store_true", help="with --runs: also run the --scenes x --seeds episodes"
+    )
     ap.add_argument("--out", default=str(REPO / "reports"), help="report folder (default: reports)")
     ap.add_argument(
         "--images", type=int, default=1, help="save AR composites of the first N scene/seed rows (default 1)"
@@ -496,10 +499,9 @@ def main(argv: list[str] | None = None) -> int:
     )
     rows, configs = [], []
     jobs: list[tuple[Any, str | None]] = []
-    if a.runs:
-        for rd in a.runs:
-            jobs.append((load_run_config(overlays=[Path(rd) / "config.toml"]), rd))
-    else:
+    for rd in a.runs or []:
+        jobs.append((load_run_config(overlays=[Path(rd) / "config.toml"]), rd))
+    if not a.runs or a.episodes_too:
         for scene in a.scenes:
             for seed in a.seeds:
                 overrides = [*a.set, f'scene="{scene}"', f"seed={seed}", "record.enabled=false"]

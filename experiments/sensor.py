@@ -38,6 +38,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+import arm_prior
 import numpy as np
 from objslam.provenance import commit, machine, report_files
 
@@ -242,7 +243,7 @@ def write_report(out: Path, result: dict) -> None:
         "",
         "## Pose prior",
         "",
-        "The prior's pose error (arm calibration model) is reported by the arm model's experiment.",
+        *(arm_prior.page_lines(result["pose_prior"]["rows"]) if result.get("pose_prior") else ["Not measured."]),
         "",
     ]
     (report_files(out, "sensor")[1]).write_text("\n".join(lines))
@@ -269,6 +270,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--distances", nargs="*", type=float, default=[0.3, 0.5, 0.7])
     ap.add_argument("--frames", type=int, default=4, help="frames rendered at rest per distance")
+    ap.add_argument(
+        "--prior-scenes", nargs="*", default=["scene01"], help="scenes of the pose-prior tour (none: skip it)"
+    )
+    ap.add_argument("--prior-seeds", nargs="*", type=int, default=[0, 1], help="seeds of the pose-prior tour")
     ap.add_argument("--out", default=str(REPO / "reports"))
     a = ap.parse_args(argv)
     command = "python experiments/sensor.py " + " ".join(argv if argv is not None else sys.argv[1:])
@@ -284,7 +289,7 @@ def main(argv: list[str] | None = None) -> int:
         "config": {p: v["config"] for p, v in presets.items()},
         "presets": {p: {"unit": v["unit"]} for p, v in presets.items()},
         "rows": rows,
-        "pose_prior": None,
+        "pose_prior": arm_prior.measure_all(a.prior_scenes, a.prior_seeds, a.presets) if a.prior_scenes else None,
     }
     result["checks"] = checks(rows)
     write_report(Path(a.out), result)
