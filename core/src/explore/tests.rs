@@ -1059,7 +1059,8 @@ fn closed_form_segment_tests_agree_with_parry() {
     let (mut disagree, mut hits) = (0usize, 0usize);
     let n = 20_000;
     for _ in 0..n {
-        let mut p = || Vector3::new(rng.random_range(-0.2..0.2), rng.random_range(-0.2..0.2), rng.random_range(-0.2..0.2));
+        let mut p =
+            || Vector3::new(rng.random_range(-0.2..0.2), rng.random_range(-0.2..0.2), rng.random_range(-0.2..0.2));
         let (o, e) = (p(), p());
         let len = (e - o).norm();
         let d = (e - o) / len;
