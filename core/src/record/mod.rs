@@ -171,8 +171,10 @@ fn depth_png_mm(width: u32, height: u32, depth_m: &[f32]) -> Result<Vec<u8>, Rec
     image::ImageEncoder::write_image(
         image::codecs::png::PngEncoder::new_with_quality(
             &mut png,
-            image::codecs::png::CompressionType::Default,
-            image::codecs::png::FilterType::Adaptive,
+            // The fast deflate with the left-neighbour filter: depth rows are smooth, and the
+            // default level with adaptive filtering cost about as much as a rendered frame.
+            image::codecs::png::CompressionType::Fast,
+            image::codecs::png::FilterType::Sub,
         ),
         &mm,
         width,

@@ -157,7 +157,7 @@ fn blur(cfg: &ColourConfig, unit: &SensorUnit, frame: &RenderedFrame<'_>, m: &Ma
     // one add (sums of at most 64 taps of 255 fit a lane).
     let packed: Vec<u64> =
         src.chunks_exact(3).map(|p| p[0] as u64 | (p[1] as u64) << 16 | (p[2] as u64) << 32).collect();
-    let recip: Vec<u64> = (0..=64u64).map(|n| if n == 0 { 0 } else { (1u64 << 32) / n + 1 }).collect();
+    let recip: Vec<u64> = (0..=64u64).map(|n| (1u64 << 32).checked_div(n).map_or(0, |q| q + 1)).collect();
     let rot = m.fixed_view::<3, 3>(0, 0).into_owned();
     let t = m.fixed_view::<3, 1>(0, 3).into_owned();
     // Ray direction (x / z, y / z, 1) of each pixel centre, rotated: r = rot · (ax, ay, 1).

@@ -247,14 +247,14 @@ pub fn stereo_depth(
         }
         if cfg.shadow {
             let mut m = f64::INFINITY;
-            for x in (0..w).rev() {
-                if sr[x] == NONE {
+            for (x, (st, zv)) in sr.iter_mut().zip(zr.iter()).enumerate().rev() {
+                if *st == NONE {
                     continue;
                 }
-                let r = x as f64 - fb / zr[x] as f64;
+                let r = x as f64 - fb / *zv as f64;
                 if r > m + 1e-3 {
-                    if sr[x] == OK {
-                        sr[x] = SHADOW;
+                    if *st == OK {
+                        *st = SHADOW;
                         stats.shadow += 1;
                     }
                 } else {
@@ -309,16 +309,15 @@ pub fn stereo_depth(
                     *o = o.max(*v);
                 }
             }
-            for x in 0..w {
-                let i = y * w + x;
-                if state[i] != OK {
+            let zr = &mut z[y * w..(y + 1) * w];
+            for (((zv, st), &l), &u) in zr.iter_mut().zip(&state[y * w..(y + 1) * w]).zip(&lo).zip(&hi) {
+                if *st != OK {
                     continue;
                 }
-                let (l, u) = (lo[x], hi[x]);
                 if ((u - l) as f64) > cfg.edge_jump_m + cfg.edge_jump_rel * l as f64
                     && rng.uniform() < cfg.mixed_fraction
                 {
-                    z[i] = l + (rng.uniform() as f32) * (u - l);
+                    *zv = l + (rng.uniform() as f32) * (u - l);
                     stats.mixed += 1;
                 }
             }
