@@ -29,7 +29,7 @@ pub fn ar_run<'py>(
     let out = py.detach(|| run_request(&req, depth)).map_err(input_err)?;
     let json = serde_json::to_string(&out).map_err(input_err)?;
     let (h, w) = out.real_depth.as_ref().map_or((0, 0), |d| (d.height as usize, d.width as usize));
-    let n = if h * w == 0 { 0 } else { out.coverage.len() / (h * w) };
+    let n = out.coverage.len().checked_div(h * w).unwrap_or(0);
     let coverage = numpy::ndarray::Array3::from_shape_vec((n, h, w), out.coverage).map_err(input_err)?;
     let depth = match out.real_depth {
         Some(d) => Some(numpy::ndarray::Array2::from_shape_vec((h, w), d.data).map_err(input_err)?.into_pyarray(py)),
