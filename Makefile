@@ -83,17 +83,17 @@ match-sim: setup ## Scene matching, part (b): maps of two simulator runs per sce
 
 features: setup ## ORB features vs OpenCV (repeatability, match precision, time) on photographs and SAPIEN renders → reports/features.json
 	$(PY) experiments/features.py $(FEATURES_ARGS)
+
 reloc: setup ## Relocalisation vs parallax, objects vs appearance (hard + test scenes; RELOC_ARGS) → reports/relocalisation.json
 	$(PY) experiments/reloc.py $(RELOC_ARGS)
 
 ar: setup ## AR on exploration maps vs the simulator's truth: occlusion IoU, drop rest error → reports/ar.json
 	$(PY) experiments/ar.py $(AR_ARGS)
 
-report: ## Report of the latest run folder → reports/foundation_run.json
 sensor: setup ## Depth sensor error vs distance and the arm prior's pose error, per preset (realistic, ideal), from SAPIEN renders → reports/sensor.json
 	$(PY) experiments/sensor.py $(SENSOR_ARGS)
 
-report: ## Report of the latest run folder → reports/foundation_run.{md,json}
+report: ## Report of the latest run folder → reports/foundation_run.json
 	$(PY) experiments/report_run.py
 
 reports-index: ## Regenerate reports/README.md (one line per report: question, headline figure, command)
