@@ -128,18 +128,17 @@ def missed(m: dict) -> int:
 
 
 def test_discovery_finds_the_object_the_paper_rule_leaves_unmapped(tmp_path, ci_overlay) -> None:
-    """Against the scene file: with a 35° camera the Init views of scene03 miss an object; the
-    paper's stopping rule ends once the mapped objects are explored and never maps it, looking at
-    the unseen table before stopping (explore.discovery_before_stop, with the budget reserve of
-    the run defaults) finds it. The scenario (scene, seed, camera) was found with a cylinder's top
-    at its highest point; with the top-face median the paper's run no longer converges within
-    the budget (stop reason max_views, the object still missed), so the test keeps that estimator
-    to test the stopping rule, not the estimator."""
+    """Against the scene file: with a 35° camera the Init views of scene03 (seed 1) miss an object;
+    the paper's stopping rule ends once the mapped objects are explored and never maps it, looking
+    at the unseen table before stopping (explore.discovery_before_stop, with the budget reserve of
+    the run defaults) finds it. The scenario holds with a cylinder's top at its highest point (with
+    the top-face median the paper's run does not converge within the budget), so the test keeps
+    that estimator to test the stopping rule, not the estimator."""
     common = {
         "preset": '"ideal"',  # the scenario was found in the ideal world
         "scene": '"scenes/scene03.toml"',
         "camera.fovy_deg": 35.0,
-        "seed": 0,
+        "seed": 1,
         "map.param.cylinder.top_from_face": "false",
     }
     paper = run_episode(
