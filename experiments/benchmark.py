@@ -3,6 +3,16 @@
 ``python experiments/benchmark.py [--scenes ...] [--strategies ...] [--seeds 0 1 2] [--workers 2]
 [--backend pool|ray] [--address ray://host:10001] [--config overlay.toml] [--set k=v] [--out reports]``
 
+By default: the hard suite (where strategies are tuned) and the test split (judged without
+re-tuning), seeds 0-8 with the estimator's random streams seeded per seed, and seven rows: the
+project's ``object-driven-discovery``, the paper's rule ``object-driven``, the paper's method end to
+end ``paper-pipeline`` (the paper's rule on the paper's object pipeline: SLAM map points as object
+clouds; ``experiments/configs/strategies/paper-pipeline.toml``), ``expected-gain``, and the
+baselines ``random``, ``coverage`` and ``init``. Every strategy is compared with each baseline pair
+by pair (same scene and seed): ``paired`` in the JSON holds the mean differences in 3D IoU, CDE,
+recall at 3D IoU 0.5 and path length with 95 % bootstrap intervals, per split and over all scenes,
+at the end and at equal view counts.
+
 Every episode is an ordinary run (its own run folder under ``runs/``); the aggregate is computed
 from those folders' ``metrics.json`` and written to ``<out>/exploration.json`` and
 ``<out>/exploration.md`` (the paper's Table VI layout: per scene and mean, 3D IoU, 2D IoU, CDE cm,
@@ -44,9 +54,25 @@ REPO = Path(__file__).resolve().parents[1]
 import figures
 from objslam.cli import HelpFormatter
 from objslam.provenance import provenance, report_files, run_config
-from objslam.sweep import BACKENDS, Job, run_sweep, scene_files
+from objslam.sweep import BACKENDS, Job, run_sweep
 
-STRATEGIES = ("object-driven", "random", "coverage", "init", "expected-gain")
+#: Report order: the project's strategy, the paper's rule, the paper's method end to end (the
+#: paper's pipeline, a strategy file), then the baselines.
+STRATEGIES = (
+    "object-driven-discovery",
+    "object-driven",
+    "paper-pipeline",
+    "expected-gain",
+    "random",
+    "coverage",
+    "init",
+)
+#: What every strategy is compared with, pair by pair (same scene and seed).
+BASELINES = ("random", "coverage", "init")
+#: The paired metrics: metric key → whether it has a value after k views (``accuracy_curve``).
+PAIRED_METRICS = {"iou3d": True, "cde_cm": True, "recall_iou50": True, "path_length_m": False}
+#: Bootstrap resamples of the paired mean difference (percentile 95 % interval; seeded).
+BOOTSTRAP_RESAMPLES = 10_000
 METRICS = ("iou3d", "iou2d", "cde_cm", "yae_deg")
 #: Map-level metrics of the core's evaluation (precision / recall at 3D IoU 0.25 and 0.5, phantoms and
 #: duplicates counted; centre and yaw error over all ground-truth objects, misses counted); None for
@@ -61,6 +87,7 @@ def _row(m: dict[str, Any]) -> dict[str, Any]:
         "scene": m["scene"],
         "strategy": m["strategy"],
         "seed": m["seed"],
+        "preset": m.get("preset"),
         "run_dir": m["run_dir"],
         **{k: m["mean"][k] for k in METRICS},
         **{k: m["mean"].get(k) for k in MAP_METRICS},
@@ -70,10 +97,108 @@ def _row(m: dict[str, Any]) -> dict[str, Any]:
         "wall_s": m["wall_s"],
         "n_objects_est": m["n_objects_est"],
         "n_objects_gt": m["n_objects_gt"],
+        "split": scene_split(m["scene"]),
         "entropy_curve": m["entropy_curve"],
         "accuracy_curve": m.get("accuracy_curve"),
         **run_extras(m["run_dir"], m),
     }
+
+
+def benchmark_scenes() -> list[str]:
+    """The benchmark's scenes: the hard suite (scenes/hard/) and the test split (scenes/test/)."""
+    return [str(p.relative_to(REPO)) for split in ("hard", "test") for p in sorted((REPO / "scenes" / split).glob("*.toml"))]
+
+
+def scene_split(scene: str) -> str:
+    """The scene's split by the folder that holds ``<scene>.toml``: ``hard`` (scenes/hard/, where
+    strategies are tuned), ``test`` (scenes/test/, judged without re-tuning) or ``dev`` (scenes/)."""
+    for split in ("hard", "test"):
+        if (REPO / "scenes" / split / f"{scene}.toml").exists():
+            return split
+    return "dev"
+
+
+def bootstrap_ci(d: list[float], resamples: int = BOOTSTRAP_RESAMPLES, seed: int = 0) -> tuple[float, float]:
+    """Percentile 95 % bootstrap interval of the mean of paired differences ``d`` (resampling the
+    pairs with replacement; seeded, so a report is reproducible)."""
+    import numpy as np
+
+    x = np.asarray(d, dtype=float)
+    idx = np.random.default_rng(seed).integers(0, len(x), size=(resamples, len(x)))
+    means = x[idx].mean(axis=1)
+    return float(np.percentile(means, 2.5)), float(np.percentile(means, 97.5))
+
+
+def paired_differences(ok: list[dict[str, Any]], strategies: list[str]) -> list[dict[str, Any]]:
+    """Every strategy against each of :data:`BASELINES`, paired by (scene, seed), per split and over
+    all scenes: the mean difference a − b of each of :data:`PAIRED_METRICS` with its
+    :func:`bootstrap_ci`, ``at = "end"`` (the final maps) and, for the metrics with an accuracy
+    curve, ``at = "equal_views"`` (a's final map against b's map after as many views, b not init)."""
+    out: list[dict[str, Any]] = []
+    by_key = {(r["strategy"], r["scene"], r["seed"]): r for r in ok}
+    splits = sorted({r.get("split") or scene_split(r["scene"]) for r in ok})
+    for split in [*splits, "all"] if len(splits) > 1 else splits:
+        for a in strategies:
+            for b in BASELINES:
+                if a == b or b not in strategies:
+                    continue
+                pairs = [
+                    (r, by_key[(b, r["scene"], r["seed"])])
+                    for r in ok
+                    if r["strategy"] == a
+                    and (split == "all" or (r.get("split") or scene_split(r["scene"])) == split)
+                    and (b, r["scene"], r["seed"]) in by_key
+                ]
+                for metric, has_curve in PAIRED_METRICS.items():
+                    ats = ["end"] + (["equal_views"] if has_curve and b != "init" else [])
+                    for at in ats:
+                        d = []
+                        for ra, rb in pairs:
+                            va = ra.get(metric)
+                            if at == "end":
+                                vb = rb.get(metric)
+                            else:
+                                vb = curve_value(rb["accuracy_curve"], ra["views"], metric) if rb.get("accuracy_curve") else None
+                            if va is not None and vb is not None:
+                                d.append(va - vb)
+                        if len(d) < 2:
+                            continue
+                        lo, hi = bootstrap_ci(d)
+                        out.append(
+                            {"a": a, "b": b, "metric": metric, "split": split, "at": at,
+                             "mean_diff": statistics.mean(d), "ci_low": lo, "ci_high": hi, "n": len(d)}
+                        )
+    return out
+
+
+def _paired_table(paired: list[dict[str, Any]]) -> list[str]:
+    """The report's paired-difference tables (3D IoU first), one row per (split, a, b)."""
+    if not paired:
+        return []
+    lines = [
+        "## Paired differences against the baselines",
+        "",
+        "Strategy a minus baseline b on the same scene and seed: mean difference [95 % bootstrap interval]",
+        f"({BOOTSTRAP_RESAMPLES} resamples of the pairs), n pairs. `end`: final maps; `equal views`: a's final",
+        "map against b's after as many views.",
+        "",
+    ]
+    for metric, spec in (("iou3d", ".3f"), ("recall_iou50", ".3f"), ("cde_cm", ".2f"), ("path_length_m", ".2f")):
+        rows = [p for p in paired if p["metric"] == metric]
+        if not rows:
+            continue
+        lines += [f"### {metric}", "", "| split | a | b | end | equal views | n |", "|---|---|---|---|---|---|"]
+        keys = list(dict.fromkeys((p["split"], p["a"], p["b"]) for p in rows))
+        for split, a, b in keys:
+            cell = {}
+            n = 0
+            for p in rows:
+                if (p["split"], p["a"], p["b"]) == (split, a, b):
+                    cell[p["at"]] = f"{p['mean_diff']:+{spec}} [{p['ci_low']:+{spec}}, {p['ci_high']:+{spec}}]"
+                    n = max(n, p["n"])
+            lines.append(f"| {split} | {a} | {b} | {cell.get('end', '-')} | {cell.get('equal_views', '-')} | {n} |")
+        lines.append("")
+    return lines
 
 
 def _run_path(run_dir: str | Path) -> Path:
@@ -142,7 +267,9 @@ def write_reports(
     strategies = [s for s in STRATEGIES if any(r["strategy"] == s for r in ok)]
     strategies += list(dict.fromkeys(r["strategy"] for r in ok if r["strategy"] not in STRATEGIES))
     scenes = sorted({r["scene"] for r in ok})
-    report = {**provenance(command, config), "rows": rows}
+    paired = paired_differences(ok, strategies)
+    preset = sorted({r.get("preset") or "realistic" for r in ok})
+    report = {**provenance(command, config), "preset": "+".join(preset), "paired": paired, "rows": rows}
     (report_files(out, "exploration")[0]).write_text(json.dumps(report, indent=2) + "\n")
 
     lines = [
@@ -189,13 +316,14 @@ def write_reports(
             ]
             lines.append(f"| {s} | " + " | ".join(cells) + f" | {_fmt(seed_means, spec)} |")
         lines.append("")
+    lines += _paired_table(paired)
     lines += _accuracy_tables(ok, strategies)
     failed = [r for r in rows if "error" in r]
     if failed:
         lines += ["## Failed episodes", ""] + [f"- {r['strategy']} {r['scene']} seed {r['seed']}: {r['error']}" for r in failed]
     lines += ["", "## Figures", ""] + figure_captions(ok, command)
     (report_files(out, "exploration")[1]).write_text("\n".join(lines) + "\n")
-    figures.exploration_figures(ok, strategies, out / "pages")
+    figures.exploration_figures(ok, strategies, out / "pages", paired)
 
 
 FIGURE_CAPTIONS = {
@@ -205,6 +333,7 @@ FIGURE_CAPTIONS = {
         "3D IoU after k views, world frame and with the map's global offset removed "
         "(an episode that stopped earlier keeps its last map)"
     ),
+    "exploration_paired": "3D IoU of each strategy minus a baseline's on the same scene and seed, at the end",
 }
 
 
@@ -214,6 +343,9 @@ def figure_captions(ok: list[dict[str, Any]], command: str) -> list[str]:
     lines = []
     for stem, text in FIGURE_CAPTIONS.items():
         if stem == "exploration_accuracy" and not any(r.get("accuracy_curve") for r in ok):
+            continue
+        if stem == "exploration_paired":
+            lines += [f"![{text}]({stem}.png)", "", f"*{text}: 95 % bootstrap intervals. Made by `{command}`.*", ""]
             continue
         lines += [
             f"![{text}]({stem}.png)",
@@ -337,7 +469,9 @@ def _other_sweep(spec: str) -> dict[str, Any]:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=HelpFormatter)
-    ap.add_argument("--scenes", nargs="*", default=scene_files(), metavar="SCENE", help="scene files")
+    ap.add_argument(
+        "--scenes", nargs="*", default=benchmark_scenes(), metavar="SCENE", help="scene files (default: the hard suite and the test split)"
+    )
     ap.add_argument(
         "--strategies",
         nargs="*",
@@ -346,7 +480,7 @@ def main(argv: list[str] | None = None) -> int:
         help=f"view-selection strategies: any of {', '.join(STRATEGIES)}, or labels of Python strategies "
         "set by --config overlays",
     )
-    ap.add_argument("--seeds", nargs="*", type=int, default=[0, 1, 2], help="run seeds")
+    ap.add_argument("--seeds", nargs="*", type=int, default=list(range(9)), help="run seeds")
     ap.add_argument("--workers", type=int, default=2, help="pool processes, or CPUs of a local Ray instance")
     ap.add_argument("--backend", choices=BACKENDS, default="pool", help="pool: local processes; ray: one Ray task per episode")
     ap.add_argument("--address", default=None, help="Ray cluster address (backend ray; default: a local instance)")
@@ -374,7 +508,8 @@ def main(argv: list[str] | None = None) -> int:
         rows = [r for r in json.loads((Path(a.out) / "exploration.json").read_text())["rows"] if "error" not in r]
         strategies = [s for s in STRATEGIES if any(r["strategy"] == s for r in rows)]
         strategies += list(dict.fromkeys(r["strategy"] for r in rows if r["strategy"] not in STRATEGIES))
-        for paths in figures.exploration_figures(rows, strategies, Path(a.out) / "pages").values():
+        paired = json.loads((Path(a.out) / "exploration.json").read_text()).get("paired")
+        for paths in figures.exploration_figures(rows, strategies, Path(a.out) / "pages", paired).values():
             print(" ".join(str(p) for p in paths))
         return 0
     if a.report_only:
@@ -393,6 +528,9 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     if a.preset:
         a.set.append(f'preset="{a.preset}"')
+    # The estimator's random streams (iForest, cylinder fit, PnP RANSAC) follow the run seed, so the
+    # spread over seeds includes the estimator's; a --set seed_algorithms=false comes later and wins.
+    a.set.insert(0, "seed_algorithms=true")
     jobs = [
         Job(sc, st, sd, tuple(a.config), tuple(a.set)) for sc in a.scenes for st in a.strategies for sd in a.seeds
     ]

@@ -187,11 +187,40 @@ def accuracy_figure(rows: list[dict[str, Any]], strategies: list[str]) -> Any:
     return fig
 
 
-def exploration_figures(rows: list[dict[str, Any]], strategies: list[str], out: Path) -> dict[str, list[Path]]:
+def paired_figure(paired: list[dict[str, Any]], metric: str = "iou3d") -> Any:
+    """Paired differences a − b at the end of the episode (``exploration.json`` ``paired``): one
+    panel per split, one row per (a, b), the mean with its 95 % bootstrap interval."""
+    plt = _pyplot()
+    rows = [p for p in paired if p["metric"] == metric and p["at"] == "end"]
+    splits = list(dict.fromkeys(p["split"] for p in rows))
+    fig, axes = plt.subplots(1, len(splits), figsize=(4.2 * len(splits), 0.3 * len(rows) / len(splits) + 1.6), squeeze=False)
+    for ax, split in zip(axes[0], splits):
+        mine = [p for p in rows if p["split"] == split]
+        y = list(range(len(mine)))[::-1]
+        ax.errorbar(
+            [p["mean_diff"] for p in mine],
+            y,
+            xerr=[[p["mean_diff"] - p["ci_low"] for p in mine], [p["ci_high"] - p["mean_diff"] for p in mine]],
+            fmt="o",
+            capsize=3,
+        )
+        ax.axvline(0.0, color="grey", lw=0.8)
+        ax.set_yticks(y, [f"{p['a']} − {p['b']}" for p in mine], fontsize=7)
+        ax.set_title(f"{split} (n = {max(p['n'] for p in mine)} pairs)")
+        ax.set_xlabel(f"{metric} difference")
+    fig.suptitle("Paired differences, mean and 95 % bootstrap interval (same scene and seed)")
+    fig.tight_layout()
+    return fig
+
+
+def exploration_figures(
+    rows: list[dict[str, Any]], strategies: list[str], out: Path, paired: list[dict[str, Any]] | None = None
+) -> dict[str, list[Path]]:
     """The exploration report's figures from its successful rows (``exploration.json``):
     ``exploration_metrics`` (:func:`metrics_figure`), ``exploration_entropy``
-    (:func:`entropy_figure`) and, with ``accuracy_curve`` in the rows, ``exploration_accuracy``
-    (:func:`accuracy_figure`). Returns the written files by figure stem."""
+    (:func:`entropy_figure`), with ``accuracy_curve`` in the rows ``exploration_accuracy``
+    (:func:`accuracy_figure`) and with ``paired`` differences ``exploration_paired``
+    (:func:`paired_figure`). Returns the written files by figure stem."""
     plt = _pyplot()
     out.mkdir(parents=True, exist_ok=True)
     makers = {"exploration_metrics": metrics_figure, "exploration_entropy": entropy_figure}
@@ -201,6 +230,10 @@ def exploration_figures(rows: list[dict[str, Any]], strategies: list[str], out: 
     for stem, make in makers.items():
         fig = make(rows, strategies)
         written[stem] = save(fig, out, stem)
+        plt.close(fig)
+    if paired and any(p["metric"] == "iou3d" and p["at"] == "end" for p in paired):
+        fig = paired_figure(paired)
+        written["exploration_paired"] = save(fig, out, "exploration_paired")
         plt.close(fig)
     return written
 

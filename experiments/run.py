@@ -101,7 +101,7 @@ def _main(argv: list[str] | None) -> int:
     if cfg.strategy != "init" and not a.no_compare:
         import dataclasses
 
-        base = run_episode(dataclasses.replace(cfg, strategy="init"), progress=not a.no_progress)
+        base = run_episode(dataclasses.replace(cfg, strategy="init", builtin_strategy=""), progress=not a.no_progress)
         print(compare_line(result.metrics, base.metrics))
         print(f"init run folder: {base.run_dir}")
         # runs/latest stays on the main run.

@@ -129,8 +129,8 @@ def missed(m: dict) -> int:
 
 def test_discovery_finds_the_object_the_paper_rule_leaves_unmapped(tmp_path, ci_overlay) -> None:
     """Against the scene file: with a 35° camera the Init views of scene03 (seed 1) miss an object;
-    the paper's stopping rule ends once the mapped objects are explored and never maps it, looking
-    at the unseen table before stopping (explore.discovery_before_stop, with the budget reserve of
+    the paper's stopping rule (object-driven-discovery with its discovery settings off) ends once the
+    mapped objects are explored and never maps it, looking at the unseen table before stopping (explore.discovery_before_stop, with the budget reserve of
     the run defaults) finds it. The scenario holds with a cylinder's top at its highest point (with
     the top-face median the paper's run does not converge within the budget), so the test keeps
     that estimator to test the stopping rule, not the estimator."""
@@ -142,10 +142,10 @@ def test_discovery_finds_the_object_the_paper_rule_leaves_unmapped(tmp_path, ci_
         "map.param.cylinder.top_from_face": "false",
     }
     paper = run_episode(
-        _cfg(tmp_path, ci_overlay, strategy="object-driven", **common, **{"explore.discovery_before_stop": "false", "explore.discovery_reserve": "false"}),
+        _cfg(tmp_path, ci_overlay, strategy="object-driven-discovery", **common, **{"explore.discovery_before_stop": "false", "explore.discovery_reserve": "false"}),
         progress=False,
     ).metrics
-    disc = run_episode(_cfg(tmp_path, ci_overlay, strategy="object-driven", **common), progress=False).metrics
+    disc = run_episode(_cfg(tmp_path, ci_overlay, strategy="object-driven-discovery", **common), progress=False).metrics
     assert missed(paper) >= 1 and paper["stop_reason"] == "all_explored", (missed(paper), paper["stop_reason"])
     assert missed(disc) < missed(paper), (missed(disc), missed(paper))
     assert disc["table_known_curve"][-1] > paper["table_known_curve"][-1] + 0.2
@@ -166,14 +166,14 @@ def test_object_evidence_maps_the_object_seen_only_at_the_border(tmp_path, ci_ov
         "record.enabled": "false",
     }
     without = run_episode(
-        _cfg(tmp_path, ci_overlay, strategy="object-driven", **common, **{"explore.discovery_evidence_height_m": 0.0}),
+        _cfg(tmp_path, ci_overlay, strategy="object-driven-discovery", **common, **{"explore.discovery_evidence_height_m": 0.0}),
         progress=False,
     ).metrics
     recorded = run_episode(
         _cfg(
             tmp_path,
             ci_overlay,
-            strategy="object-driven",
+            strategy="object-driven-discovery",
             **{**common, "record.enabled": "true", "record.rgb": "false", "record.depth": "false", "explore.discovery_evidence_height_m": 0.02},
         ),
         progress=False,

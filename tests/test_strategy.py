@@ -16,7 +16,8 @@ from objslam.strategy import StrategyError, as_view, load_strategy_class
 HERE = Path(__file__).resolve().parent
 ARGMAX = "experiments/strategies/paper_argmax.py:PaperArgmax"
 BAD = HERE / "strategies_for_tests.py"
-PAPER_RULE = ["explore.discovery_before_stop=false", "explore.discovery_reserve=false", "explore.max_views=2"]
+# The run's default [explore] has the discovery extension on; object-driven (the paper's rule) ignores it.
+PAPER_RULE = ["explore.max_views=2"]
 
 
 def _cfg(tmp_path: Path, ci_overlay: Path, strategy: str, sets: list[str]):
@@ -36,13 +37,11 @@ def test_a_python_argmax_of_the_paper_utility_takes_the_built_in_views(tmp_path,
     assert python["entropy_curve"] == built_in["entropy_curve"]
 
 
-def test_the_python_object_driven_example_takes_the_built_in_views_table_discovery_included(
-    tmp_path, ci_overlay
-) -> None:
+def test_the_python_object_driven_example_takes_the_built_in_discovery_views(tmp_path, ci_overlay) -> None:
     # The run's default [explore]: the budget reserve and before-stop discovery are on; with two
     # views after Init the reserve hands (at least) one to the unseen table.
     sets = ["explore.max_views=2"]
-    built_in = run_episode(_cfg(tmp_path, ci_overlay, "object-driven", sets), progress=False).metrics
+    built_in = run_episode(_cfg(tmp_path, ci_overlay, "object-driven-discovery", sets), progress=False).metrics
     counting = load_strategy_class(f"{BAD}:CountingObjectDriven")
     counting.table_drawn_steps = 0
     cfg = _cfg(tmp_path, ci_overlay, "object-driven-test", [f'python_strategy="{BAD}:CountingObjectDriven"', *sets])
@@ -55,9 +54,9 @@ def test_the_python_object_driven_example_takes_the_built_in_views_table_discove
     # Its config file makes the name work like a built-in one.
     cfg = load_run_config(overlays=[ci_overlay], strategy="object-driven-py")
     assert cfg.python_strategy.endswith("object_driven.py:ObjectDriven")
-    # utility-per-metre on the built-in scores (discovery = true) with a discount that is 1 to the
-    # last bit is the built-in too.
-    sets_upm = ["python_strategy_params.discovery=true", "python_strategy_params.metres_per_halving=1e300", *sets]
+    # utility-per-metre on the built-in object-driven-discovery scores with a discount that is 1 to
+    # the last bit is the built-in too.
+    sets_upm = ['python_strategy_params.utility="object-driven-discovery"', "python_strategy_params.metres_per_halving=1e300", *sets]
     upm = run_episode(_cfg(tmp_path, ci_overlay, "utility-per-metre", sets_upm), progress=False).metrics
     for key in ("views", "frames", "path_length_m", "stop_reason", "table_known_curve", "mean"):
         assert upm[key] == built_in[key], key

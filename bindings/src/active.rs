@@ -211,7 +211,8 @@ impl ActiveMapperPy {
         Ok(views.iter().map(|v| (matrix_py(py, &v.world_from_camera), v.target_object)).collect())
     }
 
-    /// Score views with a utility ("object-driven", the paper's f, or "expected-gain", with its
+    /// Score views with a utility ("object-driven", the paper's f; "object-driven-discovery", f with
+    /// the run's entropy scope; or "expected-gain", with its
     /// motion cost from `world_from_camera`): `objslam_core::explore::ViewScore` as dicts, one per
     /// view. Objects whose s(x) = 0 add nothing unless `explore_every_object`.
     #[pyo3(signature = (*, intrinsics, width, height, views, utility, world_from_camera, explore_every_object = false))]
@@ -229,15 +230,11 @@ impl ActiveMapperPy {
     ) -> PyResult<Bound<'py, PyAny>> {
         let cam = camera(intrinsics, width, height)?;
         let current = pose(world_from_camera, "world_from_camera")?;
-        let strategy = match utility {
-            "object-driven" => Strategy::ObjectDriven,
-            "expected-gain" => Strategy::ExpectedGain,
-            other => {
-                return Err(input_err(format!(
-                    "utility: expected \"object-driven\" or \"expected-gain\", got {other:?}"
-                )))
-            }
-        };
+        let strategy = Strategy::parse(utility).ok().filter(|s| s.is_utility()).ok_or_else(|| {
+            input_err(format!(
+                "utility: expected \"object-driven\", \"object-driven-discovery\" or \"expected-gain\", got {utility:?}"
+            ))
+        })?;
         let poses = view_list(&views)?;
         let s = &self.system;
         let scores = s

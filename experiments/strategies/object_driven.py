@@ -1,6 +1,6 @@
-"""Example Python strategy (``objslam.strategy``): the built-in ``object-driven`` decision in full,
-the paper's rule plus the table-discovery extension as the run's ``[explore]`` settings configure
-it. Start here when a strategy should keep the discovery behaviour of the built-in one
+"""Example Python strategy (``objslam.strategy``): the built-in ``object-driven-discovery`` decision
+in full, the paper's utility plus the table-discovery extension as the run's ``[explore]`` settings
+configure it. Start here when a strategy should keep the discovery behaviour of the built-in one
 (``paper_argmax.py`` is the paper's rule alone, written out call by call).
 
 ``objslam.strategy.built_in_scores`` gives the built-in's candidates and scores at the step (its
@@ -18,9 +18,9 @@ from objslam.strategy import DecisionStep, built_in_scores, take_best
 
 
 class ObjectDriven:
-    """The built-in object-driven (or expected-gain, ``utility``) decision with table discovery."""
+    """The built-in object-driven-discovery (or expected-gain, ``utility``) decision."""
 
-    def __init__(self, utility: str = "object-driven") -> None:
+    def __init__(self, utility: str = "object-driven-discovery") -> None:
         self.utility = utility
 
     def next_view(self, step: DecisionStep) -> npt.NDArray[np.float64] | None:

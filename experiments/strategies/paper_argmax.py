@@ -4,9 +4,7 @@ object-driven rule written against the strategy interface.
 Stop when the paper's rule says so (every object's s(x) = 0, or the budget); else sample the
 paper's candidate views around the objects still to explore, score them with the paper's utility
 f = Σ ((1 − R_o) H_obj + λ (H_IoU + H_V)) s(x), and take the best reachable one. It chooses the same
-views as the built-in ``object-driven`` with the paper's stopping rule
-(``--set explore.discovery_before_stop=false --set explore.discovery_reserve=false``), so the same
-seed gives the same metrics (``tests/test_strategy.py``). Its config:
+views as the built-in ``object-driven``, so the same seed gives the same metrics (``tests/test_strategy.py``). Its config:
 ``experiments/configs/strategies/paper-argmax.toml``.
 """
 

@@ -126,9 +126,14 @@ class RunConfig:
     ``experiments/configs/presets/`` (``ideal``); reports say which made them."""
     scene: str = "scenes/scene01.toml"
     """Scene file (relative to the repository root or absolute)."""
-    strategy: str = "object-driven"
-    """View-selection strategy: object-driven (the paper's utility), expected-gain, random,
+    strategy: str = "object-driven-discovery"
+    """View-selection strategy: object-driven-discovery (the project's: the paper's utility and the
+    table-discovery extension), object-driven (the paper's rule exactly), expected-gain, random,
     coverage or init; or the label of a Python strategy (``python_strategy``)."""
+    builtin_strategy: str = ""
+    """A labelled variant of a built-in strategy: the built-in this run executes, with ``strategy``
+    as its label in metrics and reports (a strategy file such as ``paper-pipeline.toml`` sets it
+    together with the settings that make the variant). Empty: ``strategy`` is the built-in."""
     python_strategy: str = ""
     """A view-selection strategy written in Python (``objslam.strategy``): ``path/to/file.py:Class``
     (relative to the repository root, or absolute) or ``package.module:Class``; empty (default) =
@@ -183,9 +188,26 @@ class RunConfig:
     eval: dict[str, Any] = field(default_factory=dict)
     """Scoring against the truth (core ``EvalConfig``)."""
 
+    @property
+    def core_strategy(self) -> str:
+        """The built-in strategy the core's session runs: ``init`` under a Python strategy (which
+        decides itself), the ``builtin_strategy`` of a labelled variant, else ``strategy``."""
+        return "init" if self.python_strategy else (self.builtin_strategy or self.strategy)
+
     def validate(self) -> None:
         """Raise :class:`ConfigError` naming the key if a value is out of range."""
-        if self.python_strategy:
+        if self.builtin_strategy:
+            if self.python_strategy:
+                raise ConfigError("builtin_strategy: given together with python_strategy; set one")
+            if self.builtin_strategy not in STRATEGIES:
+                raise ConfigError(
+                    f"builtin_strategy: unknown {self.builtin_strategy!r}; known: {', '.join(STRATEGIES)}"
+                )
+            if self.strategy in STRATEGIES or not self.strategy or "/" in self.strategy:
+                raise ConfigError(
+                    f"strategy: {self.strategy!r} must be the variant's own label (not a built-in name, no '/')"
+                )
+        elif self.python_strategy:
             if self.strategy in STRATEGIES:
                 raise ConfigError(
                     f"strategy: {self.strategy!r} is a built-in strategy; give the python_strategy its own label"
@@ -200,7 +222,7 @@ class RunConfig:
                 raise ConfigError(f"python_strategy: {e}") from e
         elif self.python_strategy_params:
             raise ConfigError("python_strategy_params: given without a python_strategy")
-        elif self.strategy not in STRATEGIES:
+        elif self.strategy not in STRATEGIES and not self.builtin_strategy:
             raise ConfigError(
                 f"strategy: unknown {self.strategy!r}; known: {', '.join(STRATEGIES)} "
                 "(or set python_strategy for a strategy written in Python)"
@@ -240,7 +262,7 @@ class RunConfig:
 
 POSE_SOURCES = ("fk", "kinematics", "slam", "ground_truth")
 CAMERA_PATHS = ("cartesian", "joint")
-STRATEGIES = ("init", "object-driven", "random", "coverage", "expected-gain")
+STRATEGIES = ("init", "object-driven", "object-driven-discovery", "random", "coverage", "expected-gain")
 
 
 def _build(cls: type, data: dict[str, Any], prefix: str) -> Any:

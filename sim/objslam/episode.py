@@ -105,7 +105,7 @@ def grey_of(rgb: np.ndarray) -> np.ndarray:
 def active_config(cfg: RunConfig) -> dict[str, Any]:
     """The core's ``ActiveConfig`` JSON from a run config."""
     # A Python strategy decides in Python; the core session only keeps the grids and the history.
-    return {**cfg.explore, "strategy": "init" if cfg.python_strategy else cfg.strategy, "seed": cfg.seed}
+    return {**cfg.explore, "strategy": cfg.core_strategy, "seed": cfg.seed}
 
 
 def _log_decision(rec: Any, decision: dict[str, Any]) -> None:
@@ -457,7 +457,7 @@ def run_episode(
         if cfg.record.robot:
             _log_robot(rec, world)
         init_views = mapper.initial_views()
-        budget = len(init_views) + (0 if cfg.strategy == "init" else cfg.explore["max_views"])
+        budget = len(init_views) + (0 if cfg.core_strategy == "init" else cfg.explore["max_views"])
         bar = None
         if progress:
             from tqdm import tqdm
@@ -650,6 +650,7 @@ def run_episode(
             "scene": scene.name,
             "strategy": cfg.strategy,
             "seed": cfg.seed,
+            "preset": cfg.preset,
             "n_objects_gt": evaluation["n_objects_gt"],
             "n_objects_est": evaluation["n_objects_est"],
             "views": views_done,

@@ -26,9 +26,8 @@ seen yet with the discovery extension's candidate views, gain and budget-reserve
 ``[explore]`` settings, the arm's reachability test (IK and collisions with the table and the
 mapped objects) and a random generator seeded by the run seed. The tests that pin it: a Python
 argmax of the paper's utility through this interface chooses the same views as the built-in
-``object-driven`` with the paper's stopping rule (``experiments/strategies/paper_argmax.py``), and
-the example ``object_driven.py`` the same views as the built-in with the default table discovery
-(``tests/test_strategy.py``).
+``object-driven`` (``experiments/strategies/paper_argmax.py``), and the example ``object_driven.py``
+the same views as the built-in ``object-driven-discovery`` (``tests/test_strategy.py``).
 
 A strategy that returns anything but None or a finite rigid 4x4 transform ends the run with a
 :class:`StrategyError` naming what it returned; the run folder keeps the map as it was
@@ -53,7 +52,7 @@ import numpy.typing as npt
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 
-UTILITIES = ("object-driven", "expected-gain")
+UTILITIES = ("object-driven", "object-driven-discovery", "expected-gain")
 
 
 class StrategyError(RuntimeError):
@@ -309,10 +308,11 @@ class BuiltInScores:
     """The table gain is part of the scores (assign it to ``step.table_drawn`` when taking one)."""
 
 
-def built_in_scores(step: DecisionStep, utility: str = "object-driven") -> BuiltInScores:
-    """The built-in ``object-driven`` (or ``expected-gain``, ``utility``) decision up to the argmax,
-    through the strategy interface, with the run's ``[explore]`` settings (as the core's
-    ``ActiveSession::next_view``):
+def built_in_scores(step: DecisionStep, utility: str = "object-driven-discovery") -> BuiltInScores:
+    """The built-in utility strategy ``utility`` (``object-driven-discovery``, ``object-driven`` or
+    ``expected-gain``) up to the argmax, through the strategy interface, with the run's ``[explore]``
+    settings (as the core's ``ActiveSession::next_view``; ``object-driven`` ignores the discovery
+    settings, the paper's rule):
 
     1. the paper's stopping rule; with ``stop_when_explored = false`` "all explored" keeps scoring
        every object; with ``discovery_before_stop`` it looks at the unseen table first while the
@@ -328,8 +328,11 @@ def built_in_scores(step: DecisionStep, utility: str = "object-driven") -> Built
     scores first (``experiments/strategies/utility_per_metre.py``)."""
     ex = step.explore
     min_new = float(ex["discovery_min_new_cells"])
-    weight = float(ex["discovery_weight"])
-    discovery = weight > 0.0 or ex["discovery_before_stop"] or ex["discovery_reserve"]
+    paper = utility == "object-driven"  # the paper's rule: no table discovery
+    weight = 0.0 if paper else float(ex["discovery_weight"])
+    before_stop = not paper and bool(ex["discovery_before_stop"])
+    reserve = not paper and bool(ex["discovery_reserve"])
+    discovery = weight > 0.0 or before_stop or reserve
     unknown = step.table_unknown_weight() if discovery else 0.0
     if unknown < min_new and weight <= 0.0:
         unknown = 0.0  # too little unseen table to be worth a view, and no mixed term
@@ -337,11 +340,11 @@ def built_in_scores(step: DecisionStep, utility: str = "object-driven") -> Built
     reason = step.paper_stop()
     if reason == "all_explored" and not ex["stop_when_explored"]:
         explore_all = True
-    elif reason == "all_explored" and ex["discovery_before_stop"] and unknown >= min_new:
+    elif reason == "all_explored" and before_stop and unknown >= min_new:
         table_only = True
     elif reason is not None:
         return BuiltInScores(stop=reason)
-    if not table_only and ex["discovery_reserve"] and unknown >= min_new:
+    if not table_only and reserve and unknown >= min_new:
         left = step.max_views - step.views_taken
         table_only = step.table_views_needed(left) >= left
     mixed = unknown > 0.0 and (table_only or weight > 0.0)
@@ -365,8 +368,7 @@ def built_in_scores(step: DecisionStep, utility: str = "object-driven") -> Built
 
 def paper_scores(step: DecisionStep, utility: str = "object-driven") -> BuiltInScores:
     """The paper's decision up to its argmax: its stopping rule, its candidate views around the
-    objects still to explore, each scored with ``utility`` (the built-in ``object-driven`` with
-    ``explore.discovery_before_stop`` and ``explore.discovery_reserve`` off)."""
+    objects still to explore, each scored with ``utility`` (the built-in ``object-driven``)."""
     reason = step.paper_stop()
     if reason is not None:
         return BuiltInScores(stop=reason)

@@ -33,9 +33,9 @@ use serde::{Deserialize, Serialize};
 
 use crate::explore::{
     self, coverage_views, discovery_targets, greedy_discovery_views_weighted, random_views, sample_candidates_around,
-    sample_candidates_at, stop_reason, visible_unknown_indices, CandidateConfig, CandidateView, ExplorationGrids,
-    ExploreConfig, ExploreError, HistoryBook, ObservedPoints, Occluders, Reachability, StopReason, Strategy,
-    TableCoverage, TableRect, UtilityContext,
+    sample_candidates_at, stop_reason, visible_unknown_indices, CandidateConfig, CandidateView, EntropyScope,
+    ExplorationGrids, ExploreConfig, ExploreError, HistoryBook, ObservedPoints, Occluders, Reachability, StopReason,
+    Strategy, TableCoverage, TableRect, UtilityContext,
 };
 use crate::frame::Frame;
 use crate::geometry::{PinholeCamera, Se3};
@@ -47,7 +47,8 @@ use nalgebra::Point3;
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct ActiveConfig {
-    /// Strategy name: object-driven | random | coverage | init | expected-gain.
+    /// Strategy name: object-driven (the paper's rule) | object-driven-discovery (the project's) |
+    /// expected-gain | random | coverage | init.
     pub strategy: Strategy,
     /// Seeds candidate sampling and random views.
     pub seed: u64,
@@ -79,15 +80,20 @@ pub struct ActiveConfig {
     pub done_normalized_entropy: f64,
     /// expected-gain: motion cost, bits per metre.
     pub motion_cost_bits_per_m: f64,
+    /// object-driven-discovery: the cells that make up H in the utility's (1 − R_o)·H term:
+    /// `view_cells` (default; the object's cells the candidate camera sees, "under the predicted
+    /// camera view") or `object` (all of them, H_obj of Eq. `eq:obj`). object-driven always uses
+    /// `object`, the paper's definition.
+    pub entropy_scope: EntropyScope,
     /// object-driven / expected-gain: stop once s(x) = 0 for every object (the paper's rule;
     /// default). `false` keeps choosing views by the same utility with s(x) = 1 for every object
     /// until `max_views` — an equal-budget comparison with random and coverage, which always spend
     /// the budget (stop reason `max_views`).
     pub stop_when_explored: bool,
-    /// object-driven / expected-gain: weight w of the table discovery gain added to every
+    /// object-driven-discovery / expected-gain: weight w of the table discovery gain added to every
     /// candidate's utility (beyond the paper; 0 = the paper's utility; `explore::discovery`).
     pub discovery_weight: f64,
-    /// object-driven / expected-gain: look at the unseen table before stopping on "all explored"
+    /// object-driven-discovery / expected-gain: look at the unseen table before stopping on "all explored"
     /// (beyond the paper; false = the paper's stopping rule).
     pub discovery_before_stop: bool,
     /// Table coverage cell, metres.
@@ -95,7 +101,7 @@ pub struct ActiveConfig {
     /// After every object is done, keep looking while a candidate sees at least this many unseen
     /// table cells.
     pub discovery_min_new_cells: usize,
-    /// object-driven / expected-gain: the budget reserve — take a discovery view when the views
+    /// object-driven-discovery / expected-gain: the budget reserve — take a discovery view when the views
     /// left are no more than the discovery views still worth taking (beyond the paper;
     /// `explore::discovery`).
     pub discovery_reserve: bool,
@@ -139,6 +145,7 @@ impl Default for ActiveConfig {
             done_occupied_ratio: e.done_occupied_ratio,
             done_normalized_entropy: e.done_normalized_entropy,
             motion_cost_bits_per_m: e.motion_cost_bits_per_m,
+            entropy_scope: e.entropy_scope,
             stop_when_explored: true,
             discovery_weight: e.discovery.weight,
             discovery_before_stop: e.discovery.before_stop,
@@ -257,6 +264,7 @@ impl ActiveSession {
         explore.done_occupied_ratio = config.done_occupied_ratio;
         explore.done_normalized_entropy = config.done_normalized_entropy;
         explore.motion_cost_bits_per_m = config.motion_cost_bits_per_m;
+        explore.entropy_scope = config.entropy_scope;
         explore.discovery.weight = config.discovery_weight;
         explore.discovery.before_stop = config.discovery_before_stop;
         explore.discovery.cell_m = config.discovery_cell_m;
@@ -447,9 +455,16 @@ impl ActiveSession {
                     None => NextView::Stop { reason: SessionStop::NoReachableView },
                 })
             }
-            Strategy::ObjectDriven | Strategy::ExpectedGain => {
+            Strategy::ObjectDriven | Strategy::ObjectDrivenDiscovery | Strategy::ExpectedGain => {
                 let mut ctx = UtilityContext::new(map, &self.grids, &self.history, camera, &self.explore)?;
-                let disc = &self.explore.discovery;
+                // The paper's object-driven never looks for the table.
+                let paper = explore::DiscoveryConfig {
+                    weight: 0.0,
+                    before_stop: false,
+                    reserve: false,
+                    ..self.explore.discovery
+                };
+                let disc = if self.strategy.uses_discovery() { &self.explore.discovery } else { &paper };
                 let occluders = Occluders::from_map(map, &self.explore.grid);
                 let (mut unknown, mut weights) =
                     if disc.enabled() { self.weighted_unknown(&occluders) } else { (Vec::new(), Vec::new()) };

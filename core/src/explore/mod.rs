@@ -262,7 +262,8 @@ pub enum IouMode {
 }
 
 /// Which cells make up H in the utility's (1 − R_o)·H term.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
 pub enum EntropyScope {
     /// Cells facing the candidate camera and projecting into its image ("under the predicted
     /// camera view").
@@ -276,8 +277,13 @@ pub enum EntropyScope {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Strategy {
-    /// The paper's utility over candidate views ("object-driven").
+    /// The paper's rule exactly ("object-driven"): its utility with H_obj over all of an object's
+    /// cells ([`EntropyScope::Object`]), its stop, no table discovery.
     ObjectDriven,
+    /// The project's strategy ("object-driven-discovery"): the paper's utility with H over the
+    /// cells the candidate sees (the run's `entropy_scope`), plus the table-discovery extension
+    /// (`discovery_*` settings, [`discovery`] module docs).
+    ObjectDrivenDiscovery,
     /// Random reachable views ("random").
     Random,
     /// Boustrophedon coverage ("coverage").
@@ -290,13 +296,20 @@ pub enum Strategy {
 
 impl Strategy {
     /// All strategies, in report order.
-    pub const ALL: [Strategy; 5] =
-        [Strategy::ObjectDriven, Strategy::Random, Strategy::Coverage, Strategy::Init, Strategy::ExpectedGain];
+    pub const ALL: [Strategy; 6] = [
+        Strategy::ObjectDriven,
+        Strategy::ObjectDrivenDiscovery,
+        Strategy::Random,
+        Strategy::Coverage,
+        Strategy::Init,
+        Strategy::ExpectedGain,
+    ];
 
     /// The report name.
     pub fn as_str(self) -> &'static str {
         match self {
             Strategy::ObjectDriven => "object-driven",
+            Strategy::ObjectDrivenDiscovery => "object-driven-discovery",
             Strategy::Random => "random",
             Strategy::Coverage => "coverage",
             Strategy::Init => "init",
@@ -308,8 +321,33 @@ impl Strategy {
     pub fn parse(name: &str) -> Result<Self, ExploreError> {
         Strategy::ALL.iter().copied().find(|s| s.as_str() == name).ok_or_else(|| ExploreError::InvalidConfig {
             field: "strategy",
-            reason: format!("unknown strategy {name:?} (object-driven, random, coverage, init, expected-gain)"),
+            reason: format!(
+                "unknown strategy {name:?} ({})",
+                Strategy::ALL.iter().map(|s| s.as_str()).collect::<Vec<_>>().join(", ")
+            ),
         })
+    }
+
+    /// Whether the strategy scores candidate views with a utility (object-driven,
+    /// object-driven-discovery, expected-gain) rather than generating them.
+    pub fn is_utility(self) -> bool {
+        matches!(self, Strategy::ObjectDriven | Strategy::ObjectDrivenDiscovery | Strategy::ExpectedGain)
+    }
+
+    /// Whether the run's table-discovery settings apply (object-driven-discovery and
+    /// expected-gain; the paper's object-driven never looks for the table).
+    pub fn uses_discovery(self) -> bool {
+        matches!(self, Strategy::ObjectDrivenDiscovery | Strategy::ExpectedGain)
+    }
+
+    /// Which cells make up H in the utility: all of the object's for the paper's object-driven,
+    /// the run's `configured` scope otherwise.
+    pub fn entropy_scope(self, configured: EntropyScope) -> EntropyScope {
+        if self == Strategy::ObjectDriven {
+            EntropyScope::Object
+        } else {
+            configured
+        }
     }
 }
 

@@ -230,7 +230,7 @@ fn utility_prefers_the_view_facing_the_unobserved_face() {
     let facing_seen = view(eye_around(center, 0.0, 30.0, 0.45), center);
     let facing_unseen = view(eye_around(center, 180.0, 30.0, 0.45), center);
     let side = view(eye_around(center, 90.0, 30.0, 0.45), center);
-    for strategy in [Strategy::ObjectDriven, Strategy::ExpectedGain] {
+    for strategy in [Strategy::ObjectDrivenDiscovery, Strategy::ExpectedGain] {
         let s = ctx.score_all(&[facing_seen, side, facing_unseen], strategy, None).unwrap();
         assert!(
             s[2].utility > s[0].utility && s[2].utility > s[1].utility,
@@ -262,7 +262,11 @@ fn occlusion_term_follows_the_paper_formula() {
     let ctx = UtilityContext::new(&map, &grids, &HistoryBook::default(), &camera(), &cfg).unwrap();
     // Looking along +x, the two blocks overlap in the image.
     let s = ctx
-        .score(&view(eye_around([0.56, 0.0, 0.05], 180.0, 20.0, 0.5), [0.56, 0.0, 0.05]), Strategy::ObjectDriven, None)
+        .score(
+            &view(eye_around([0.56, 0.0, 0.05], 180.0, 20.0, 0.5), [0.56, 0.0, 0.05]),
+            Strategy::ObjectDrivenDiscovery,
+            None,
+        )
         .unwrap();
     assert_eq!(s.objects.len(), 2);
     for t in &s.objects {
@@ -275,7 +279,11 @@ fn occlusion_term_follows_the_paper_formula() {
     }
     // Looking along y they do not overlap.
     let s2 = ctx
-        .score(&view(eye_around([0.56, 0.0, 0.05], 90.0, 20.0, 0.5), [0.56, 0.0, 0.05]), Strategy::ObjectDriven, None)
+        .score(
+            &view(eye_around([0.56, 0.0, 0.05], 90.0, 20.0, 0.5), [0.56, 0.0, 0.05]),
+            Strategy::ObjectDrivenDiscovery,
+            None,
+        )
         .unwrap();
     assert!(s2.objects.iter().all(|t| t.r_iou == 0.0));
 }
@@ -329,11 +337,11 @@ fn volume_convergence_and_s_rule() {
     // equal-budget mode of the active session): then the view facing the block scores its terms.
     let mut ctx = UtilityContext::new(&map, &grids, &hist, &camera(), &cfg).unwrap();
     let facing = view(eye_around([0.5, 0.0, 0.05], 180.0, 40.0, 0.45), [0.5, 0.0, 0.05]);
-    let done = ctx.score(&facing, Strategy::ObjectDriven, None).unwrap();
+    let done = ctx.score(&facing, Strategy::ObjectDrivenDiscovery, None).unwrap();
     assert!(done.objects.iter().all(|t| t.s == 0.0) && done.utility == 0.0, "{done:?}");
     ctx.explore_every_object();
     assert!(ctx.features().iter().all(|f| f.explore));
-    let again = ctx.score(&facing, Strategy::ObjectDriven, None).unwrap();
+    let again = ctx.score(&facing, Strategy::ObjectDrivenDiscovery, None).unwrap();
     assert_eq!(again.objects.len(), 1);
     assert!(again.objects[0].s == 1.0 && again.utility > 0.0, "{again:?}");
 }
@@ -401,7 +409,7 @@ fn same_seed_gives_same_candidates_and_utilities() {
     };
     let views: Vec<Se3> = a.iter().map(|v| v.world_from_camera).collect();
     let ctx = UtilityContext::new(&map, &grids, &HistoryBook::default(), &camera(), &cfg).unwrap();
-    for strategy in [Strategy::ObjectDriven, Strategy::ExpectedGain] {
+    for strategy in [Strategy::ObjectDrivenDiscovery, Strategy::ExpectedGain] {
         let s1 = ctx.score_all(&views, strategy, Some(&views[0])).unwrap();
         let s2 = ctx.score_all(&views, strategy, Some(&views[0])).unwrap();
         assert_eq!(s1, s2);
@@ -554,20 +562,26 @@ fn utility_matches_closed_form_for_one_unknown_cube() {
     grids.sync(&map, &cfg.grid).unwrap();
     let ctx = UtilityContext::new(&map, &grids, &HistoryBook::default(), &camera(), &cfg).unwrap();
     // Level with the centre, facing +x: only the +x face (100 cells) faces the camera within 80°.
-    let level = ctx.score(&view(eye_around(center, 0.0, 0.0, 0.5), center), Strategy::ObjectDriven, None).unwrap();
+    let level =
+        ctx.score(&view(eye_around(center, 0.0, 0.0, 0.5), center), Strategy::ObjectDrivenDiscovery, None).unwrap();
     assert!((level.utility - 100.0).abs() < 1e-9, "{level:?}");
     assert_eq!(level.objects[0].visible_cells, 100);
     // 45° above +x: the +x face and the top (incidence 45°) are seen: 200 bits.
-    let high = ctx.score(&view(eye_around(center, 0.0, 45.0, 0.5), center), Strategy::ObjectDriven, None).unwrap();
+    let high =
+        ctx.score(&view(eye_around(center, 0.0, 45.0, 0.5), center), Strategy::ObjectDrivenDiscovery, None).unwrap();
     assert!((high.utility - 200.0).abs() < 1e-9, "{high:?}");
     // Whole-object scope: H_obj = 500 bits from any view that sees the object.
     let whole = ExploreConfig { entropy_scope: EntropyScope::Object, ..ExploreConfig::default() };
     let ctx2 = UtilityContext::new(&map, &grids, &HistoryBook::default(), &camera(), &whole).unwrap();
-    let s2 = ctx2.score(&view(eye_around(center, 0.0, 0.0, 0.5), center), Strategy::ObjectDriven, None).unwrap();
+    let s2 =
+        ctx2.score(&view(eye_around(center, 0.0, 0.0, 0.5), center), Strategy::ObjectDrivenDiscovery, None).unwrap();
     assert!((s2.utility - 500.0).abs() < 1e-9);
+    // The paper's object-driven uses the whole-object scope whatever the configured one.
+    let paper = ctx.score(&view(eye_around(center, 0.0, 0.0, 0.5), center), Strategy::ObjectDriven, None).unwrap();
+    assert!((paper.utility - 500.0).abs() < 1e-9, "{paper:?}");
     // Looking away: the object is not in the view, f = 0.
     let away = look_at(&eye_around(center, 0.0, 0.0, 0.5), &Point3::new(2.0, 0.0, 0.05)).unwrap();
-    let s3 = ctx.score(&away, Strategy::ObjectDriven, None).unwrap();
+    let s3 = ctx.score(&away, Strategy::ObjectDrivenDiscovery, None).unwrap();
     assert_eq!(s3.utility, 0.0);
     assert!(s3.objects.is_empty());
 }
@@ -1051,8 +1065,11 @@ fn the_decision_step_view_reproduces_the_built_in_utility_strategies() {
 }
 
 /// The paper's session: no table discovery (before stop, budget reserve, object evidence).
+/// object-driven-discovery (whose discovery settings apply) with before-stop, the reserve and object
+/// evidence off: the paper's stopping rule.
 fn paper_active() -> crate::active::ActiveConfig {
     crate::active::ActiveConfig {
+        strategy: Strategy::ObjectDrivenDiscovery,
         discovery_before_stop: false,
         discovery_reserve: false,
         discovery_evidence_height_m: 0.0,
@@ -1158,7 +1175,7 @@ fn bench_scene_scores_match_the_parry_reference() {
     assert!((sum - 83_679.819_818_211_44).abs() < 1e-6 * sum, "expected-gain sum {sum}");
     assert_eq!(cells, 128_377);
     assert_eq!(next_best_view(&eg), Some(8));
-    let od = ctx.score_all(&views, Strategy::ObjectDriven, None).unwrap();
+    let od = ctx.score_all(&views, Strategy::ObjectDrivenDiscovery, None).unwrap();
     let od_sum: f64 = od.iter().map(|s| s.utility).sum();
     assert!((od_sum - 125_760.433_794_101_85).abs() < 1e-6 * od_sum, "object-driven sum {od_sum}");
     let occ = Occluders::from_map(&map, &cfg.grid);

@@ -392,7 +392,7 @@ impl UtilityContext {
                     }
                     g
                 }
-                _ => match cfg.entropy_scope {
+                _ => match strategy.entropy_scope(cfg.entropy_scope) {
                     EntropyScope::Object => (1.0 - f.occupied_ratio) * f.entropy_bits,
                     EntropyScope::ViewCells => {
                         let mut h = 0.0;
