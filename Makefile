@@ -54,7 +54,7 @@ fuzz: setup ## Fuzz the JSON readers and native entry points at length (FUZZ_CAS
 bench: setup ## Benchmarks (criterion + Python references in one run) → reports/bench.json
 	$(PY) experiments/bench.py
 
-benchmark: setup ## Exploration benchmark: 7 scenes × 5 strategies × seeds → reports/exploration.json
+benchmark: setup ## Exploration benchmark: hard + test scenes × 7 strategies × 9 seeds → reports/exploration.json
 	$(PY) experiments/benchmark.py $(BENCHMARK_ARGS)
 
 associate: setup ## Association ablation (scenes × modes) → reports/association.json
