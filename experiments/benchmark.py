@@ -33,6 +33,9 @@ report gives the metrics after k views per strategy, and 3D IoU differences to r
 counts, paired by scene and seed. The kinematic biases are drawn per (seed, scene, view index), so
 at the same k two strategies' maps share the gauge's draw and the paired difference isolates what
 the choice of views did; an episode that stopped earlier keeps the map it stopped with.
+Each finished episode's row is appended to ``<out>/exploration.partial.jsonl`` as it arrives (the
+file goes once the report is written), so an interrupted sweep keeps what finished:
+``--report-only`` then makes the report from those rows.
 ``--report-only`` rebuilds the reports from ``<out>/exploration.json`` and its run folders;
 ``--also FILE[:strategies]`` joins other sweeps' rows (more seeds, or the baselines of the main
 report next to a variant: ``--set explore.stop_when_explored=false`` runs the utility strategies
@@ -454,6 +457,20 @@ def _accuracy_tables(ok: list[dict[str, Any]], strategies: list[str]) -> list[st
     return lines
 
 
+PARTIAL = "exploration.partial.jsonl"
+
+
+def _previous_sweep(out: Path) -> dict[str, Any]:
+    """The sweep in ``out``: its ``exploration.json``, or the rows an interrupted sweep kept in
+    ``exploration.partial.jsonl`` (its first line: the command and config)."""
+    done = out / "exploration.json"
+    partial = out / PARTIAL
+    if partial.exists() and (not done.exists() or partial.stat().st_mtime > done.stat().st_mtime):
+        head, *rows = [json.loads(line) for line in partial.read_text().splitlines() if line.strip()]
+        return {"command": head["command"] + f" (interrupted: {len(rows)} episodes finished)", "config": head["config"], "rows": rows}
+    return json.loads(done.read_text())
+
+
 def _other_sweep(spec: str) -> dict[str, Any]:
     """``--also FILE`` or ``FILE:strategy,strategy``: another sweep's rows (only those strategies)."""
     path, _, only = spec.partition(":")
@@ -513,7 +530,7 @@ def main(argv: list[str] | None = None) -> int:
             print(" ".join(str(p) for p in paths))
         return 0
     if a.report_only:
-        old = json.loads((Path(a.out) / "exploration.json").read_text())
+        old = _previous_sweep(Path(a.out))
         extra = [_other_sweep(spec) for spec in a.also]
         rows = [
             r if "error" in r else {**r, **run_extras(r["run_dir"])}
@@ -536,10 +553,20 @@ def main(argv: list[str] | None = None) -> int:
     ]
     command = "python experiments/benchmark.py " + " ".join(argv if argv is not None else sys.argv[1:])
     t0 = time.perf_counter()
-    rows = [_row(m) for m in run_sweep(jobs, a.workers, backend=a.backend, address=a.address)]
-    rows.sort(key=lambda r: (r["scene"], STRATEGIES.index(r["strategy"]) if r["strategy"] in STRATEGIES else 99, r["seed"]))
     config = {**run_config(a.config, a.set), "scenes": a.scenes, "strategies": a.strategies, "seeds": a.seeds}
+    partial = Path(a.out) / PARTIAL
+    partial.parent.mkdir(parents=True, exist_ok=True)
+    partial.write_text(json.dumps({"command": command.strip(), "config": config}) + "\n")
+
+    def keep(m: dict[str, Any]) -> None:
+        with partial.open("a") as f:
+            f.write(json.dumps(_row(m)) + "\n")
+
+    results = run_sweep(jobs, a.workers, backend=a.backend, address=a.address, on_result=keep)
+    rows = [_row(m) for m in results]
+    rows.sort(key=lambda r: (r["scene"], STRATEGIES.index(r["strategy"]) if r["strategy"] in STRATEGIES else 99, r["seed"]))
     write_reports(rows, Path(a.out), command.strip(), config)
+    partial.unlink()
     print(f"{len(rows)} episodes in {time.perf_counter() - t0:.0f} s → {a.out}/pages/exploration.md")
     return 0 if all("error" not in r for r in rows) else 1
 

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import multiprocessing
 import os
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -102,9 +102,16 @@ def _ray_results(jobs: list[Job], workers: int, address: str | None) -> Iterator
 
 
 def run_sweep(
-    jobs: list[Job], workers: int = 2, label: str = "episode", backend: str = "pool", address: str | None = None
+    jobs: list[Job],
+    workers: int = 2,
+    label: str = "episode",
+    backend: str = "pool",
+    address: str | None = None,
+    on_result: Callable[[dict[str, Any]], None] | None = None,
 ) -> list[dict[str, Any]]:
-    """Run jobs on ``backend`` (see the module docs) with a progress bar; results in job order."""
+    """Run jobs on ``backend`` (see the module docs) with a progress bar; results in job order.
+    ``on_result`` is called with each result as it arrives (to keep what finished if the sweep is
+    interrupted)."""
     from tqdm import tqdm
 
     if backend not in BACKENDS:
@@ -116,6 +123,8 @@ def run_sweep(
     with tqdm(total=len(jobs), unit=label) as bar:
         for i, r in stream:
             results[i] = r
+            if on_result is not None:
+                on_result(r)
             status = "FAILED" if "error" in r else f"iou3d {r['mean']['iou3d']:.3f}"
             bar.set_postfix_str(f"{r['strategy']} {r['scene']} {status}")
             bar.update(1)
