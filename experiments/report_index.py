@@ -50,10 +50,20 @@ def _mean_by(rows: list[dict[str, Any]], key: str, value: str) -> dict[str, floa
 
 
 def _exploration(d: dict[str, Any]) -> str:
-    iou = _mean_by(d["rows"], "strategy", "iou3d")
-    seeds = len({r["seed"] for r in _ok(d["rows"])})
+    ok = _ok(d["rows"])
+    seeds = len({r["seed"] for r in ok})
+    # The headline is the test split when the report has one (judged without re-tuning).
+    split = "test" if any(r.get("split") == "test" for r in ok) else None
+    rows = [r for r in ok if r.get("split") == split] if split else ok
+    iou = _mean_by(rows, "strategy", "iou3d")
     parts = ", ".join(f"{s} {v:.3f}" for s, v in sorted(iou.items(), key=lambda kv: -kv[1]))
-    return f"mean 3D IoU ({seeds} seeds): {parts}"
+    where = f"test split, {seeds} seed{'s' if seeds != 1 else ''}" if split else f"{seeds} seeds"
+    line = f"mean 3D IoU ({where}): {parts}"
+    best = max(iou, key=iou.get) if iou else None
+    for p in d.get("paired", []):
+        if (p["a"], p["b"], p["metric"], p["split"], p["at"]) == (best, "random", "iou3d", split, "end"):
+            line += f"; {best} − random {p['mean_diff']:+.3f} [{p['ci_low']:+.3f}, {p['ci_high']:+.3f}] (n {p['n']})"
+    return line
 
 
 def _association(d: dict[str, Any]) -> str:
