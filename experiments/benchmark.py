@@ -174,6 +174,52 @@ def paired_differences(ok: list[dict[str, Any]], strategies: list[str]) -> list[
     return out
 
 
+STAGES = ("render", "sensor", "detect", "core", "motion", "record")
+
+
+def throughput(ok: list[dict[str, Any]], workers: int) -> dict[str, Any]:
+    """Where an episode's time goes on the machine that ran the sweep: the median over episodes of
+    each stage's median milliseconds per frame (render, sensor model, detector, core, arm motion,
+    recording; ``timings_ms_median`` of each run), frames and wall seconds per episode, and the
+    episodes per hour of a sweep with ``workers`` processes (``3600 · workers / mean wall``, each
+    episode's wall time measured while the others ran)."""
+    walls = [r["wall_s"] for r in ok if r.get("wall_s")]
+    timed = [r["timings_ms_median"] for r in ok if r.get("timings_ms_median")]
+    stages = {
+        s: statistics.median([t[s] for t in timed if t.get(s) is not None])
+        for s in STAGES
+        if any(t.get(s) is not None for t in timed)
+    }
+    frames = [r["frames"] for r in ok if r.get("frames")]
+    return {
+        "workers": workers,
+        "episodes": len(ok),
+        "wall_s_mean": statistics.mean(walls) if walls else None,
+        "episodes_per_hour": 3600.0 * workers / statistics.mean(walls) if walls else None,
+        "frames_median": statistics.median(frames) if frames else None,
+        "frame_ms_median": stages,
+    }
+
+
+def _throughput_lines(t: dict[str, Any]) -> list[str]:
+    if not t.get("frame_ms_median"):
+        return []
+    stages = t["frame_ms_median"]
+    return [
+        "## Where the time goes",
+        "",
+        (
+            f"{t['episodes']} episodes, {t['workers']} worker process(es): {t['episodes_per_hour']:.0f} episodes"
+            f" per hour, {t['wall_s_mean']:.0f} s and {t['frames_median']:.0f} frames per episode. Median ms per frame:"
+        ),
+        "",
+        "| " + " | ".join(stages) + " |",
+        "|---" * len(stages) + "|",
+        "| " + " | ".join(f"{v:.1f}" for v in stages.values()) + " |",
+        "",
+    ]
+
+
 def _paired_table(paired: list[dict[str, Any]]) -> list[str]:
     """The report's paired-difference tables (3D IoU first), one row per (split, a, b)."""
     if not paired:
@@ -215,7 +261,8 @@ def run_extras(run_dir: str | Path, metrics: dict[str, Any] | None = None) -> di
     ``table_known_curve``) and the table cells whose object evidence no map object explained at
     the end (``table_unexplained``; None for runs made before ``table_unexplained_curve``), the
     camera pose error the map was built with (``ate_mm``: online ATE; None for runs without
-    ``ate_rmse_m``) and the tracker's lost frames (``lost_frames``).
+    ``ate_rmse_m``), the tracker's lost frames (``lost_frames``), the episode's frames and its median
+    milliseconds per frame by stage (``timings_ms_median``).
     ``metrics``: the run's metrics.json when already loaded."""
     m = metrics if metrics is not None else json.loads((_run_path(run_dir) / "metrics.json").read_text())
     curve = m.get("table_known_curve") or [None]
@@ -227,6 +274,8 @@ def run_extras(run_dir: str | Path, metrics: dict[str, Any] | None = None) -> di
         "table_unexplained": unexplained[-1],
         "ate_mm": None if m.get("ate_rmse_m") is None else 1000.0 * m["ate_rmse_m"],
         "lost_frames": m.get("lost_frames"),
+        "frames": m.get("frames"),
+        "timings_ms_median": m.get("timings_ms_median"),
     }
 
 
@@ -272,7 +321,15 @@ def write_reports(
     scenes = sorted({r["scene"] for r in ok})
     paired = paired_differences(ok, strategies)
     preset = sorted({r.get("preset") or "realistic" for r in ok})
-    report = {**provenance(command, config), "preset": "+".join(preset), "paired": paired, "rows": rows}
+    workers = int((config or {}).get("workers") or (config or {}).get("sweep", {}).get("workers") or 1)
+    time_use = throughput(ok, workers)
+    report = {
+        **provenance(command, config),
+        "preset": "+".join(preset),
+        "throughput": time_use,
+        "paired": paired,
+        "rows": rows,
+    }
     (report_files(out, "exploration")[0]).write_text(json.dumps(report, indent=2) + "\n")
 
     lines = [
@@ -320,6 +377,7 @@ def write_reports(
             lines.append(f"| {s} | " + " | ".join(cells) + f" | {_fmt(seed_means, spec)} |")
         lines.append("")
     lines += _paired_table(paired)
+    lines += _throughput_lines(time_use)
     lines += _accuracy_tables(ok, strategies)
     failed = [r for r in rows if "error" in r]
     if failed:
@@ -467,7 +525,7 @@ def _previous_sweep(out: Path) -> dict[str, Any]:
     partial = out / PARTIAL
     if partial.exists() and (not done.exists() or partial.stat().st_mtime > done.stat().st_mtime):
         head, *rows = [json.loads(line) for line in partial.read_text().splitlines() if line.strip()]
-        return {"command": head["command"] + f" (interrupted: {len(rows)} episodes finished)", "config": head["config"], "rows": rows}
+        return {"command": head["command"] + f" (partial: {len(rows)} episodes finished)", "config": head["config"], "rows": rows}
     return json.loads(done.read_text())
 
 
@@ -553,7 +611,14 @@ def main(argv: list[str] | None = None) -> int:
     ]
     command = "python experiments/benchmark.py " + " ".join(argv if argv is not None else sys.argv[1:])
     t0 = time.perf_counter()
-    config = {**run_config(a.config, a.set), "scenes": a.scenes, "strategies": a.strategies, "seeds": a.seeds}
+    config = {
+        **run_config(a.config, a.set),
+        "scenes": a.scenes,
+        "strategies": a.strategies,
+        "seeds": a.seeds,
+        "workers": a.workers,
+        "backend": a.backend,
+    }
     partial = Path(a.out) / PARTIAL
     partial.parent.mkdir(parents=True, exist_ok=True)
     partial.write_text(json.dumps({"command": command.strip(), "config": config}) + "\n")
