@@ -278,7 +278,8 @@ mod tests {
         assert_eq!(q, Query::ScoreViews { utility: Strategy::ExpectedGain, explore_every_object: false });
         let q: Query = serde_json::from_str(r#"{"query": "candidate_views", "around": [3]}"#).unwrap();
         assert_eq!(q, Query::CandidateViews { around: Some(vec![3]) });
-        assert!(serde_json::from_str::<Query>(r#"{"query": "paper_stop", "limit": 1}"#).is_err());
+        assert!(serde_json::from_str::<Query>(r#"{"query": "candidate_views", "limit": 1}"#).is_err());
+        assert!(serde_json::from_str::<Query>(r#"{"query": "everything"}"#).is_err());
         assert!(serde_json::from_str::<Query>(r#"{"query": "candidate_views", "around": [-1]}"#).is_err());
     }
 }
