@@ -1,6 +1,7 @@
 """One exploration episode: scene → simulator → core → object map → metrics → Rerun recording.
 
-Entry point: :func:`run_episode` (and the CLI ``experiments/run.py``). Per frame, data flows one
+Entry point: :func:`run_episode` (and the CLI ``experiments/run.py``), which runs an
+:class:`Episode` step by step (setup, Init views, the view loop, finish). Per frame, data flows one
 way: the body senses (:meth:`SimWorld.render`), the simulated detector boxes the objects, the core
 fuses the frame into the object map, the recorder logs everything. Ground truth goes only to the
 evaluation and to its own entity paths in the recording.
