@@ -171,7 +171,7 @@ def test_fuzz_native_configs() -> None:
                 active_config_json=mutate_json(active, rng) if which == 2 else active,
                 table=table if rng.random() < 0.3 else (0.5, 0.0, 0.8, 1.2),
             )
-            m.initial_views()
+            m.query('{"query": "initial_views"}')
 
     _fuzz("configs", call)
 

@@ -88,7 +88,7 @@ def test_planner_rejects_bad_input_with_named_fields() -> None:
         p.plan_grasp(np.full(7, np.nan), box, "[]")
     with pytest.raises(_native.InputError, match="target_json"):
         p.plan_grasp(q, "{}", "[]")
-    with pytest.raises(_native.InputError, match="unknown key \"bogus\""):
+    with pytest.raises(_native.InputError, match="unknown field `bogus`"):
         _native.Planner(str(panda_urdf_path()), json.dumps({"bogus": 1}))
     with pytest.raises(_native.PlanningError):
         _native.Planner("/nonexistent/panda.urdf")

@@ -353,8 +353,8 @@ def test_active_mapper_arguments_are_checked_by_name() -> None:
         m.next_view(intrinsics=k, width=320, height=240, world_from_camera=np.eye(4), reachable=3)
     with pytest.raises(_native.InputError, match="id: an object id"):
         m.resolve_id(-1)
-    with pytest.raises(_native.InputError, match="around: an object id"):
-        m.candidate_views(around=[-1])
+    with pytest.raises(_native.InputError, match="query_json: .*integer `-1`, expected u32"):
+        m.query('{"query": "candidate_views", "around": [-1]}', intrinsics=k, width=320, height=240)
     with pytest.raises(_native.InputError, match="active_config"):
         _native.ActiveMapper(
             mapper_config_json="{}", active_config_json='{"explore": {"max_views": "ten"}}', table=(0.5, 0.0, 0.8, 1.2)

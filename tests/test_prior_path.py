@@ -44,7 +44,7 @@ def _run(pose_source: str, gt_shift: np.ndarray) -> list[np.ndarray]:
             index=i, intrinsics=k, depth=depth, world_from_camera=prior, detections=[], grey=grey,
             world_from_camera_gt=gt, view_index=0,
         )
-        poses.append(np.asarray(mapper.last_pose()))
+        poses.append(np.asarray(mapper.query('{"query": "last_pose"}')["world_from_camera"]))
     return poses
 
 

@@ -151,11 +151,11 @@ def test_the_table_discovery_view_of_an_empty_map() -> None:
     m = _bare_mapper()
     cam = {"intrinsics": np.array([[300.0, 0, 160], [0, 300.0, 120], [0, 0, 1]]), "width": 320, "height": 240}
     # 2 cm cells over the whole table, each weighing 1 (no unexplained evidence).
-    assert m.table_unknown_weight() == pytest.approx((0.8 / 0.02) * (1.2 / 0.02))
-    views = m.table_candidate_views()
-    assert views and all(v.shape == (4, 4) for v in views)
+    assert m.query('{"query": "progress"}')["table_unknown_weight"] == pytest.approx((0.8 / 0.02) * (1.2 / 0.02))
+    views = m.query('{"query": "table_candidate_views"}', **cam)
+    assert views and all(v["world_from_camera"].shape == (4, 4) and v["target_object"] is None for v in views)
     high, low, away = _look_down(0.5, 0.0, 0.8), _look_down(0.5, 0.0, 0.4), _look_down(3.0, 0.0, 0.8)
-    gains = m.table_gain(**cam, views=[high, low, away])
+    gains = m.query('{"query": "table_gain"}', **cam, views=[high, low, away])
     # The inner image (a 10 % border excluded) of a camera looking straight down from height z
     # covers a (0.8 w z / f) × (0.8 h z / f) rectangle of the table: the 2 cm cells whose centres
     # fall in it number between the rectangle shrunk and grown by a cell on each side.
@@ -165,25 +165,29 @@ def test_the_table_discovery_view_of_an_empty_map() -> None:
         assert g["bits"] == pytest.approx(4.0 * g["cells"])  # (2 cm / 1 cm)² bits per cell
     assert gains[2] == {"cells": 0.0, "unexplained": False, "bits": 0.0}, "looking at the floor"
     # The reserve's greedy count: at most the limit, none when nothing is reachable.
-    assert 1 <= m.table_views_needed(**cam, reachable=lambda p: True, limit=3) <= 3
-    assert m.table_views_needed(**cam, reachable=lambda p: False, limit=3) == 0
+    needed = '{"query": "table_views_needed", "limit": 3}'
+    assert 1 <= m.query(needed, **cam, reachable=lambda p: True) <= 3
+    assert m.query(needed, **cam, reachable=lambda p: False) == 0
 
 
 def test_bad_input_to_the_decision_step_bindings_is_a_typed_error() -> None:
     m = _bare_mapper()
     cam = {"intrinsics": np.array([[300.0, 0, 160], [0, 300.0, 120], [0, 0, 1]]), "width": 320, "height": 240}
+    score = '{"query": "score_views", "utility": "object-driven"}'
     with pytest.raises(ValueError, match=r"views\[1\]"):
-        m.table_gain(**cam, views=[_look_down(0.5, 0.0, 0.8), np.eye(3)])
+        m.query('{"query": "table_gain"}', **cam, views=[_look_down(0.5, 0.0, 0.8), np.eye(3)])
     with pytest.raises(ValueError, match=r"views\[0\]"):
-        m.score_views(
-            **cam, views=[np.full((4, 4), np.nan)], utility="object-driven", world_from_camera=np.eye(4)
-        )
+        m.query(score, **cam, views=[np.full((4, 4), np.nan)], world_from_camera=np.eye(4))
+    with pytest.raises(ValueError, match="unknown variant `greedy`"):
+        m.query('{"query": "score_views", "utility": "greedy"}', **cam, views=[np.eye(4)])
     with pytest.raises(ValueError, match="utility"):
-        m.score_views(**cam, views=[np.eye(4)], utility="greedy", world_from_camera=np.eye(4))
+        m.query('{"query": "score_views", "utility": "random"}', **cam, views=[np.eye(4)])
+    with pytest.raises(ValueError, match="query_json"):
+        m.query('{"query": "everything"}', **cam)
 
     def broken(_pose):
         raise RuntimeError("IK server down")
 
     # The callback's own error reaches the caller, not a panic or a silent "unreachable".
     with pytest.raises(RuntimeError, match="IK server down"):
-        m.table_views_needed(**cam, reachable=broken, limit=3)
+        m.query('{"query": "table_views_needed", "limit": 3}', **cam, reachable=broken)

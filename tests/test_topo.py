@@ -47,7 +47,7 @@ def test_exact_copy_under_a_known_similarity_is_recovered_to_1e_6(scene_map) -> 
     assert back["matched"]
     assert np.abs(back["matrix"] - np.linalg.inv(truth)).max() < 1e-6
     assert abs(back["scale"] - 1 / S) < 1e-6
-    assert back["matched_ids"] == [(i, i) for i in range(n)]
+    assert back["matched_ids"] == [[i, i] for i in range(n)]
 
 
 def test_ids_are_the_maps_object_ids_not_indices(scene_map) -> None:

@@ -4,12 +4,12 @@
 //! (models, H, W) with 0 / 1 hidden / 2 visible (shape (0, 0, 0) without a camera), `depth` the float32
 //! (H, W) depth the masks used (None without a camera). Bad input raises `InputError` naming the field.
 
-use numpy::{IntoPyArray, PyArray2, PyArray3, PyReadonlyArray2};
+use numpy::{IntoPyArray, PyArray2, PyArray3};
 use objslam_core::ar::{run_request, ArRequest};
 use objslam_core::frame::DepthImage;
 use pyo3::prelude::*;
 
-use crate::input_err;
+use crate::{array, input_err, to_json};
 
 type ArAnswer<'py> = (String, Bound<'py, PyArray3<u8>>, Option<Bound<'py, PyArray2<f32>>>);
 
@@ -19,15 +19,13 @@ type ArAnswer<'py> = (String, Bound<'py, PyArray3<u8>>, Option<Bound<'py, PyArra
 pub fn ar_run<'py>(
     py: Python<'py>,
     request_json: &str,
-    real_depth: Option<PyReadonlyArray2<'py, f32>>,
+    real_depth: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<ArAnswer<'py>> {
     let req = ArRequest::from_json(request_json).map_err(input_err)?;
-    let depth = real_depth.map(|a| {
-        let a = a.as_array();
-        DepthImage { width: a.shape()[1] as u32, height: a.shape()[0] as u32, data: a.iter().copied().collect() }
-    });
+    let depth = real_depth.map(|a| array::<f32, 2>(a, "real_depth", [None, None], "(H, W) in metres")).transpose()?;
+    let depth = depth.map(|(data, [h, w])| DepthImage { width: w as u32, height: h as u32, data });
     let out = py.detach(|| run_request(&req, depth)).map_err(input_err)?;
-    let json = serde_json::to_string(&out).map_err(input_err)?;
+    let json = to_json(&out, "answer")?;
     let (h, w) = out.real_depth.as_ref().map_or((0, 0), |d| (d.height as usize, d.width as usize));
     let n = out.coverage.len().checked_div(h * w).unwrap_or(0);
     let coverage = numpy::ndarray::Array3::from_shape_vec((n, h, w), out.coverage).map_err(input_err)?;

@@ -2,12 +2,12 @@
 //! (`objslam_core::slam::OrbExtractor`, kept between calls) on one uint8 (H, W) image. `keypoints` is float32 (N, 5):
 //! x, y (level-0 pixel indices), level, angle (radians), FAST score; `descriptors` uint8 (N, 32).
 
-use numpy::{IntoPyArray, PyArray2, PyReadonlyArray2};
+use numpy::{IntoPyArray, PyArray2};
 use objslam_core::frame::GreyImage;
 use objslam_core::slam::{OrbConfig, OrbExtractor};
 use pyo3::prelude::*;
 
-use crate::{check_elements, input_err, parse_json};
+use crate::{array, input_err, parse_or_default};
 
 static CACHE: std::sync::Mutex<Option<OrbExtractor>> = std::sync::Mutex::new(None);
 
@@ -18,14 +18,12 @@ type OrbAnswer<'py> = (Bound<'py, PyArray2<f32>>, Bound<'py, PyArray2<u8>>);
 #[pyo3(signature = (grey, config_json = None))]
 pub fn orb_extract<'py>(
     py: Python<'py>,
-    grey: PyReadonlyArray2<'py, u8>,
+    grey: &Bound<'py, PyAny>,
     config_json: Option<&str>,
 ) -> PyResult<OrbAnswer<'py>> {
-    let config: OrbConfig = config_json.map_or(Ok(OrbConfig::default()), |t| parse_json("config_json", t))?;
-    let a = grey.as_array();
-    check_elements("grey", a.shape())?;
-    let image =
-        GreyImage { width: a.shape()[1] as u32, height: a.shape()[0] as u32, data: a.iter().copied().collect() };
+    let config: OrbConfig = parse_or_default("config_json", config_json)?;
+    let (data, [h, w]) = array::<u8, 2>(grey, "grey", [None, None], "(H, W)")?;
+    let image = GreyImage { width: w as u32, height: h as u32, data };
     let features = py
         .detach(|| {
             // One extractor kept between calls (its pattern tables and pyramid buffers), rebuilt
@@ -40,14 +38,6 @@ pub fn orb_extract<'py>(
             }
         })
         .map_err(input_err)?;
-    let n = features.keypoints.len();
-    let kp: Vec<f32> = features
-        .keypoints
-        .iter()
-        .flat_map(|k| [k.x, k.y, f32::from(k.level), k.angle_rad, f32::from(k.score)])
-        .collect();
-    let desc: Vec<u8> = features.descriptors.iter().flat_map(|d| d.iter().flat_map(|w| w.to_le_bytes())).collect();
-    let kp = numpy::ndarray::Array2::from_shape_vec((n, 5), kp).map_err(input_err)?;
-    let desc = numpy::ndarray::Array2::from_shape_vec((n, 32), desc).map_err(input_err)?;
-    Ok((kp.into_pyarray(py), desc.into_pyarray(py)))
+    let keypoints = numpy::ndarray::arr2(&features.keypoint_rows()).into_pyarray(py);
+    Ok((keypoints, numpy::ndarray::arr2(&features.descriptor_bytes()).into_pyarray(py)))
 }

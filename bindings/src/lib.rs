@@ -1,17 +1,18 @@
 //! Thin pyo3 layer over `objslam-core`, built by maturin as the private module `objslam._native`.
 //!
-//! Rules: numpy arrays in, validated here (dtype, shape, finiteness, element count against
-//! [`MAX_ARRAY_ELEMENTS`] before anything is copied, so a broadcast view of a huge shape is refused
-//! instead of copied) with errors that name the argument; every core error maps to a specific
-//! Python exception; no panic crosses into Python (core code has no unwrap, and these wrappers
-//! only return `PyResult`). Complex structured values (maps, evaluations, configs) cross as JSON
-//! strings, read with [`parse_json`] so errors name the field's path.
+//! Rules: numpy arrays in, validated here by [`array`] (dtype, shape, finiteness, element count
+//! against [`MAX_ARRAY_ELEMENTS`] before anything is copied, so a broadcast view of a huge shape is
+//! refused instead of copied) with errors that name the argument; every core error maps to a
+//! specific Python exception; no panic crosses into Python (core code has no unwrap, and these
+//! wrappers only return `PyResult`). Complex structured values (maps, evaluations, configs) cross
+//! as JSON strings, read with [`parse_json`] so errors name the field's path; core results come
+//! back as Python values through their serde form ([`to_py`], [`to_py_arrays`]).
 
-use nalgebra::{Matrix3, Matrix4, Point3};
-use numpy::{PyReadonlyArray2, PyReadonlyArray3};
+use nalgebra::{Point3, SMatrix};
+use numpy::{PyArray2, PyReadonlyArrayDyn, PyUntypedArrayMethods, ToPyArray};
 use objslam_core::eval::{config_from_json, estimates_from_map, evaluate, ground_truth_from_json, EvalConfig};
-use objslam_core::frame::{DepthImage, Detection, Frame, FrameError};
-use objslam_core::geometry::{se3_from_matrix, Box2, GeometryError, ObjectGeometry, PinholeCamera, Se3};
+use objslam_core::frame::{DepthImage, Detection, Frame};
+use objslam_core::geometry::{se3_from_matrix, Box2, PinholeCamera, Se3};
 use objslam_core::map::{Label, MapError, ObjectMap};
 use objslam_core::naive::{NaiveConfig, NaiveMapper};
 use objslam_core::record::{DrawnObject, RecordError, RecordOptions, Recorder};
@@ -25,6 +26,7 @@ mod topo;
 use pyo3::create_exception;
 use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyList};
 
 create_exception!(_native, ObjslamError, PyValueError, "Base class of every objslam error.");
 create_exception!(_native, InputError, ObjslamError, "An argument has the wrong shape, dtype or value.");
@@ -39,101 +41,78 @@ pub(crate) fn input_err(msg: impl std::fmt::Display) -> PyErr {
 /// checked before the array is copied.
 pub(crate) const MAX_ARRAY_ELEMENTS: usize = 1 << 26;
 
-/// Refuse an array of more than [`MAX_ARRAY_ELEMENTS`] elements (a broadcast view has a large
-/// shape and no memory of its own: copying it would allocate the full shape).
-pub(crate) fn check_elements(field: &str, shape: &[usize]) -> PyResult<()> {
-    let n = shape.iter().try_fold(1usize, |acc, d| acc.checked_mul(*d));
-    match n {
-        Some(n) if n <= MAX_ARRAY_ELEMENTS => Ok(()),
-        _ => Err(input_err(format!("{field}: shape {shape:?} has more than {MAX_ARRAY_ELEMENTS} elements"))),
-    }
-}
-
-/// Parse JSON `text` given as argument `field`; errors name the field's path inside it.
-pub(crate) fn parse_json<T: serde::de::DeserializeOwned>(field: &str, text: &str) -> PyResult<T> {
-    objslam_core::map::validate::parse_json(text).map_err(|e| input_err(format!("{field}: {e}")))
-}
-
-fn frame_err(e: FrameError) -> PyErr {
-    input_err(e)
-}
-
-fn geometry_err(e: GeometryError) -> PyErr {
-    input_err(e)
-}
-
-pub(crate) fn map_err(e: MapError) -> PyErr {
-    match e {
-        MapError::UnknownLabel(_) => input_err(e),
-        _ => MapFileError::new_err(e.to_string()),
-    }
-}
-
-fn record_err(e: RecordError) -> PyErr {
-    match e {
-        RecordError::BufferLength { .. } | RecordError::Option { .. } => input_err(e),
-        _ => RecordingError::new_err(e.to_string()),
-    }
-}
-
-fn dtype_name(obj: &Bound<'_, PyAny>) -> String {
-    obj.getattr("dtype").map(|d| d.to_string()).unwrap_or_else(|_| obj.get_type().to_string())
-}
-
-fn shape_of(obj: &Bound<'_, PyAny>) -> String {
-    obj.getattr("shape").map(|d| d.to_string()).unwrap_or_else(|_| "?".into())
-}
-
-/// Extract a float64 matrix of a fixed shape, finite.
-fn matrix<const R: usize, const C: usize>(obj: &Bound<'_, PyAny>, field: &str) -> PyResult<[[f64; C]; R]> {
-    let arr: PyReadonlyArray2<'_, f64> = obj.extract().map_err(|_| {
-        PyTypeError::new_err(format!(
-            "{field}: expected a float64 array of shape ({R}, {C}), got dtype {} shape {}",
-            dtype_name(obj),
-            shape_of(obj)
-        ))
-    })?;
+/// A numpy argument of dtype `T` and `D` dimensions, copied out in row-major order with its shape.
+/// `shape` fixes the lengths that must be (None = any), `text` names the shape in the error: the
+/// wrong dtype or number of dimensions is a `TypeError`, a wrong length or more than
+/// [`MAX_ARRAY_ELEMENTS`] elements an `InputError` (a broadcast view has a large shape and no
+/// memory of its own: copying it would allocate the full shape).
+pub(crate) fn array<T: numpy::Element + Copy, const D: usize>(
+    obj: &Bound<'_, PyAny>,
+    field: &str,
+    shape: [Option<usize>; D],
+    text: &str,
+) -> PyResult<(Vec<T>, [usize; D])> {
+    let arr: PyReadonlyArrayDyn<'_, T> =
+        obj.extract().ok().filter(|a: &PyReadonlyArrayDyn<'_, T>| a.ndim() == D).ok_or_else(|| {
+            let got = |attr: &str| obj.getattr(attr).map_or_else(|_| "?".to_string(), |v| v.to_string());
+            let dtype = numpy::dtype::<T>(obj.py());
+            PyTypeError::new_err(format!(
+                "{field}: expected a {dtype} array of shape {text}, got dtype {} shape {}",
+                got("dtype"),
+                got("shape")
+            ))
+        })?;
     let a = arr.as_array();
-    if a.shape() != [R, C] {
-        return Err(input_err(format!("{field}: expected shape ({R}, {C}), got {:?}", a.shape())));
+    let dims: [usize; D] = std::array::from_fn(|i| a.shape()[i]);
+    if dims.iter().zip(&shape).any(|(d, s)| s.is_some_and(|s| s != *d)) {
+        return Err(input_err(format!("{field}: expected shape {text}, got {dims:?}")));
     }
-    let mut out = [[0.0; C]; R];
-    for r in 0..R {
-        for c in 0..C {
-            let v = a[[r, c]];
-            if !v.is_finite() {
-                return Err(input_err(format!("{field}: non-finite value at [{r}, {c}]")));
-            }
-            out[r][c] = v;
-        }
+    if dims.iter().try_fold(1usize, |n, d| n.checked_mul(*d)).is_none_or(|n| n > MAX_ARRAY_ELEMENTS) {
+        return Err(input_err(format!("{field}: shape {dims:?} has more than {MAX_ARRAY_ELEMENTS} elements")));
     }
-    Ok(out)
+    Ok((a.iter().copied().collect(), dims))
+}
+
+/// [`array`] of float64 values, every one finite (the error names the first other one's index).
+pub(crate) fn finite<const D: usize>(
+    obj: &Bound<'_, PyAny>,
+    field: &str,
+    shape: [Option<usize>; D],
+    text: &str,
+) -> PyResult<(Vec<f64>, [usize; D])> {
+    let (values, dims) = array::<f64, D>(obj, field, shape, text)?;
+    let Some(mut rest) = values.iter().position(|v| !v.is_finite()) else { return Ok((values, dims)) };
+    let mut index = [0usize; D];
+    for k in (0..D).rev() {
+        index[k] = rest % dims[k];
+        rest /= dims[k];
+    }
+    Err(input_err(format!("{field}: non-finite value at {index:?}")))
+}
+
+/// A finite float64 matrix of a fixed shape.
+fn matrix<const R: usize, const C: usize>(obj: &Bound<'_, PyAny>, field: &str) -> PyResult<SMatrix<f64, R, C>> {
+    let (values, _) = finite::<2>(obj, field, [Some(R), Some(C)], &format!("({R}, {C})"))?;
+    Ok(SMatrix::from_row_slice(&values))
 }
 
 pub(crate) fn pose(obj: &Bound<'_, PyAny>, field: &'static str) -> PyResult<Se3> {
-    let m = matrix::<4, 4>(obj, field)?;
-    let mat = Matrix4::from_fn(|r, c| m[r][c]);
-    se3_from_matrix(&mat, field).map_err(geometry_err)
+    se3_from_matrix(&matrix::<4, 4>(obj, field)?, field).map_err(input_err)
 }
 
 pub(crate) fn camera(k: &Bound<'_, PyAny>, width: u32, height: u32) -> PyResult<PinholeCamera> {
-    let m = matrix::<3, 3>(k, "intrinsics")?;
-    PinholeCamera::from_matrix(width, height, &Matrix3::from_fn(|r, c| m[r][c])).map_err(geometry_err)
+    PinholeCamera::from_matrix(width, height, &matrix::<3, 3>(k, "intrinsics")?).map_err(input_err)
 }
 
 pub(crate) fn depth_image(obj: &Bound<'_, PyAny>) -> PyResult<DepthImage> {
-    let arr: PyReadonlyArray2<'_, f32> = obj.extract().map_err(|_| {
-        PyTypeError::new_err(format!(
-            "depth: expected a float32 array of shape (H, W) in metres, got dtype {} shape {}",
-            dtype_name(obj),
-            shape_of(obj)
-        ))
-    })?;
-    let a = arr.as_array();
-    check_elements("depth", a.shape())?;
-    let (h, w) = (a.shape()[0], a.shape()[1]);
-    let data: Vec<f32> = a.iter().copied().collect();
-    DepthImage::new(w as u32, h as u32, data).map_err(frame_err)
+    let (data, [h, w]) = array::<f32, 2>(obj, "depth", [None, None], "(H, W) in metres")?;
+    DepthImage::new(w as u32, h as u32, data).map_err(input_err)
+}
+
+/// Points (N, 3) float64, finite.
+fn points3(obj: &Bound<'_, PyAny>, field: &str) -> PyResult<Vec<Point3<f64>>> {
+    let (values, _) = finite::<2>(obj, field, [None, Some(3)], "(N, 3)")?;
+    Ok(values.chunks_exact(3).map(|p| Point3::new(p[0], p[1], p[2])).collect())
 }
 
 /// Detections from a list of `(u0, v0, u1, v1, label, score)` tuples.
@@ -173,14 +152,91 @@ pub(crate) fn frame_from_py(
     })
 }
 
-pub(crate) fn json_err(field: &str, e: serde_json::Error) -> PyErr {
-    input_err(format!("{field}: {e}"))
+/// Parse JSON `text` given as argument `field`; errors name the field's path inside it.
+pub(crate) fn parse_json<T: serde::de::DeserializeOwned>(field: &str, text: &str) -> PyResult<T> {
+    objslam_core::map::validate::parse_json(text).map_err(|e| input_err(format!("{field}: {e}")))
+}
+
+/// [`parse_json`] of an optional argument, the type's default without it.
+pub(crate) fn parse_or_default<T: serde::de::DeserializeOwned + Default>(
+    field: &str,
+    text: Option<&str>,
+) -> PyResult<T> {
+    text.map_or_else(|| Ok(T::default()), |t| parse_json(field, t))
+}
+
+/// A string argument naming one variant of a core enum (its serde name, e.g. `"refined"`).
+pub(crate) fn choice<T: serde::de::DeserializeOwned>(field: &str, value: &str) -> PyResult<T> {
+    serde_json::from_value(serde_json::Value::from(value)).map_err(|e| input_err(format!("{field}: {e}")))
+}
+
+/// A core value as JSON text.
+pub(crate) fn to_json(value: &impl serde::Serialize, field: &str) -> PyResult<String> {
+    serde_json::to_string(value).map_err(|e| input_err(format!("{field}: {e}")))
 }
 
 /// A core value as Python dicts / lists / numbers, through its JSON form.
 pub(crate) fn to_py<'py>(py: Python<'py>, value: &impl serde::Serialize, field: &str) -> PyResult<Bound<'py, PyAny>> {
-    let s = serde_json::to_string(value).map_err(|e| json_err(field, e))?;
-    py.import("json")?.call_method1("loads", (s,))
+    py.import("json")?.call_method1("loads", (to_json(value, field)?,))
+}
+
+/// [`to_py`], with the values under `array_keys` (in the dict and the dicts and lists nested in
+/// it, or in each dict of a list) as float64 numpy arrays.
+pub(crate) fn to_py_arrays<'py>(
+    py: Python<'py>,
+    value: &impl serde::Serialize,
+    field: &str,
+    array_keys: &[&str],
+) -> PyResult<Bound<'py, PyAny>> {
+    fn convert(d: &Bound<'_, PyAny>, keys: &[&str], asarray: &Bound<'_, PyAny>) -> PyResult<()> {
+        if let Ok(list) = d.cast::<PyList>() {
+            return list.iter().try_for_each(|v| convert(&v, keys, asarray));
+        }
+        let Ok(d) = d.cast::<PyDict>() else { return Ok(()) };
+        for v in d.values() {
+            convert(&v, keys, asarray)?;
+        }
+        for key in keys {
+            if let Some(v) = d.get_item(key)?.filter(|v| !v.is_none()) {
+                d.set_item(key, asarray.call1((v, "float64"))?)?;
+            }
+        }
+        Ok(())
+    }
+    let out = to_py(py, value, field)?;
+    convert(&out, array_keys, &py.import("numpy")?.getattr("asarray")?)?;
+    Ok(out)
+}
+
+/// A pose as a 4x4 float64 array.
+pub(crate) fn matrix_py<'py>(py: Python<'py>, t: &Se3) -> Bound<'py, PyArray2<f64>> {
+    rows_py(py, &objslam_core::geometry::rows(&t.to_homogeneous()))
+}
+
+/// Points as an (N, 3) float64 array.
+pub(crate) fn points_py<'py>(py: Python<'py>, points: &[Point3<f64>]) -> Bound<'py, PyArray2<f64>> {
+    rows_py(py, &points.iter().map(|p| [p.x, p.y, p.z]).collect::<Vec<_>>())
+}
+
+/// Rows of `C` values as an (N, C) float64 array.
+pub(crate) fn rows_py<'py, const C: usize>(py: Python<'py>, rows: &[[f64; C]]) -> Bound<'py, PyArray2<f64>> {
+    numpy::ndarray::Array2::from_shape_fn((rows.len(), C), |(r, c)| rows[r][c]).to_pyarray(py)
+}
+
+pub(crate) fn map_err(e: MapError) -> PyErr {
+    if e.is_input() {
+        input_err(e)
+    } else {
+        MapFileError::new_err(e.to_string())
+    }
+}
+
+fn record_err(e: RecordError) -> PyErr {
+    if e.is_input() {
+        input_err(e)
+    } else {
+        RecordingError::new_err(e.to_string())
+    }
 }
 
 /// The foundation's naive mapper (depth points in the box, box-IoU association, AABB extent).
@@ -194,10 +250,7 @@ impl NaiveMapperPy {
     #[new]
     #[pyo3(signature = (config_json = None))]
     fn new(config_json: Option<&str>) -> PyResult<Self> {
-        let config: NaiveConfig = match config_json {
-            Some(s) => parse_json("config", s)?,
-            None => NaiveConfig::default(),
-        };
+        let config: NaiveConfig = parse_or_default("config", config_json)?;
         config.validate().map_err(|(field, reason)| input_err(format!("config.{field}: {reason}")))?;
         Ok(Self { inner: NaiveMapper::new(config) })
     }
@@ -213,8 +266,7 @@ impl NaiveMapperPy {
         detections: &Bound<'_, PyAny>,
     ) -> PyResult<Vec<Option<u32>>> {
         let frame = frame_from_py(index, intrinsics, depth, world_from_camera, detections)?;
-        let summary = self.inner.update(&frame).map_err(frame_err)?;
-        Ok(summary.assigned)
+        Ok(self.inner.update(&frame).map_err(input_err)?.assigned)
     }
 
     /// The map as versioned JSON.
@@ -224,7 +276,7 @@ impl NaiveMapperPy {
 
     /// The map's objects as JSON records `{"id", "label", "geometry", "n_observations"}`.
     fn objects_json(&self) -> PyResult<String> {
-        objects_json(self.inner.map())
+        to_json(&self.inner.map().object_records(), "objects")
     }
 
     /// Number of objects in the map.
@@ -233,26 +285,10 @@ impl NaiveMapperPy {
     }
 }
 
-pub(crate) fn objects_json(map: &ObjectMap) -> PyResult<String> {
-    let records: Vec<serde_json::Value> = map
-        .objects
-        .iter()
-        .map(|o| {
-            serde_json::json!({
-                "id": o.id,
-                "label": o.label,
-                "geometry": o.geometry(),
-                "n_observations": o.observations.len(),
-            })
-        })
-        .collect();
-    serde_json::to_string(&records).map_err(|e| json_err("objects", e))
-}
-
 /// The objects of a map given as versioned JSON (see `NaiveMapper.objects_json`).
 #[pyfunction]
 fn map_objects_json(map_json: &str) -> PyResult<String> {
-    objects_json(&ObjectMap::from_json(map_json, "map_json").map_err(map_err)?)
+    to_json(&ObjectMap::from_json(map_json, "map_json").map_err(map_err)?.object_records(), "objects")
 }
 
 /// Evaluate a map (versioned JSON) against ground truth (JSON list of GtObject); returns JSON.
@@ -261,12 +297,9 @@ fn map_objects_json(map_json: &str) -> PyResult<String> {
 fn evaluate_map(gt_json: &str, map_json: &str, config_json: Option<&str>) -> PyResult<String> {
     let gt = ground_truth_from_json(gt_json).map_err(input_err)?;
     let map = ObjectMap::from_json(map_json, "map_json").map_err(map_err)?;
-    let config: EvalConfig = match config_json {
-        Some(s) => config_from_json(s).map_err(input_err)?,
-        None => EvalConfig::default(),
-    };
-    let ev = evaluate(&gt, &estimates_from_map(&map), &config);
-    serde_json::to_string(&ev).map_err(|e| json_err("evaluation", e))
+    let config: EvalConfig =
+        config_json.map_or_else(|| Ok(EvalConfig::default()), config_from_json).map_err(input_err)?;
+    to_json(&evaluate(&gt, &estimates_from_map(&map), &config), "evaluation")
 }
 
 /// The core's settings of a run (`{"slam", "map", "explore", "eval"}` tables as JSON, missing keys
@@ -274,8 +307,7 @@ fn evaluate_map(gt_json: &str, map_json: &str, config_json: Option<&str>) -> PyR
 /// the field as `table.key` (`objslam_core::system::SystemConfig`).
 #[pyfunction]
 fn resolve_config(config_json: &str) -> PyResult<String> {
-    let c = objslam_core::system::SystemConfig::from_json(config_json).map_err(input_err)?;
-    serde_json::to_string(&c).map_err(|e| json_err("config", e))
+    to_json(&objslam_core::system::SystemConfig::from_json(config_json).map_err(input_err)?, "config")
 }
 
 /// Load a map file and return its JSON (checks format, version, content hash and values).
@@ -289,44 +321,6 @@ fn load_map(path: &str) -> PyResult<String> {
 fn save_map(map_json: &str, path: &str) -> PyResult<()> {
     let map = ObjectMap::from_json(map_json, "map_json").map_err(map_err)?;
     map.save(std::path::Path::new(path)).map_err(map_err)
-}
-
-fn points3(obj: &Bound<'_, PyAny>, field: &str) -> PyResult<Vec<Point3<f64>>> {
-    let arr: PyReadonlyArray2<'_, f64> = obj.extract().map_err(|_| {
-        PyTypeError::new_err(format!(
-            "{field}: expected a float64 array of shape (N, 3), got dtype {} shape {}",
-            dtype_name(obj),
-            shape_of(obj)
-        ))
-    })?;
-    let a = arr.as_array();
-    if a.shape()[1] != 3 {
-        return Err(input_err(format!("{field}: expected shape (N, 3), got {:?}", a.shape())));
-    }
-    check_elements(field, a.shape())?;
-    let mut out = Vec::with_capacity(a.shape()[0]);
-    for (i, row) in a.rows().into_iter().enumerate() {
-        if !row.iter().all(|v| v.is_finite()) {
-            return Err(input_err(format!("{field}: non-finite value in row {i}")));
-        }
-        out.push(Point3::new(row[0], row[1], row[2]));
-    }
-    Ok(out)
-}
-
-fn colors_u8(obj: &Bound<'_, PyAny>, n: usize) -> PyResult<Vec<[u8; 3]>> {
-    let arr: PyReadonlyArray2<'_, u8> = obj.extract().map_err(|_| {
-        PyTypeError::new_err(format!(
-            "colors: expected a uint8 array of shape (N, 3), got dtype {} shape {}",
-            dtype_name(obj),
-            shape_of(obj)
-        ))
-    })?;
-    let a = arr.as_array();
-    if a.shape() != [n, 3] {
-        return Err(input_err(format!("colors: expected shape ({n}, 3), got {:?}", a.shape())));
-    }
-    Ok(a.rows().into_iter().map(|r| [r[0], r[1], r[2]]).collect())
 }
 
 /// One Rerun recording (`.rrd` file); see `objslam_core::record` for entity paths.
@@ -347,20 +341,15 @@ impl RecorderPy {
     #[new]
     #[pyo3(signature = (path, application_id = "objslam", options_json = None))]
     fn new(path: &str, application_id: &str, options_json: Option<&str>) -> PyResult<Self> {
-        let options: RecordOptions = match options_json {
-            Some(j) => serde_json::from_str(j).map_err(|e| json_err("options_json", e))?,
-            None => RecordOptions::default(),
-        };
+        let options: RecordOptions = parse_or_default("options_json", options_json)?;
         let rec = Recorder::create(std::path::Path::new(path), application_id, options).map_err(record_err)?;
         Ok(Self { inner: Some(rec) })
     }
 
     /// The arm's links: `{link name: world_from_link (4x4)}`.
     fn log_robot_pose(&self, links: std::collections::HashMap<String, Bound<'_, PyAny>>) -> PyResult<()> {
-        let mut poses = Vec::with_capacity(links.len());
-        for (name, m) in links {
-            poses.push((name, pose(&m, "links")?));
-        }
+        let poses: Vec<(String, Se3)> =
+            links.into_iter().map(|(name, m)| Ok((name, pose(&m, "links")?))).collect::<PyResult<_>>()?;
         self.rec()?.log_robot_pose(&poses).map_err(record_err)
     }
 
@@ -378,25 +367,12 @@ impl RecorderPy {
         height: u32,
     ) -> PyResult<()> {
         let p = pose(world_from_camera, "world_from_camera")?;
-        let cam = camera(intrinsics, width, height)?;
-        self.rec()?.log_camera(&p, &cam).map_err(record_err)
+        self.rec()?.log_camera(&p, &camera(intrinsics, width, height)?).map_err(record_err)
     }
 
     fn log_rgb(&self, rgb: &Bound<'_, PyAny>) -> PyResult<()> {
-        let arr: PyReadonlyArray3<'_, u8> = rgb.extract().map_err(|_| {
-            PyTypeError::new_err(format!(
-                "rgb: expected a uint8 array of shape (H, W, 3), got dtype {} shape {}",
-                dtype_name(rgb),
-                shape_of(rgb)
-            ))
-        })?;
-        let a = arr.as_array();
-        if a.shape()[2] != 3 {
-            return Err(input_err(format!("rgb: expected shape (H, W, 3), got {:?}", a.shape())));
-        }
-        check_elements("rgb", a.shape())?;
-        let data: Vec<u8> = a.iter().copied().collect();
-        self.rec()?.log_rgb(a.shape()[1] as u32, a.shape()[0] as u32, &data).map_err(record_err)
+        let (data, [h, w, _]) = array::<u8, 3>(rgb, "rgb", [None, None, Some(3)], "(H, W, 3)")?;
+        self.rec()?.log_rgb(w as u32, h as u32, &data).map_err(record_err)
     }
 
     fn log_depth(&self, depth: &Bound<'_, PyAny>) -> PyResult<()> {
@@ -405,50 +381,39 @@ impl RecorderPy {
     }
 
     fn log_detections(&self, detections: &Bound<'_, PyAny>) -> PyResult<()> {
-        let dets = self::detections(detections)?;
-        self.rec()?.log_detections(&dets).map_err(record_err)
+        self.rec()?.log_detections(&self::detections(detections)?).map_err(record_err)
     }
 
     fn log_trajectory(&self, which: &str, positions: &Bound<'_, PyAny>) -> PyResult<()> {
         if which != "estimated" && which != "ground_truth" {
             return Err(input_err(format!("which: expected 'estimated' or 'ground_truth', got {which:?}")));
         }
-        let pts = points3(positions, "positions")?;
-        self.rec()?.log_trajectory(which, &pts).map_err(record_err)
+        self.rec()?.log_trajectory(which, &points3(positions, "positions")?).map_err(record_err)
     }
 
     /// Objects from JSON: a list of {"id", "label", "geometry": ObjectGeometry}.
     fn log_objects(&self, root: &str, objects_json: &str) -> PyResult<()> {
-        #[derive(serde::Deserialize)]
-        struct In {
-            id: u32,
-            label: String,
-            geometry: ObjectGeometry,
-        }
-        let v: Vec<In> = parse_json("objects_json", objects_json)?;
-        let objs: Vec<DrawnObject> =
-            v.into_iter().map(|o| DrawnObject { id: o.id, label: o.label, geometry: o.geometry }).collect();
-        self.rec()?.log_objects(root, &objs).map_err(record_err)
+        let objects: Vec<DrawnObject> = parse_json("objects_json", objects_json)?;
+        self.rec()?.log_objects(root, &objects).map_err(record_err)
     }
 
-    #[pyo3(signature = (entity, points, group_keys = None))]
-    fn log_points(&self, entity: &str, points: &Bound<'_, PyAny>, group_keys: Option<Vec<String>>) -> PyResult<()> {
-        let pts = points3(points, "points")?;
-        self.rec()?.log_points(entity, &pts, &group_keys.unwrap_or_default()).map_err(record_err)
-    }
-
-    /// Points (N, 3) float64 with colours (N, 3) uint8.
-    #[pyo3(signature = (entity, points, colors, radius_m = 0.004))]
-    fn log_colored_points(
+    /// Points (N, 3) float64: with colours (N, 3) uint8 drawn at `radius_m`, else coloured by
+    /// `group_keys` (one key per point).
+    #[pyo3(signature = (entity, points, group_keys = None, *, colors = None, radius_m = 0.004))]
+    fn log_points(
         &self,
         entity: &str,
         points: &Bound<'_, PyAny>,
-        colors: &Bound<'_, PyAny>,
+        group_keys: Option<Vec<String>>,
+        colors: Option<&Bound<'_, PyAny>>,
         radius_m: f32,
     ) -> PyResult<()> {
         let pts = points3(points, "points")?;
-        let cols = colors_u8(colors, pts.len())?;
-        self.rec()?.log_colored_points(entity, &pts, &cols, radius_m).map_err(record_err)
+        match colors {
+            Some(c) => self.rec()?.log_colored_points(entity, &pts, &colors_u8(c, pts.len())?, radius_m),
+            None => self.rec()?.log_points(entity, &pts, &group_keys.unwrap_or_default()),
+        }
+        .map_err(record_err)
     }
 
     /// Arrows: origins (N, 3), vectors (N, 3) float64, colours (N, 3) uint8.
@@ -478,11 +443,17 @@ impl RecorderPy {
 
     /// Flush and close the file; later calls raise.
     fn close(&mut self) -> PyResult<()> {
-        if let Some(rec) = self.inner.take() {
-            rec.flush().map_err(record_err)?;
+        match self.inner.take() {
+            Some(rec) => rec.flush().map_err(record_err),
+            None => Ok(()),
         }
-        Ok(())
     }
+}
+
+/// Colours (N, 3) uint8 for `n` points.
+fn colors_u8(obj: &Bound<'_, PyAny>, n: usize) -> PyResult<Vec<[u8; 3]>> {
+    let (values, _) = array::<u8, 2>(obj, "colors", [Some(n), Some(3)], "(N, 3)")?;
+    Ok(values.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect())
 }
 
 #[pymodule]
@@ -492,10 +463,10 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("InputError", py.get_type::<InputError>())?;
     m.add("MapFileError", py.get_type::<MapFileError>())?;
     m.add("RecordingError", py.get_type::<RecordingError>())?;
+    m.add("PlanningError", py.get_type::<plan::PlanningError>())?;
     m.add_class::<NaiveMapperPy>()?;
     m.add_class::<RecorderPy>()?;
     m.add_class::<active::ActiveMapperPy>()?;
-    m.add("PlanningError", py.get_type::<plan::PlanningError>())?;
     m.add_class::<plan::PlannerPy>()?;
     m.add_function(wrap_pyfunction!(ar::ar_run, m)?)?;
     m.add_function(wrap_pyfunction!(evaluate_map, m)?)?;
@@ -504,7 +475,6 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(save_map, m)?)?;
     m.add_function(wrap_pyfunction!(map_objects_json, m)?)?;
     m.add_function(wrap_pyfunction!(topo::match_maps, m)?)?;
-    m.add_function(wrap_pyfunction!(topo::relocalise, m)?)?;
     m.add_function(wrap_pyfunction!(topo::relocalise_appearance, m)?)?;
     m.add_function(wrap_pyfunction!(sensor::sensor_model, m)?)?;
     m.add_function(wrap_pyfunction!(features::orb_extract, m)?)?;

@@ -29,10 +29,10 @@ from ._native import (
     load_map,
     map_objects_json,
     match_maps,
-    relocalise,
     save_map,
 )
 from .scene import SceneFileError, SceneSpec, generate_scene, load_scene
+from .topo import relocalise
 
 __all__ = [
     "ConfigError",

@@ -48,13 +48,12 @@ class Recorder:
     def log_trajectory(self, which: str, positions: npt.NDArray[np.float64]) -> None: ...
     def log_objects(self, root: str, objects_json: str) -> None: ...
     def log_points(
-        self, entity: str, points: npt.NDArray[np.float64], group_keys: list[str] | None = None
-    ) -> None: ...
-    def log_colored_points(
         self,
         entity: str,
         points: npt.NDArray[np.float64],
-        colors: npt.NDArray[np.uint8],
+        group_keys: list[str] | None = None,
+        *,
+        colors: npt.NDArray[np.uint8] | None = None,
         radius_m: float = 0.004,
     ) -> None: ...
     def log_arrows(
@@ -77,7 +76,6 @@ class ActiveMapper:
         table: tuple[float, float, float, float],
         tracker_config_json: str | None = None,
     ) -> None: ...
-    def initial_views(self) -> list[npt.NDArray[np.float64]]: ...
     def update(
         self,
         *,
@@ -90,9 +88,6 @@ class ActiveMapper:
         world_from_camera_gt: npt.NDArray[np.float64] | None = None,
         view_index: int = 0,
     ) -> list[int | None]: ...
-    def last_pose(self) -> npt.NDArray[np.float64] | None: ...
-    def pose_metrics(self) -> dict[str, Any] | None: ...
-    def map_points(self) -> npt.NDArray[np.float64] | None: ...
     def view_done(self, counts_as_view: bool) -> None: ...
     def next_view(
         self,
@@ -102,46 +97,28 @@ class ActiveMapper:
         height: int,
         world_from_camera: npt.NDArray[np.float64],
         reachable: Callable[[npt.NDArray[np.float64]], bool],
-    ) -> dict[str, Any]: ...
-    def views_taken(self) -> int: ...
-    def max_views(self) -> int: ...
-    def object_features(
-        self, *, intrinsics: npt.NDArray[np.float64], width: int, height: int
-    ) -> list[dict[str, Any]]: ...
-    def candidate_views(
-        self, *, around: list[int] | None = None
-    ) -> list[tuple[npt.NDArray[np.float64], int | None]]: ...
-    def score_views(
+    ) -> dict[str, Any]:
+        """``{"action": "move", "world_from_camera", "utility" (None without one), "candidates":
+        [{"world_from_camera", "utility", "reachable"}]}`` or ``{"action": "stop", "reason"}``."""
+
+    def query(
         self,
+        query_json: str,
         *,
-        intrinsics: npt.NDArray[np.float64],
-        width: int,
-        height: int,
-        views: Sequence[npt.NDArray[np.float64]],
-        utility: str,
-        world_from_camera: npt.NDArray[np.float64],
-        explore_every_object: bool = False,
-    ) -> list[dict[str, Any]]: ...
-    def paper_stop(self, *, intrinsics: npt.NDArray[np.float64], width: int, height: int) -> str | None: ...
-    def table_candidate_views(self) -> list[npt.NDArray[np.float64]]: ...
-    def table_gain(
-        self,
-        *,
-        intrinsics: npt.NDArray[np.float64],
-        width: int,
-        height: int,
-        views: Sequence[npt.NDArray[np.float64]],
-    ) -> list[dict[str, Any]]: ...
-    def table_unknown_weight(self) -> float: ...
-    def table_views_needed(
-        self,
-        *,
-        intrinsics: npt.NDArray[np.float64],
-        width: int,
-        height: int,
-        reachable: Callable[[npt.NDArray[np.float64]], bool],
-        limit: int,
-    ) -> int: ...
+        intrinsics: npt.NDArray[np.float64] | None = None,
+        width: int = 0,
+        height: int = 0,
+        views: Sequence[npt.NDArray[np.float64]] = (),
+        world_from_camera: npt.NDArray[np.float64] | None = None,
+        reachable: Callable[[npt.NDArray[np.float64]], bool] | None = None,
+    ) -> Any:
+        """One question (``objslam_core::system::Query``): ``{"query": "initial_views" | "progress" |
+        "last_pose" | "pose_metrics"}``; with the camera, ``"object_features"``, ``"candidate_views"``
+        (``"around"``), ``"score_views"`` (``"utility"``, ``"explore_every_object"``; ``views``,
+        ``world_from_camera``), ``"paper_stop"``, ``"table_candidate_views"``, ``"table_gain"``
+        (``views``), ``"table_views_needed"`` (``"limit"``; ``reachable``). Views come back as
+        ``{"world_from_camera", "target_object"}`` dicts, poses as 4x4 arrays."""
+
     def note_chosen_view(
         self,
         *,
@@ -150,13 +127,10 @@ class ActiveMapper:
         height: int,
         world_from_camera: npt.NDArray[np.float64],
     ) -> None: ...
-    def entropy_curve(self) -> list[float]: ...
-    def table_known_curve(self) -> list[float]: ...
+    def map_points(self) -> npt.NDArray[np.float64] | None: ...
     def table_unknown_cells(self) -> tuple[npt.NDArray[np.float64], list[bool]]: ...
-    def table_unexplained_curve(self) -> list[int]: ...
-    def map_json(self) -> str: ...
+    def map_json(self, stage: str | None = None) -> str: ...
     def objects_json(self) -> str: ...
-    def stage_map_json(self, stage: str) -> str: ...
     def refresh_estimates(self) -> None: ...
     def estimator_inputs_json(self) -> str: ...
     def resolve_id(self, id: int) -> int: ...
@@ -172,8 +146,13 @@ def map_objects_json(map_json: str) -> str: ...
 def ar_run(
     request_json: str, real_depth: np.ndarray | None = None
 ) -> tuple[str, np.ndarray, np.ndarray | None]: ...
-def match_maps(prior_map_json: str, query_map_json: str, config_json: str | None = None) -> dict[str, Any]: ...
-def relocalise(prior_map_json: str, query_map_json: str, config_json: str | None = None) -> dict[str, Any]: ...
+def match_maps(
+    prior_map_json: str, query_map_json: str, config_json: str | None = None, *, relocalise: bool = False
+) -> dict[str, Any]:
+    """``objslam_core::topo::report::MatchReport`` as a dict (rotation, translation and matrix as
+    arrays; ``inliers``, ``matched_pairs`` and, with ``relocalise``, ``matched_ids`` as lists of
+    lists)."""
+
 def relocalise_appearance(
     request_json: str,
     prior_grey: npt.NDArray[np.uint8],
@@ -209,9 +188,10 @@ class Planner:
     rrt_max_iterations, shortcut_iterations, rng_seed, ik_seed, ik_random_restarts, sample_dt_s,
     velocity_scale, acceleration_scale, jerk_scale, opening_clearance_m, max_grasp_depth_m,
     shallow_grasp_depth_m, min_tcp_height_m, pregrasp_height_m, lift_height_m, allow_long_side,
-    cylinder_yaw_count, linear_step_m, linear_max_joint_step_rad. ``plan_linear`` moves the TCP
-    along a straight line (IK every ``linear_step_m`` continuing the previous solution; a line that
-    cannot be followed is ``no_path``). ``held_json`` (the ObjectGeometry of the object in the hand, where it stood
+    cylinder_yaw_count, linear_step_m, linear_max_joint_step_rad (an unknown key is an
+    ``InputError``). ``plan_to_pose(..., linear=True)`` moves the TCP along a straight line (IK every
+    ``linear_step_m`` continuing the previous solution; a line that cannot be followed is
+    ``no_path``). ``held_json`` (the ObjectGeometry of the object in the hand, where it stood
     when grasped) with ``held_world_from_tcp`` (that grasp's TCP pose, 4x4): the held object moves
     with the hand and is kept clear of the obstacles too (not of the table, where it is put down);
     give both or neither (``InputError``)."""
@@ -236,6 +216,8 @@ class Planner:
         obstacles_json: str,
         held_json: str | None = None,
         held_world_from_tcp: npt.NDArray[np.float64] | None = None,
+        *,
+        linear: bool = False,
     ) -> dict[str, Any]: ...
     def inverse_tcp(
         self,
@@ -247,13 +229,5 @@ class Planner:
     def path_is_free(self, positions: npt.NDArray[np.float64], obstacles_json: str) -> bool: ...
     def time_parameterize_path(
         self, positions: npt.NDArray[np.float64], max_joint_speed: float | None = None
-    ) -> dict[str, Any]: ...
-    def plan_linear(
-        self,
-        q_start: npt.NDArray[np.float64],
-        world_from_tcp: npt.NDArray[np.float64],
-        obstacles_json: str,
-        held_json: str | None = None,
-        held_world_from_tcp: npt.NDArray[np.float64] | None = None,
     ) -> dict[str, Any]: ...
     def plan_grasp(self, q_start: npt.NDArray[np.float64], target_json: str, neighbours_json: str) -> dict[str, Any]: ...

@@ -1,6 +1,7 @@
 """One exploration episode: scene → simulator → core → object map → metrics → Rerun recording.
 
-Entry point: :func:`run_episode` (and the CLI ``experiments/run.py``). Per frame, data flows one
+Entry point: :func:`run_episode` (and the CLI ``experiments/run.py``), which runs an
+:class:`Episode` step by step (setup, Init views, the view loop, finish). Per frame, data flows one
 way: the body senses (:meth:`SimWorld.render`), the simulated detector boxes the objects, the core
 fuses the frame into the object map, the recorder logs everything. Ground truth goes only to the
 evaluation and to its own entity paths in the recording.
@@ -75,12 +76,19 @@ TABLE_UNEXPLAINED_COLOR = np.array([255, 140, 0], dtype=np.uint8)
 explains, i.e. an object the depth shows and the map lacks (explore::discovery)."""
 
 
+def _progress(mapper: Any) -> dict[str, Any]:
+    """The core session's progress (``objslam_core::system::Progress``: ``views_taken``,
+    ``max_views`` and the curves after each view)."""
+    return mapper.query('{"query": "progress"}')
+
+
 def _log_table(rec: Any, mapper: Any, cells: bool) -> None:
     """Record the table-top coverage after a view: the known fraction and the unexplained cell
     count as scalars and, with ``cells``, the unknown cells (``world/map/table_unseen``) and the
     unexplained ones (``world/map/table_unexplained``) as points."""
-    rec.log_scalar("explore/table_known_fraction", mapper.table_known_curve()[-1])
-    rec.log_scalar("explore/table_unexplained_cells", float(mapper.table_unexplained_curve()[-1]))
+    progress = _progress(mapper)
+    rec.log_scalar("explore/table_known_fraction", progress["table_known_curve"][-1])
+    rec.log_scalar("explore/table_unexplained_cells", float(progress["table_unexplained_curve"][-1]))
     if not cells:
         return
     pts, unexplained = mapper.table_unknown_cells()
@@ -89,7 +97,7 @@ def _log_table(rec: Any, mapper: Any, cells: bool) -> None:
         ("world/map/table_unseen", ~mask, TABLE_UNSEEN_COLOR),
         ("world/map/table_unexplained", mask, TABLE_UNEXPLAINED_COLOR),
     ):
-        rec.log_colored_points(entity, pts[sel], np.tile(colour, (int(sel.sum()), 1)), 0.008)
+        rec.log_points(entity, pts[sel], colors=np.tile(colour, (int(sel.sum()), 1)), radius_m=0.008)
 
 
 def grey_of(rgb: np.ndarray) -> np.ndarray:
@@ -112,8 +120,8 @@ def _log_decision(rec: Any, decision: dict[str, Any]) -> None:
     """Candidate views as arrows coloured by utility (blue low → red high), the chosen one white."""
     cands = decision.get("candidates") or []
     if cands:
-        poses = np.array([c[0] for c in cands])
-        util = np.array([c[1] for c in cands], dtype=float)
+        poses = np.array([c["world_from_camera"] for c in cands])
+        util = np.array([c["utility"] for c in cands], dtype=float)
         finite = np.isfinite(util)
         lo, hi = (util[finite].min(), util[finite].max()) if finite.any() else (0.0, 1.0)
         t = np.where(finite, (util - lo) / max(hi - lo, 1e-12), 0.0)
@@ -126,15 +134,17 @@ def _log_decision(rec: Any, decision: dict[str, Any]) -> None:
         0.12 * chosen[None, :3, 2],
         np.array([[255, 255, 255]], dtype=np.uint8),
     )
-    if np.isfinite(decision.get("utility", float("nan"))):
-        rec.log_scalar("explore/utility", float(decision["utility"]))
+    utility = decision.get("utility")
+    if utility is not None and np.isfinite(utility):
+        rec.log_scalar("explore/utility", float(utility))
 
 
 def _python_decision(
     strategy: Any, cfg: RunConfig, scene: SceneSpec, mapper: Any, world: SimWorld, rng: np.random.Generator
 ) -> dict[str, Any]:
     """One decision of a Python strategy (``objslam.strategy``), in the built-in decision's form."""
-    if mapper.views_taken() >= mapper.max_views():
+    progress = _progress(mapper)
+    if progress["views_taken"] >= progress["max_views"]:
         return {"action": "stop", "reason": "max_views"}
     step = DecisionStep(
         mapper=mapper,
@@ -155,12 +165,17 @@ def _python_decision(
         # A view the table gain helped choose counts towards discovery_evidence_max_views when
         # it sees unexplained cells, as the built-in strategies count theirs.
         mapper.note_chosen_view(
-            intrinsics=world.intrinsics, width=cfg.camera.width, height=cfg.camera.height, world_from_camera=view
+            intrinsics=world.intrinsics,
+            width=cfg.camera.width,
+            height=cfg.camera.height,
+            world_from_camera=view,
         )
-    decision: dict[str, Any] = {"action": "move", "world_from_camera": view, "utility": float("nan")}
+    decision: dict[str, Any] = {"action": "move", "world_from_camera": view, "utility": None}
     if step.logged is not None:
         views, scores = step.logged
-        decision["candidates"] = [(v, sc, None) for v, sc in zip(views, scores)]
+        decision["candidates"] = [
+            {"world_from_camera": v, "utility": sc, "reachable": None} for v, sc in zip(views, scores)
+        ]
         same = [sc for v, sc in zip(views, scores) if np.allclose(v, view, atol=1e-12)]
         if same:
             decision["utility"] = same[0]
@@ -325,7 +340,9 @@ def _log_robot(rec: Any, world: SimWorld) -> None:
     rec.log_robot_pose({link.name: pose_to_matrix(link.entity_pose) for link in world.robot.get_links()})
 
 
-def mapper_config(cfg: RunConfig, table: tuple[float, float, float], seeds: dict[str, int] | None) -> dict[str, Any]:
+def mapper_config(
+    cfg: RunConfig, table: tuple[float, float, float], seeds: dict[str, int] | None
+) -> dict[str, Any]:
     """The core's ``PipelineConfig``: the run's ``[map]`` table with the episode's inputs filled in:
     the table plane the cell's calibration gives (``[table]``: the local clouds cut the table around
     it, and with ``param.support_snap_m`` > 0 estimates resting near it are extended down to it),
@@ -397,7 +414,433 @@ def algorithm_seeds(run_seed: int, scene_seed: int) -> dict[str, int]:
         return (x ^ (x >> 31)) % (1 << 63)
 
     base = kinematic_noise_seed(run_seed, scene_seed)
-    return {name: splitmix(base ^ (tag << 56)) for tag, name in enumerate(("iforest", "cylinder", "ransac"), 1)}
+    return {
+        name: splitmix(base ^ (tag << 56)) for tag, name in enumerate(("iforest", "cylinder", "ransac"), 1)
+    }
+
+
+class Episode:
+    """One exploration episode, step by step; :func:`run_episode` runs it.
+
+    Building it loads the scene and the core's system (config values the core refuses raise
+    :class:`ConfigError` here) and makes the run folder. :meth:`run` then takes the steps:
+    :meth:`setup` (folder marked running, resolved config, recording, simulated world and
+    detector), :meth:`take_init_views`, :meth:`explore` (one :meth:`decide` and :meth:`step` per
+    view until the strategy stops) and :meth:`finish` (final map, evaluation, ``metrics.json``,
+    status ``complete``). Every view goes through :meth:`move_to`, which fuses the streamed frames
+    (:meth:`fuse`), and is evaluated by :meth:`evaluate_view`.
+
+    ``on_frame(frame)`` is called after each frame is fused; ``on_fused(frame, world_from_camera)``
+    too, with the pose the mapper used for it (its estimate, in the map's frame), e.g. to keep
+    keyframes for relocalisation (:mod:`objslam.reloc`)."""
+
+    def __init__(
+        self,
+        cfg: RunConfig,
+        *,
+        progress: bool = True,
+        on_frame: Callable[[SensorFrame], None] | None = None,
+        on_fused: Callable[[SensorFrame, np.ndarray], None] | None = None,
+    ) -> None:
+        cfg.validate()
+        self.cfg = cfg
+        self.scene = load_scene(_scene_path(cfg))
+        try:
+            self.mapper = new_mapper(cfg, self.scene)
+        except _native.InputError as e:
+            raise ConfigError(str(e)) from None
+        self.run_dir = _make_run_dir(cfg, self.scene)
+        self.show_progress = progress
+        self.on_frame = on_frame
+        self.on_fused = on_fused
+        self.t_start = time.perf_counter()
+        self.times: dict[str, list[float]] = {s: [] for s in STAGES}
+        """Per-stage timings of every frame, ms."""
+        self.events: list[str] = []
+        self.est_positions: list[np.ndarray] = []
+        self.gt_positions: list[np.ndarray] = []
+        self.frames = 0
+        self.views_done = 0
+        """Views reached (Init views included; a skipped view does not count)."""
+        self.view_index = 0
+        """Views attempted so far (the per-view index of the kinematic errors)."""
+        self.assignments: list[tuple[int, int | None]] = []
+        """(map object id, true object id) of every assigned detection, for the association metrics."""
+        self.prior_errors: list[tuple[float, float]] = []
+        self.move_paths: dict[str, int] = {"cartesian": 0, "joint": 0}
+        self.accuracy_curve: list[dict[str, Any]] = []
+        self.stop_reason = "strategy_done"
+        self.start = _status_start()
+        self.world: SimWorld | None = None
+        self.rec: Any = _Recorder(None)
+        self.bar: Any = None
+
+    # ----- the run -------------------------------------------------------------------------------
+    def run(self) -> EpisodeResult:
+        """Take every step and return the result. Raises on failure after marking the folder;
+        SIGINT (Ctrl-C) and SIGTERM raise :class:`RunStopped` after marking it ``interrupted`` or
+        ``terminated``."""
+        previous_sigterm = None
+        if threading.current_thread() is threading.main_thread():
+            previous_sigterm = signal.signal(signal.SIGTERM, _on_sigterm)
+        try:
+            self.setup()
+            self.take_init_views()
+            self.explore()
+            return self.finish()
+        except BaseException as e:
+            stopped = self._mark_stopped(e, signals_handled=previous_sigterm is not None)
+            if stopped is e:
+                raise
+            raise stopped from e
+        finally:
+            if previous_sigterm is not None:
+                signal.signal(signal.SIGTERM, previous_sigterm)
+
+    def setup(self) -> None:
+        """Mark the folder as running, write the resolved config, open the recording, build the
+        simulated world and the detector, and record the truth and the arm at time 0."""
+        import tomli_w
+
+        cfg, scene = self.cfg, self.scene
+        (self.run_dir / "INCOMPLETE").write_text(
+            "this run has not finished (or stopped early: see status.json)\n"
+        )
+        _write_json(self.run_dir / "status.json", {"status": "running", **self.start})
+        _write_atomic(self.run_dir / "config.toml", tomli_w.dumps(to_dict(cfg)))
+        self.rec = _Recorder(
+            self.run_dir / "run.rrd" if cfg.record.enabled else None, recording_options(cfg, scene)
+        )
+        rng_sensor = np.random.default_rng([cfg.seed, 1])
+        rng_detector = np.random.default_rng([cfg.seed, 2])
+        self.arm = episode_arm_errors(cfg, scene)
+        self.world = SimWorld(scene, cfg.camera, rng_sensor, textures=cfg.textures, arm_errors=self.arm)
+        self.detector = SimulatedDetector(cfg.detector, rng_detector)
+        # The truth and the arm's start pose at the first frame's time, so the viewer shows them from the start.
+        self.rec.set_frame(0, 0.0)
+        self.rec.log_objects("world/ground_truth", json.dumps(gt_objects(scene, self.world.ground_truth())))
+        if cfg.record.robot:
+            _log_robot(self.rec, self.world)
+        self.gt_scene_file = gt_objects(scene)
+
+    def take_init_views(self) -> None:
+        """Visit the session's Init views (they do not count against the view budget)."""
+        init_views = [v["world_from_camera"] for v in self.mapper.query('{"query": "initial_views"}')]
+        if self.show_progress:
+            from tqdm import tqdm
+
+            budget = len(init_views) + (0 if self.cfg.core_strategy == "init" else self.cfg.explore["max_views"])
+            desc = f"{self.cfg.strategy} {self.scene.name} seed {self.cfg.seed}"
+            self.bar = tqdm(total=budget, desc=desc, unit="view")
+        for vi, view in enumerate(init_views):
+            self.views_done += self.move_to(view, f"init view {vi}")
+            self.mapper.view_done(False)
+            self.evaluate_view()
+        self._log_exploration()
+
+    def explore(self) -> None:
+        """Decide and take views until the strategy (built-in or ``python_strategy``) stops."""
+        cfg = self.cfg
+        user_strategy = (
+            make_strategy(cfg.python_strategy, cfg.python_strategy_params) if cfg.python_strategy else None
+        )
+        rng_strategy = np.random.default_rng([cfg.seed, 3])
+        while True:
+            decision = self.decide(user_strategy, rng_strategy)
+            if decision["action"] == "stop":
+                self.stop_reason = decision["reason"]
+                self.rec.log_event(f"stop: {self.stop_reason}")
+                break
+            self.step(decision)
+        if self.bar is not None:
+            self.bar.close()
+
+    def decide(self, user_strategy: Any, rng: np.random.Generator) -> dict[str, Any]:
+        """The next decision: the core session's for a built-in strategy, else the Python
+        strategy's (:func:`_python_decision`)."""
+        world, cfg = self.world, self.cfg
+        assert world is not None
+        # Candidate views are reachable only with a collision-free arm among the mapped objects.
+        world.set_obstacles(self.mapper.objects_json())
+        if user_strategy is not None:
+            return _python_decision(user_strategy, cfg, self.scene, self.mapper, world, rng)
+        return self.mapper.next_view(
+            intrinsics=world.intrinsics,
+            width=cfg.camera.width,
+            height=cfg.camera.height,
+            world_from_camera=world.world_from_camera_fk(world.qpos()),
+            reachable=world.is_reachable,
+        )
+
+    def step(self, decision: dict[str, Any]) -> None:
+        """Take one decided view: record the decision, move there fusing the frames, evaluate."""
+        _log_decision(self.rec, decision)
+        what = f"view {_progress(self.mapper)['views_taken'] + 1}"
+        self.views_done += self.move_to(decision["world_from_camera"], what)
+        self.mapper.view_done(True)
+        self.evaluate_view()
+        self._log_exploration()
+        if self.cfg.record.grids:
+            pts, states = self.mapper.grid_cells()
+            colors = GRID_COLORS[np.frombuffer(states, dtype=np.uint8)]
+            self.rec.log_points("world/map/grids", pts, colors=colors, radius_m=0.004)
+
+    def finish(self) -> EpisodeResult:
+        """Save the final map, evaluate it (and each parameterization stage), write
+        ``metrics.json`` and mark the run complete."""
+        cfg, scene, mapper, rec, world = self.cfg, self.scene, self.mapper, self.rec, self.world
+        assert world is not None
+        mapper.refresh_estimates()
+        map_json = mapper.map_json()
+        _native.save_map(map_json, str(self.run_dir / "map.json"))
+        (self.run_dir / "map.json.partial").unlink(missing_ok=True)
+        gt = gt_objects(scene, world.ground_truth())
+        rec.log_objects("world/ground_truth", json.dumps(gt))
+        if cfg.record.estimator_inputs:
+            inputs = json.loads(mapper.estimator_inputs_json())
+            _write_atomic(
+                self.run_dir / "estimator_inputs.json", json.dumps({"objects": inputs, "ground_truth": gt})
+            )
+        evaluation = json.loads(_native.evaluate_map(json.dumps(gt), map_json, json.dumps(cfg.eval)))
+        stages = {}
+        for stage in ("raw", "iforest", "lines", "refined"):
+            ev = json.loads(
+                _native.evaluate_map(json.dumps(gt), mapper.map_json(stage), json.dumps(cfg.eval))
+            )
+            stages[stage] = ev["mean"]
+        association = json.loads(
+            mapper.association_metrics_json(self.assignments, [o.id for o in scene.objects])
+        )
+        progress = _progress(mapper)
+        metrics = {
+            "scene": scene.name,
+            "strategy": cfg.strategy,
+            "seed": cfg.seed,
+            "preset": cfg.preset,
+            "n_objects_gt": evaluation["n_objects_gt"],
+            "n_objects_est": evaluation["n_objects_est"],
+            "views": self.views_done,
+            "frames": self.frames,
+            "path_length_m": world.camera_path_length_m,
+            "moves_by_path": dict(self.move_paths),
+            "wall_s": time.perf_counter() - self.t_start,
+            "mean": evaluation["mean"],
+            "objects": evaluation["objects"],
+            "n_matched": evaluation["n_matched"],
+            "nbv_views": progress["views_taken"],
+            "association_mode": cfg.map["association_mode"],
+            "pose_source": cfg.pose_source,
+            **(mapper.query('{"query": "pose_metrics"}') or {}),
+            "prior_error": prior_error_summary(self.prior_errors),
+            "arm_errors": self._arm_errors(),
+            "association": association,
+            "stages": stages,
+            "stop_reason": self.stop_reason,
+            "entropy_curve": progress["entropy_curve"],
+            "table_known_curve": progress["table_known_curve"],
+            "table_unexplained_curve": progress["table_unexplained_curve"],
+            "accuracy_curve": self.accuracy_curve,
+            "timings_ms_median": {s: (statistics.median(v) if v else None) for s, v in self.times.items()},
+            "frame_budget_ms_median": frame_budget(self.times),
+            "events": self.events,
+        }
+        self.write_metrics(metrics)
+        return EpisodeResult(
+            run_dir=self.run_dir, metrics=metrics, map_json=map_json, frame_times_ms=self.times
+        )
+
+    def write_metrics(self, metrics: dict[str, Any]) -> None:
+        """Write ``metrics.json``, close the recording, mark the run complete and point
+        ``<runs_dir>/latest`` at it."""
+        _write_json(self.run_dir / "metrics.json", metrics)
+        self.rec.log_event(f"done: mean 3D IoU {metrics['mean']['iou3d']:.3f}")
+        self.rec.close()
+        _write_json(
+            self.run_dir / "status.json",
+            {"status": "complete", **self.start, "finished": datetime.now().isoformat(timespec="seconds")},
+        )
+        (self.run_dir / "INCOMPLETE").unlink()
+        _update_latest(self.run_dir)
+
+    # ----- per view and per frame ----------------------------------------------------------------
+    def move_to(self, view: np.ndarray, what: str) -> bool:
+        """Move to a view while fusing the streamed frames; False if it was skipped (unreachable,
+        or the motion failed). Afterwards the SLAM map points are recorded and the map so far is
+        kept in ``map.json.partial``."""
+        world, cfg, rec = self.world, self.cfg, self.rec
+        assert world is not None
+        try:
+            it = world.move_camera_to(
+                view,
+                frame_rate_hz=cfg.frame_rate_hz,
+                max_joint_speed=cfg.max_joint_speed,
+                what=what,
+                path=cfg.camera_path,
+            )
+            while True:
+                t0 = time.perf_counter()
+                try:
+                    frame = next(it)
+                except StopIteration:
+                    break
+                step_ms = (time.perf_counter() - t0) * 1e3
+                self.times["render"].append(world.last_timings_ms["render"])
+                self.times["sensor"].append(world.last_timings_ms["sensor"])
+                self.times["motion"].append(
+                    max(step_ms - self.times["render"][-1] - self.times["sensor"][-1], 0.0)
+                )
+                rec.set_frame(frame.index, frame.sim_time_s)
+                for s in ("render", "sensor", "motion"):
+                    rec.log_scalar(f"timings/{s}_ms", self.times[s][-1])
+                self.fuse(frame)
+            ok = True
+            self.move_paths[world.last_move_path] += 1
+        except (UnreachablePoseError, MotionError) as e:
+            self.events.append(f"{what} skipped: {e}")
+            rec.log_event(f"{what} skipped: {e}")
+            ok = False
+        self.view_index += 1
+        if cfg.record.map_points:
+            pts = self.mapper.map_points()
+            if pts is not None and len(pts):
+                colors = np.tile(MAP_POINT_COLOR, (len(pts), 1))
+                rec.log_points("world/map/points", pts, colors=colors, radius_m=0.002)
+        if self.bar is not None:
+            self.bar.update(1)
+        _write_atomic(self.run_dir / "map.json.partial", self.mapper.map_json())
+        return ok
+
+    def fuse(self, frame: SensorFrame) -> None:
+        """Detect the objects in one frame, fuse it into the core at the kinematic prior, and
+        record it."""
+        world, cfg, rec, mapper = self.world, self.cfg, self.rec, self.mapper
+        assert world is not None
+        t0 = time.perf_counter()
+        dets: list[Detection] = self.detector.detect(
+            frame.segmentation, world.actor_to_object, frame.detector_view
+        )
+        t1 = time.perf_counter()
+        # The prior: nominal forward kinematics of the joint readings (the robot's errors are in
+        # them), with the per-view / per-frame errors of [robot] (identity under realistic).
+        prior = self.arm.prior(frame.world_from_camera_fk, self.view_index, frame.index)
+        self.prior_errors.append(pose_error(prior, frame.world_from_camera_gt))
+        assigned = mapper.update(
+            index=frame.index,
+            intrinsics=frame.intrinsics,
+            depth=frame.depth_m,
+            world_from_camera=prior,
+            detections=[d.as_tuple() for d in dets],
+            grey=grey_of(frame.rgb) if (cfg.map["parameterize"] or cfg.pose_source != "fk") else None,
+            world_from_camera_gt=frame.world_from_camera_gt,
+            view_index=self.view_index,
+        )
+        used_pose = mapper.query('{"query": "last_pose"}')["world_from_camera"]
+        self.assignments.extend((oid, d.gt_id) for oid, d in zip(assigned, dets) if oid is not None)
+        t2 = time.perf_counter()
+        self.est_positions.append(used_pose[:3, 3].copy())
+        self.gt_positions.append(frame.world_from_camera_gt[:3, 3].copy())
+        self._record_frame(frame, dets, used_pose)
+        t3 = time.perf_counter()
+        self.times["detect"].append((t1 - t0) * 1e3)
+        self.times["core"].append((t2 - t1) * 1e3)
+        self.times["record"].append((t3 - t2) * 1e3)
+        for s in ("detect", "core", "record"):
+            rec.log_scalar(f"timings/{s}_ms", self.times[s][-1])
+        self.frames += 1
+        if self.on_frame is not None:
+            self.on_frame(frame)
+        if self.on_fused is not None:
+            self.on_fused(frame, used_pose)
+        if self.bar is not None:
+            self.bar.set_postfix(frames=self.frames, objects=len(mapper))
+
+    def _record_frame(self, frame: SensorFrame, dets: list[Detection], used_pose: np.ndarray) -> None:
+        """One fused frame in the recording: the arm, the camera at the pose used, the images,
+        the detections, both trajectories and the map."""
+        rec, record = self.rec, self.cfg.record
+        rec.set_frame(frame.index, frame.sim_time_s)
+        if record.robot:
+            _log_robot(rec, self.world)
+        rec.log_camera(
+            world_from_camera=used_pose,
+            intrinsics=frame.intrinsics,
+            width=self.cfg.camera.width,
+            height=self.cfg.camera.height,
+        )
+        if frame.index % record.every_n_frames == 0:
+            if record.rgb:
+                rec.log_rgb(frame.rgb)
+            if record.depth and frame.index % (record.every_n_frames * record.depth_every_n_frames) == 0:
+                rec.log_depth(frame.depth_m)
+        rec.log_detections([d.as_tuple() for d in dets])
+        rec.log_trajectory("estimated", np.array(self.est_positions))
+        rec.log_trajectory("ground_truth", np.array(self.gt_positions))
+        rec.log_objects("world/map", self.mapper.objects_json())
+
+    def evaluate_view(self) -> None:
+        """Evaluate the map as it stands after a view (``accuracy_curve`` in metrics.json; ground
+        truth judges only, on its own entity paths in the recording)."""
+        assert self.world is not None
+        map_json = self.mapper.map_json()
+        gt = json.dumps(gt_objects(self.scene, self.world.ground_truth()))
+        ev = json.loads(_native.evaluate_map(gt, map_json, json.dumps(self.cfg.eval)))
+        self.accuracy_curve.append(
+            {
+                "views": self.views_done,
+                **{
+                    k: ev["mean"].get(k)
+                    for k in ("iou3d", "iou2d", "cde_cm", "precision_iou50", "recall_iou50")
+                },
+                "n_objects_est": ev["n_objects_est"],
+                **offset_removed(self.gt_scene_file, json.loads(map_json), ev["objects"]),
+            }
+        )
+        for k in ("iou3d", "cde_cm", "iou3d_oracle_aligned"):
+            if self.accuracy_curve[-1][k] is not None:
+                self.rec.log_scalar(f"eval/{k}", self.accuracy_curve[-1][k])
+
+    def _log_exploration(self) -> None:
+        """The exploration state after a view: mean entropy and the table's coverage."""
+        self.rec.log_scalar("explore/mean_normalized_entropy", _progress(self.mapper)["entropy_curve"][-1])
+        _log_table(self.rec, self.mapper, self.cfg.record.grids)
+
+    def _arm_errors(self) -> dict[str, Any]:
+        """The episode's drawn robot errors (evaluation only)."""
+        arm = self.arm
+        return {
+            "hand_eye_trans_mm": round(pose_error(arm.camera_from_true_camera, np.eye(4))[0] * 1e3, 3),
+            "hand_eye_rot_deg": round(pose_error(arm.camera_from_true_camera, np.eye(4))[1], 4),
+            "joint_offsets_deg": np.degrees(arm.joint_offsets_rad).round(4).tolist(),
+            "time_offset_ms": round(arm.time_offset_s * 1e3, 3),
+            "table_plane": list(episode_table_plane(self.cfg, self.scene)),
+        }
+
+    def _mark_stopped(self, e: BaseException, *, signals_handled: bool) -> BaseException:
+        """Keep everything written so far, mark the folder and say why; returns what to raise. A
+        second signal while cleaning up must not leave the status at "running"."""
+        status = _stop_status(e)
+        if signals_handled:
+            signal.signal(signal.SIGTERM, signal.SIG_IGN)
+            previous_sigint = signal.signal(signal.SIGINT, signal.SIG_IGN)
+        try:
+            _write_atomic(self.run_dir / "map.json.partial", self.mapper.map_json())
+            self.rec.close()
+        except Exception as cleanup:  # noqa: BLE001 - best effort while already failing
+            print(f"run folder {self.run_dir}: could not save the partial map: {cleanup}", file=sys.stderr)
+        extra: dict[str, Any] = {"error": f"{type(e).__name__}: {e}"}
+        if status == "failed":
+            extra["traceback"] = traceback.format_exc()
+        _finish_status(self.run_dir, self.start, status, **extra)
+        # Shut the renderer down before the interpreter exits (it may otherwise still be rendering
+        # while Python tears down): drop the world and the frames (a signal's traceback is not
+        # shown) that hold it.
+        self.world = None
+        if status != "failed":
+            traceback.clear_frames(e.__traceback__)
+        gc.collect()
+        if signals_handled:
+            signal.signal(signal.SIGINT, previous_sigint)
+        return _stopped(e, self.run_dir)
 
 
 def run_episode(
@@ -407,325 +850,11 @@ def run_episode(
     on_frame: Callable[[SensorFrame], None] | None = None,
     on_fused: Callable[[SensorFrame, np.ndarray], None] | None = None,
 ) -> EpisodeResult:
-    """Run one episode and write its run folder. Raises on failure after marking the folder;
-    SIGINT (Ctrl-C) and SIGTERM raise :class:`RunStopped` after marking it ``interrupted`` or
-    ``terminated``. Config values the core refuses raise before any folder is made.
-
-    ``on_frame(frame)`` is called after each frame is fused; ``on_fused(frame, world_from_camera)``
-    too, with the pose the mapper used for it (its estimate, in the map's frame), e.g. to keep
-    keyframes for relocalisation (:mod:`objslam.reloc`)."""
-    cfg.validate()
-    scene = load_scene(_scene_path(cfg))
-    try:
-        mapper = new_mapper(cfg, scene)
-    except _native.InputError as e:
-        raise ConfigError(str(e)) from None
-    run_dir = _make_run_dir(cfg, scene)
-    import tomli_w
-
-    t_start = time.perf_counter()
-    times: dict[str, list[float]] = {s: [] for s in STAGES}
-    events: list[str] = []
-    est_positions: list[np.ndarray] = []
-    gt_positions: list[np.ndarray] = []
-    frames = 0
-    views_done = 0
-    assignments: list[tuple[int, int | None]] = []
-    view_counter = [0]
-    prior_errors: list[tuple[float, float]] = []
-    move_paths: dict[str, int] = {"cartesian": 0, "joint": 0}
-    accuracy_curve: list[dict[str, Any]] = []
-    start = _status_start()
-    world: SimWorld | None = None
-    rec = _Recorder(None)
-    previous_sigterm = None
-    if threading.current_thread() is threading.main_thread():
-        previous_sigterm = signal.signal(signal.SIGTERM, _on_sigterm)
-    try:
-        (run_dir / "INCOMPLETE").write_text("this run has not finished (or stopped early: see status.json)\n")
-        _write_json(run_dir / "status.json", {"status": "running", **start})
-        _write_atomic(run_dir / "config.toml", tomli_w.dumps(to_dict(cfg)))
-        rec = _Recorder(run_dir / "run.rrd" if cfg.record.enabled else None, recording_options(cfg, scene))
-        rng_sensor = np.random.default_rng([cfg.seed, 1])
-        rng_detector = np.random.default_rng([cfg.seed, 2])
-        arm = episode_arm_errors(cfg, scene)
-        world = SimWorld(scene, cfg.camera, rng_sensor, textures=cfg.textures, arm_errors=arm)
-        detector = SimulatedDetector(cfg.detector, rng_detector)
-        # The truth and the arm's start pose at the first frame's time, so the viewer shows them from the start.
-        rec.set_frame(0, 0.0)
-        rec.log_objects("world/ground_truth", json.dumps(gt_objects(scene, world.ground_truth())))
-        if cfg.record.robot:
-            _log_robot(rec, world)
-        init_views = mapper.initial_views()
-        budget = len(init_views) + (0 if cfg.core_strategy == "init" else cfg.explore["max_views"])
-        bar = None
-        if progress:
-            from tqdm import tqdm
-
-            bar = tqdm(total=budget, desc=f"{cfg.strategy} {scene.name} seed {cfg.seed}", unit="view")
-
-        def process(frame: SensorFrame) -> None:
-            nonlocal frames
-            t0 = time.perf_counter()
-            dets: list[Detection] = detector.detect(frame.segmentation, world.actor_to_object, frame.detector_view)
-            t1 = time.perf_counter()
-            # The prior: nominal forward kinematics of the joint readings (the robot's errors are in
-            # them), with the per-view / per-frame errors of [robot] (identity under realistic).
-            prior = arm.prior(frame.world_from_camera_fk, view_counter[0], frame.index)
-            prior_errors.append(pose_error(prior, frame.world_from_camera_gt))
-            assigned = mapper.update(
-                index=frame.index,
-                intrinsics=frame.intrinsics,
-                depth=frame.depth_m,
-                world_from_camera=prior,
-                detections=[d.as_tuple() for d in dets],
-                grey=grey_of(frame.rgb) if (cfg.map["parameterize"] or cfg.pose_source != "fk") else None,
-                world_from_camera_gt=frame.world_from_camera_gt,
-                view_index=view_counter[0],
-            )
-            used_pose = mapper.last_pose()
-            assignments.extend((oid, d.gt_id) for oid, d in zip(assigned, dets) if oid is not None)
-            t2 = time.perf_counter()
-            est_positions.append(used_pose[:3, 3].copy())
-            gt_positions.append(frame.world_from_camera_gt[:3, 3].copy())
-            rec.set_frame(frame.index, frame.sim_time_s)
-            if cfg.record.robot:
-                _log_robot(rec, world)
-            rec.log_camera(
-                world_from_camera=used_pose,
-                intrinsics=frame.intrinsics,
-                width=cfg.camera.width,
-                height=cfg.camera.height,
-            )
-            if frame.index % cfg.record.every_n_frames == 0:
-                if cfg.record.rgb:
-                    rec.log_rgb(frame.rgb)
-                depth_every = cfg.record.every_n_frames * cfg.record.depth_every_n_frames
-                if cfg.record.depth and frame.index % depth_every == 0:
-                    rec.log_depth(frame.depth_m)
-            rec.log_detections([d.as_tuple() for d in dets])
-            rec.log_trajectory("estimated", np.array(est_positions))
-            rec.log_trajectory("ground_truth", np.array(gt_positions))
-            rec.log_objects("world/map", mapper.objects_json())
-            t3 = time.perf_counter()
-            times["detect"].append((t1 - t0) * 1e3)
-            times["core"].append((t2 - t1) * 1e3)
-            times["record"].append((t3 - t2) * 1e3)
-            for s in ("detect", "core", "record"):
-                rec.log_scalar(f"timings/{s}_ms", times[s][-1])
-            frames += 1
-            if on_frame is not None:
-                on_frame(frame)
-            if on_fused is not None:
-                on_fused(frame, used_pose)
-            if bar is not None:
-                bar.set_postfix(frames=frames, objects=len(mapper))
-
-        gt_scene_file = gt_objects(scene)
-
-        def snapshot() -> None:
-            """Evaluate the map as it stands after a view (``accuracy_curve`` in metrics.json)."""
-            map_json = mapper.map_json()
-            ev = json.loads(
-                _native.evaluate_map(
-                    json.dumps(gt_objects(scene, world.ground_truth())), map_json, json.dumps(cfg.eval)
-                )
-            )
-            accuracy_curve.append(
-                {
-                    "views": views_done,
-                    **{k: ev["mean"].get(k) for k in ("iou3d", "iou2d", "cde_cm", "precision_iou50", "recall_iou50")},
-                    "n_objects_est": ev["n_objects_est"],
-                    **offset_removed(gt_scene_file, json.loads(map_json), ev["objects"]),
-                }
-            )
-            # Evaluation against ground truth, on its own entity paths (the viewer plots it over time).
-            for k in ("iou3d", "cde_cm", "iou3d_oracle_aligned"):
-                if accuracy_curve[-1][k] is not None:
-                    rec.log_scalar(f"eval/{k}", accuracy_curve[-1][k])
-
-        def execute(view: np.ndarray, what: str) -> bool:
-            """Move to a view while fusing the streamed frames; False if it was skipped."""
-            try:
-                it = world.move_camera_to(
-                    view,
-                    frame_rate_hz=cfg.frame_rate_hz,
-                    max_joint_speed=cfg.max_joint_speed,
-                    what=what,
-                    path=cfg.camera_path,
-                )
-                while True:
-                    t0 = time.perf_counter()
-                    try:
-                        frame = next(it)
-                    except StopIteration:
-                        break
-                    step_ms = (time.perf_counter() - t0) * 1e3
-                    times["render"].append(world.last_timings_ms["render"])
-                    times["sensor"].append(world.last_timings_ms["sensor"])
-                    times["motion"].append(max(step_ms - times["render"][-1] - times["sensor"][-1], 0.0))
-                    rec.set_frame(frame.index, frame.sim_time_s)
-                    for s in ("render", "sensor", "motion"):
-                        rec.log_scalar(f"timings/{s}_ms", times[s][-1])
-                    process(frame)
-                ok = True
-                move_paths[world.last_move_path] += 1
-            except (UnreachablePoseError, MotionError) as e:
-                events.append(f"{what} skipped: {e}")
-                rec.log_event(f"{what} skipped: {e}")
-                ok = False
-            view_counter[0] += 1
-            if cfg.record.map_points:
-                pts = mapper.map_points()
-                if pts is not None and len(pts):
-                    rec.log_colored_points(
-                        "world/map/points", pts, np.tile(MAP_POINT_COLOR, (len(pts), 1)), 0.002
-                    )
-            if bar is not None:
-                bar.update(1)
-            _write_atomic(run_dir / "map.json.partial", mapper.map_json())
-            return ok
-
-        for vi, view in enumerate(init_views):
-            views_done += execute(view, f"init view {vi}")
-            mapper.view_done(False)
-            snapshot()
-        rec.log_scalar("explore/mean_normalized_entropy", mapper.entropy_curve()[-1])
-        _log_table(rec, mapper, cfg.record.grids)
-        stop_reason = "strategy_done"
-        user_strategy = make_strategy(cfg.python_strategy, cfg.python_strategy_params) if cfg.python_strategy else None
-        rng_strategy = np.random.default_rng([cfg.seed, 3])
-        while True:
-            # Candidate views are reachable only with a collision-free arm among the mapped objects.
-            world.set_obstacles(mapper.objects_json())
-            if user_strategy is None:
-                decision = mapper.next_view(
-                    intrinsics=world.intrinsics,
-                    width=cfg.camera.width,
-                    height=cfg.camera.height,
-                    world_from_camera=world.world_from_camera_fk(world.qpos()),
-                    reachable=world.is_reachable,
-                )
-            else:
-                decision = _python_decision(user_strategy, cfg, scene, mapper, world, rng_strategy)
-            if decision["action"] == "stop":
-                stop_reason = decision["reason"]
-                rec.log_event(f"stop: {stop_reason}")
-                break
-            _log_decision(rec, decision)
-            views_done += execute(decision["world_from_camera"], f"view {mapper.views_taken() + 1}")
-            mapper.view_done(True)
-            snapshot()
-            rec.log_scalar("explore/mean_normalized_entropy", mapper.entropy_curve()[-1])
-            _log_table(rec, mapper, cfg.record.grids)
-            if cfg.record.grids:
-                pts, states = mapper.grid_cells()
-                rec.log_colored_points(
-                    "world/map/grids", pts, GRID_COLORS[np.frombuffer(states, dtype=np.uint8)], 0.004
-                )
-        if bar is not None:
-            bar.close()
-
-        mapper.refresh_estimates()
-        map_json = mapper.map_json()
-        _native.save_map(map_json, str(run_dir / "map.json"))
-        (run_dir / "map.json.partial").unlink(missing_ok=True)
-        gt = gt_objects(scene, world.ground_truth())
-        rec.log_objects("world/ground_truth", json.dumps(gt))
-        if cfg.record.estimator_inputs:
-            inputs = json.loads(mapper.estimator_inputs_json())
-            _write_atomic(run_dir / "estimator_inputs.json", json.dumps({"objects": inputs, "ground_truth": gt}))
-        evaluation = json.loads(_native.evaluate_map(json.dumps(gt), map_json, json.dumps(cfg.eval)))
-        stages = {}
-        for stage in ("raw", "iforest", "lines", "refined"):
-            ev = json.loads(
-                _native.evaluate_map(
-                    json.dumps(gt), mapper.stage_map_json(stage), json.dumps(cfg.eval)
-                )
-            )
-            stages[stage] = ev["mean"]
-        association = json.loads(mapper.association_metrics_json(assignments, [o.id for o in scene.objects]))
-        wall_s = time.perf_counter() - t_start
-        metrics = {
-            "scene": scene.name,
-            "strategy": cfg.strategy,
-            "seed": cfg.seed,
-            "preset": cfg.preset,
-            "n_objects_gt": evaluation["n_objects_gt"],
-            "n_objects_est": evaluation["n_objects_est"],
-            "views": views_done,
-            "frames": frames,
-            "path_length_m": world.camera_path_length_m,
-            "moves_by_path": dict(move_paths),
-            "wall_s": wall_s,
-            "mean": evaluation["mean"],
-            "objects": evaluation["objects"],
-            "n_matched": evaluation["n_matched"],
-            "nbv_views": mapper.views_taken(),
-            "association_mode": cfg.map["association_mode"],
-            "pose_source": cfg.pose_source,
-            **(mapper.pose_metrics() or {}),
-            "prior_error": prior_error_summary(prior_errors),
-            "arm_errors": {
-                "hand_eye_trans_mm": round(pose_error(arm.camera_from_true_camera, np.eye(4))[0] * 1e3, 3),
-                "hand_eye_rot_deg": round(pose_error(arm.camera_from_true_camera, np.eye(4))[1], 4),
-                "joint_offsets_deg": np.degrees(arm.joint_offsets_rad).round(4).tolist(),
-                "time_offset_ms": round(arm.time_offset_s * 1e3, 3),
-                "table_plane": list(episode_table_plane(cfg, scene)),
-            },
-            "association": association,
-            "stages": stages,
-            "stop_reason": stop_reason,
-            "entropy_curve": mapper.entropy_curve(),
-            "table_known_curve": mapper.table_known_curve(),
-            "table_unexplained_curve": mapper.table_unexplained_curve(),
-            "accuracy_curve": accuracy_curve,
-            "timings_ms_median": {s: (statistics.median(v) if v else None) for s, v in times.items()},
-            "frame_budget_ms_median": frame_budget(times),
-            "events": events,
-        }
-        _write_json(run_dir / "metrics.json", metrics)
-        rec.log_event(f"done: mean 3D IoU {metrics['mean']['iou3d']:.3f}")
-        rec.close()
-        _write_json(
-            run_dir / "status.json",
-            {"status": "complete", **start, "finished": datetime.now().isoformat(timespec="seconds")},
-        )
-        (run_dir / "INCOMPLETE").unlink()
-        _update_latest(run_dir)
-        return EpisodeResult(run_dir=run_dir, metrics=metrics, map_json=map_json, frame_times_ms=times)
-    except BaseException as e:
-        # Keep everything written so far; mark the folder and say why. A second signal while
-        # cleaning up must not leave the status at "running".
-        status = _stop_status(e)
-        if previous_sigterm is not None:
-            signal.signal(signal.SIGTERM, signal.SIG_IGN)
-            previous_sigint = signal.signal(signal.SIGINT, signal.SIG_IGN)
-        try:
-            _write_atomic(run_dir / "map.json.partial", mapper.map_json())
-            rec.close()
-        except Exception as cleanup:  # noqa: BLE001 - best effort while already failing
-            print(f"run folder {run_dir}: could not save the partial map: {cleanup}", file=sys.stderr)
-        extra: dict[str, Any] = {"error": f"{type(e).__name__}: {e}"}
-        if status == "failed":
-            extra["traceback"] = traceback.format_exc()
-        _finish_status(run_dir, start, status, **extra)
-        # Shut the renderer down before the interpreter exits (it may otherwise still be rendering
-        # while Python tears down): drop the world and the frames (a signal's traceback is not
-        # shown) that hold it.
-        world = None
-        if status != "failed":
-            traceback.clear_frames(e.__traceback__)
-        gc.collect()
-        if previous_sigterm is not None:
-            signal.signal(signal.SIGINT, previous_sigint)
-        stopped = _stopped(e, run_dir)
-        if stopped is e:
-            raise
-        raise stopped from e
-    finally:
-        if previous_sigterm is not None:
-            signal.signal(signal.SIGTERM, previous_sigterm)
+    """Run one episode (:class:`Episode`) and write its run folder. Raises on failure after marking
+    the folder; SIGINT (Ctrl-C) and SIGTERM raise :class:`RunStopped` after marking it
+    ``interrupted`` or ``terminated``. Config values the core refuses raise before any folder is
+    made. ``on_frame`` / ``on_fused``: see :class:`Episode`."""
+    return Episode(cfg, progress=progress, on_frame=on_frame, on_fused=on_fused).run()
 
 
 def _stop_status(e: BaseException) -> str:
@@ -753,7 +882,13 @@ def prior_error_summary(errors: list[tuple[float, float]]) -> dict[str, float | 
     """The kinematic prior's error against the true camera pose over an episode's frames (evaluation
     only): RMS and 90th percentile of the translation (mm) and rotation (deg) differences."""
     if not errors:
-        return {"trans_rms_mm": None, "trans_p90_mm": None, "rot_rms_deg": None, "rot_p90_deg": None, "frames": 0}
+        return {
+            "trans_rms_mm": None,
+            "trans_p90_mm": None,
+            "rot_rms_deg": None,
+            "rot_p90_deg": None,
+            "frames": 0,
+        }
     t = np.array([e[0] for e in errors]) * 1e3
     r = np.array([e[1] for e in errors])
     return {

@@ -355,7 +355,7 @@ class GraspSession:
                 moved = {**target, "geometry": {**target["geometry"], "center": c.tolist()}}
                 up = tcp.copy()
                 up[2, 3] += cfg.contact_backoff_m
-                r = self.planner.plan_linear(self.q_arm(), up, obs)
+                r = self.planner.plan_to_pose(self.q_arm(), up, obs, linear=True)
                 if r["ok"]:
                     self.execute(r, open_half)
                 # A fresh plan for the moved target from here: its own pre-grasp, approach and lift.
@@ -367,7 +367,7 @@ class GraspSession:
                     err = self.execute(plan["approach"], open_half, stop=stopper())
                     continue
             # No retry left (or none plannable): go on down as planned, as a blind approach would.
-            r = self.planner.plan_linear(self.q_arm(), np.asarray(plan["world_from_tcp_grasp"], dtype=np.float64), obs)
+            r = self.planner.plan_to_pose(self.q_arm(), np.asarray(plan["world_from_tcp_grasp"], dtype=np.float64), obs, linear=True)
             if r["ok"]:
                 err = self.execute(r, open_half)
             break

@@ -21,7 +21,7 @@ experiment's rule; scene02's cups are 7.8 and 8.4 cm wide): the report lists it 
 Every grasp goes through :class:`~objslam.grasp.GraspSession` (planner, PD drives, the grasp
 physics); a place motion is the planner's ``plan_to_pose`` to a pre-place pose 12 cm above the slot
 (carrying the held object's estimate, so that it too clears the map objects), a straight-line
-descent (``plan_linear``) until the held object's estimated bottom is 1 cm above its release gap
+descent (``plan_to_pose(..., linear=True)``) until the held object's estimated bottom is 1 cm above its release gap
 (1 cm above its support; 5 mm for tall items), a slow descent until the hand feels the support
 through the item (beyond the paper, :attr:`PlaceConfig.feel_support`: a guarded move on the
 arm's external-wrench estimate, :meth:`~objslam.world.SimWorld.external_wrench`), opening, and a
@@ -194,7 +194,7 @@ class Placer:
         "force_n" (the force's rise over the last window)}``, or ``{"felt": False, "cause"}`` with no
         plan."""
         s, cfg, world = self.s, self.cfg, self.s.world
-        r = s.planner.plan_linear(q_from, target, obs, *held)
+        r = s.planner.plan_to_pose(q_from, target, obs, *held, linear=True)
         if not r["ok"]:
             return {"felt": False, "cause": r["cause"]}
         pos = np.asarray(r["positions"], dtype=np.float64)
@@ -246,7 +246,7 @@ class Placer:
         for (x, y), h in zip(slots, heights):
             z = max(h - depth, h / 2.0) + self.release_gap(h)
             pre = planner.plan_to_pose(READY_QPOS[:7], top_down(x, y, z + self.cfg.preplace_height_m, yaw), obs)
-            if not pre["ok"] or not planner.plan_linear(pre["positions"][-1], top_down(x, y, z, yaw), obs)["ok"]:
+            if not pre["ok"] or not planner.plan_to_pose(pre["positions"][-1], top_down(x, y, z, yaw), obs, linear=True)["ok"]:
                 return False
         return True
 
@@ -275,7 +275,7 @@ class Placer:
                 continue
             feel = self.cfg.feel_support
             z_down = z + (self.cfg.feel_start_m if feel else 0.0)
-            down = s.planner.plan_linear(pre["positions"][-1], top_down(x, y, z_down, yaw), obs, *held_args)
+            down = s.planner.plan_to_pose(pre["positions"][-1], top_down(x, y, z_down, yaw), obs, *held_args, linear=True)
             if not down["ok"]:
                 failed, self.message = f"descent_{down['cause']}", down["message"]
                 continue
@@ -294,13 +294,13 @@ class Placer:
                 self.touchdown = {}
             if feel and "cause" in self.touchdown:
                 # No slow descent plannable: the rest of the way to the release gap, as without the feel.
-                rest = s.planner.plan_linear(q_down, top_down(x, y, z, yaw), obs, *held_args)
+                rest = s.planner.plan_to_pose(q_down, top_down(x, y, z, yaw), obs, *held_args, linear=True)
                 if rest["ok"]:
                     s.execute(rest, 0.0)
             gap = self.true_gap()
             self.touchdown["true_gap_m"] = None if gap is None else round(gap, 5)
             s.hold(0.5, GRIPPER_OPEN_M)
-            up = s.planner.plan_linear(s.q_arm(), top_down(x, y, z + self.cfg.preplace_height_m, yaw), obs)
+            up = s.planner.plan_to_pose(s.q_arm(), top_down(x, y, z + self.cfg.preplace_height_m, yaw), obs, linear=True)
             if up["ok"]:
                 s.execute(up, GRIPPER_OPEN_M)
             return None

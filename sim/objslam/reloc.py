@@ -207,7 +207,7 @@ def build_query_map(cfg: Any, scene: Any, frames: list[PoolFrame]) -> tuple[str,
             world_from_camera_gt=f.world_from_camera_gt,
             view_index=i,
         )
-        poses.append(np.asarray(mapper.last_pose(), dtype=np.float64))
+        poses.append(np.asarray(mapper.query('{"query": "last_pose"}')["world_from_camera"], dtype=np.float64))
         mapper.view_done(False)
     mapper.refresh_estimates()
     return mapper.map_json(), poses

@@ -151,9 +151,10 @@ class DecisionStep:
         """The camera pose now (forward kinematics of the arm's joints), 4x4."""
         self.rng = rng
         """Random generator seeded by the run seed; one stream for the whole episode."""
-        self.views_taken: int = mapper.views_taken()
+        progress = mapper.query('{"query": "progress"}')
+        self.views_taken: int = progress["views_taken"]
         """Views taken after Init so far."""
-        self.max_views: int = mapper.max_views()
+        self.max_views: int = progress["max_views"]
         """The budget after Init (``explore.max_views``); the episode stops there regardless."""
         self.table_center = table_center
         """Table top centre (x, y) in the world frame, metres (the top is z = 0)."""
@@ -170,6 +171,10 @@ class DecisionStep:
         """Set it before returning None to say why the strategy stopped (metrics' ``stop_reason``)."""
         self.logged: tuple[list[npt.NDArray[np.float64]], list[float]] | None = None
 
+    def _query(self, query: str, **kwargs: Any) -> Any:
+        """One question to the core's session at this step (``ActiveMapper.query``)."""
+        return self._mapper.query(json.dumps({"query": query, **kwargs}), **self._cam)
+
     def objects(self) -> list[dict[str, Any]]:
         """The map's objects (the map file's object records: id, label, pose, size, stage)."""
         return json.loads(self._mapper.objects_json())
@@ -179,7 +184,7 @@ class DecisionStep:
         ``entropy_bits`` (H_obj), ``normalized_entropy`` (H̄_obj), ``occupied_ratio`` (R_o),
         ``history_iou`` (R_IoU or None), ``normalized_volume`` (V̄_obj), ``volume_probability``,
         ``explore`` (s(x) = 1: still to explore), ``cells_occupied|free|unknown``."""
-        features = self._mapper.object_features(**self._cam)
+        features = self._query("object_features")
         for f in features:
             grid = f.pop("grid")
             f.update(cells_occupied=grid["occupied"], cells_free=grid["free"], cells_unknown=grid["unknown"])
@@ -195,7 +200,8 @@ class DecisionStep:
         self, around: Sequence[int] | None = None
     ) -> list[tuple[npt.NDArray[np.float64], int | None]]:
         """Like :meth:`candidates`, with the map id of the object each view was sampled around."""
-        return self._mapper.candidate_views(around=None if around is None else [int(i) for i in around])
+        views = self._query("candidate_views", around=None if around is None else [int(i) for i in around])
+        return [(v["world_from_camera"], v["target_object"]) for v in views]
 
     def score(
         self,
@@ -210,12 +216,12 @@ class DecisionStep:
             raise StrategyError(f"score(utility=...): expected one of {', '.join(UTILITIES)}, got {utility!r}")
         if not len(views):
             return []
-        return self._mapper.score_views(
+        query = {"query": "score_views", "utility": utility, "explore_every_object": explore_every_object}
+        return self._mapper.query(
+            json.dumps(query),
             **self._cam,
             views=list(views),
-            utility=utility,
             world_from_camera=self.world_from_camera,
-            explore_every_object=explore_every_object,
         )
 
     def utilities(
@@ -256,7 +262,7 @@ class DecisionStep:
         """The discovery extension's candidate views (beyond the paper; core ``explore::discovery``):
         sampled at targets among the table cells not known yet, the unexplained cells' first, as
         the built-in utility strategies sample them at this step; not filtered by reachability."""
-        return self._mapper.table_candidate_views()
+        return [v["world_from_camera"] for v in self._query("table_candidate_views")]
 
     def table_gain(self, views: Sequence[npt.NDArray[np.float64]]) -> list[dict[str, Any]]:
         """What each view would show of the table not known yet, one dict per view: ``cells``
@@ -266,22 +272,23 @@ class DecisionStep:
         ``discovery_weight``, or alone on a table-only step)."""
         if not len(views):
             return []
-        return self._mapper.table_gain(**self._cam, views=list(views))
+        return self._mapper.query(json.dumps({"query": "table_gain"}), **self._cam, views=list(views))
 
     def table_unknown_weight(self) -> float:
         """The weighted count of table cells not known yet (the built-in strategies look at the
         table only while it is at least ``discovery_min_new_cells``)."""
-        return float(self._mapper.table_unknown_weight())
+        return float(self._mapper.query('{"query": "progress"}')["table_unknown_weight"])
 
     def table_views_needed(self, limit: int) -> int:
         """The budget reserve's count: how many table candidates a greedy cover takes (each
         reachable, each revealing ``discovery_min_new_cells`` new weighted cells), at most
         ``limit``; the built-in strategies switch to the table once it reaches the views left."""
-        return int(self._mapper.table_views_needed(**self._cam, reachable=self.reachable, limit=int(limit)))
+        query = json.dumps({"query": "table_views_needed", "limit": int(limit)})
+        return int(self._mapper.query(query, **self._cam, reachable=self.reachable))
 
     def paper_stop(self) -> str | None:
         """The paper's stopping rule now: "all_explored", "max_views" or None."""
-        return self._mapper.paper_stop(**self._cam)
+        return self._query("paper_stop")
 
     def log_candidates(self, views: Sequence[npt.NDArray[np.float64]], scores: Sequence[float]) -> None:
         """Record the views the strategy weighed and their scores (arrows coloured by score in the

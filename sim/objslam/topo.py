@@ -1,5 +1,7 @@
 """Helpers around scene matching (:func:`objslam.match_maps`, :func:`objslam.relocalise`).
 
+- :func:`relocalise`: :func:`objslam.match_maps` the other way round, for a map built in a new
+  session: ``prior_from_query`` and the matched object ids.
 - :func:`map_json_from_objects`: a versioned map JSON from object records (label, centre, yaw,
   half-extents), e.g. a scene's ground truth, for tests and synthetic experiments.
 - :func:`transform_map_json`: a map moved by a gravity-aligned similarity q = s R_z(yaw) p + t
@@ -19,8 +21,17 @@ from typing import Any
 
 import numpy as np
 
+from . import _native
+
 MAP_FORMAT = "objslam-map"
 MAP_VERSION = 1
+
+
+def relocalise(prior_map_json: str, query_map_json: str, config_json: str | None = None) -> dict[str, Any]:
+    """Relocalise a map built in a new session against a prior map: the dict of
+    :func:`objslam.match_maps` with the transform keys holding ``prior_from_query`` (p = s R q + t)
+    and ``matched_ids`` [[prior id, query id]] sorted by prior id."""
+    return _native.match_maps(prior_map_json, query_map_json, config_json, relocalise=True)
 
 
 def _quat_z(yaw: float) -> list[float]:

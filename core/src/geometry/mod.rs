@@ -66,6 +66,11 @@ pub enum GeometryError {
     },
 }
 
+/// A matrix as rows of values (e.g. a pose's 4x4 homogeneous matrix for JSON).
+pub fn rows<const R: usize, const C: usize>(m: &nalgebra::SMatrix<f64, R, C>) -> [[f64; C]; R] {
+    std::array::from_fn(|r| std::array::from_fn(|c| m[(r, c)]))
+}
+
 /// Build an [`Se3`] from a row-major 4x4 homogeneous matrix, checking it is rigid.
 ///
 /// `field` names the argument in the error (e.g. `"world_from_camera"`).

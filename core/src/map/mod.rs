@@ -92,6 +92,27 @@ pub enum MapError {
     UnknownLabel(String),
 }
 
+impl MapError {
+    /// Whether the caller gave a bad value (an unknown label) rather than a bad or unreadable file.
+    pub fn is_input(&self) -> bool {
+        matches!(self, MapError::UnknownLabel(_))
+    }
+}
+
+/// One map object as the bindings list it (`objects_json`): id, label, geometry and how often it
+/// was observed.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ObjectRecord {
+    /// Map id.
+    pub id: u32,
+    /// Class.
+    pub label: Label,
+    /// Box or cylinder in the world frame.
+    pub geometry: ObjectGeometry,
+    /// Detections fused into it.
+    pub n_observations: usize,
+}
+
 /// Object classes. The detector's labels, the scene files' `class` field and the map all use these.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -249,6 +270,17 @@ impl ObjectMap {
     /// An empty map.
     pub fn new() -> Self {
         Self::default()
+    }
+
+    /// Every object as an [`ObjectRecord`], in map order.
+    pub fn object_records(&self) -> Vec<ObjectRecord> {
+        let record = |o: &MapObject| ObjectRecord {
+            id: o.id,
+            label: o.label,
+            geometry: o.geometry(),
+            n_observations: o.observations.len(),
+        };
+        self.objects.iter().map(record).collect()
     }
 
     /// Add an object with a fresh id; returns the id.
@@ -414,6 +446,19 @@ mod tests {
             stage: EstimateStage::Raw,
         });
         m
+    }
+
+    #[test]
+    fn object_records_list_id_label_geometry_and_observations() {
+        let m = sample_map();
+        let records = m.object_records();
+        assert_eq!(records.len(), 1);
+        assert_eq!((records[0].id, records[0].label, records[0].n_observations), (0, Label::Book, 1));
+        assert_eq!(records[0].geometry, m.objects[0].geometry());
+        let json = serde_json::to_value(&records).unwrap();
+        assert_eq!(json[0]["label"], "book");
+        assert!(MapError::UnknownLabel("x".into()).is_input());
+        assert!(!MapError::Checksum { path: "f".into(), reason: "r".into() }.is_input());
     }
 
     #[test]

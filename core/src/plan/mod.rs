@@ -24,6 +24,8 @@
 //!   checked every [`PlannerConfig::edge_resolution_rad`] of the largest joint motion.
 //! - [`trajectory`]: chained rest-to-rest, time-optimal Ruckig moves along the checked straight
 //!   segments under per-joint velocity / acceleration / jerk limits.
+//! - [`report`]: the results as records for the bindings ([`report::Attempt`], [`report::GraspPlan`])
+//!   and the settings by name ([`report::PlannerOverrides`]).
 //! - [`grasp`]: top-down grasps (short side for cuboids, any yaw for cylinders), opening from the
 //!   estimated size, ranked by reachability, clearance, side, depth and yaw change.
 //!
@@ -52,6 +54,7 @@
 pub mod collision;
 pub mod grasp;
 pub mod kinematics;
+pub mod report;
 mod rrt;
 pub mod trajectory;
 

@@ -56,7 +56,7 @@ impl Default for MotionLimits {
 }
 
 /// A time-parameterised joint trajectory sampled at a fixed period.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct JointTrajectory {
     /// Sample period, seconds.
     pub dt_s: f64,

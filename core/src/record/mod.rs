@@ -86,6 +86,14 @@ pub enum RecordError {
     },
 }
 
+impl RecordError {
+    /// Whether the caller gave a bad value (a buffer of the wrong size, an option out of range)
+    /// rather than the recording failing.
+    pub fn is_input(&self) -> bool {
+        matches!(self, RecordError::BufferLength { .. } | RecordError::Option { .. })
+    }
+}
+
 /// JPEG quality of colour frames when not set: visually lossless on the simulator's renders at
 /// about a twentieth of the raw size.
 pub const DEFAULT_JPEG_QUALITY: u8 = 85;
@@ -126,8 +134,9 @@ const GROUND_TRUTH_LINE_RADIUS_M: f32 = 0.0015;
 /// Root of the simulator's truth: drawn as wireframes without labels.
 pub const GROUND_TRUTH_ROOT: &str = "world/ground_truth";
 
-/// A labelled object to draw (estimate or ground truth).
-#[derive(Debug, Clone)]
+/// A labelled object to draw (estimate or ground truth); its JSON is an object record
+/// `{"id", "label", "geometry"}` (other keys are ignored).
+#[derive(Debug, Clone, serde::Deserialize)]
 pub struct DrawnObject {
     /// Id shown in the label.
     pub id: u32,
@@ -486,6 +495,21 @@ impl Recorder {
     /// Flush everything to disk (also done on drop).
     pub fn flush(&self) -> Result<(), RecordError> {
         self.stream.flush_blocking().map_err(|e| RecordError::Log { entity: "<flush>".into(), reason: e.to_string() })
+    }
+}
+
+#[cfg(test)]
+mod report_tests {
+    use super::*;
+
+    #[test]
+    fn drawn_objects_read_object_records_and_input_errors_are_told_apart() {
+        let json = r#"[{"id": 4, "label": "cup", "n_observations": 2,
+            "geometry": {"shape": "cylinder", "center": [0.1, 0.2, 0.05], "yaw_rad": 0.0, "half_extents": [0.04, 0.04, 0.05]}}]"#;
+        let objects: Vec<DrawnObject> = serde_json::from_str(json).unwrap();
+        assert_eq!((objects[0].id, objects[0].label.as_str()), (4, "cup"));
+        assert!(RecordError::Option { field: "jpeg_quality", reason: "r".into() }.is_input());
+        assert!(!RecordError::Log { entity: "e".into(), reason: "r".into() }.is_input());
     }
 }
 

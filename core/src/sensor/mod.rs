@@ -339,6 +339,46 @@ pub fn simulate_frame(
     Ok(SensorFrame { depth_m, rgb, stats })
 }
 
+/// One call of the sensor model as the Python API makes it (`sensor_model(request_json, ...)`).
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SensorRequest {
+    /// Stereo, colour and calibration settings (missing keys take the defaults).
+    #[serde(default)]
+    pub config: SensorConfig,
+    /// The episode's seed (the unit's draw and the per-frame draws).
+    pub seed: u64,
+    /// The frame's index (per-frame draws). Default 0.
+    #[serde(default)]
+    pub frame_index: u64,
+    /// Nominal (assumed) colour intrinsics, 3 × 3 (rows).
+    pub intrinsics: [[f64; 3]; 3],
+    /// The camera's motion over the colour exposure (4 × 4, rows); None = at rest.
+    #[serde(default)]
+    pub camera_end_from_start: Option<[[f64; 4]; 4]>,
+}
+
+/// What a sensor-model call reports beside the images.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct SensorInfo {
+    /// The episode's calibration state.
+    pub unit: SensorUnit,
+    /// The depth model's counts on the frame (None without a frame).
+    pub stats: Option<DepthStats>,
+}
+
+impl SensorRequest {
+    /// Draws the episode's unit and, given a rendered frame, simulates it ([`simulate_frame`]).
+    pub fn run(&self, frame: Option<&RenderedFrame<'_>>) -> Result<(SensorInfo, Option<SensorFrame>), SensorError> {
+        let k = Intrinsics::from_matrix(&Matrix3::from_fn(|r, c| self.intrinsics[r][c]));
+        let unit = SensorUnit::draw(&self.config, k, self.seed)?;
+        let Some(frame) = frame else { return Ok((SensorInfo { unit, stats: None }, None)) };
+        let motion = self.camera_end_from_start.map(|m| Matrix4::from_fn(|r, c| m[r][c]));
+        let out = simulate_frame(&self.config, &unit, frame, motion.as_ref(), self.seed, self.frame_index)?;
+        Ok((SensorInfo { unit, stats: Some(out.stats) }, Some(out)))
+    }
+}
+
 #[cfg(test)]
 #[allow(clippy::unwrap_used)] // tests may unwrap (STYLE.md 18)
 mod tests {
@@ -346,6 +386,23 @@ mod tests {
 
     fn nominal() -> Intrinsics {
         Intrinsics { fx: 433.0, fy: 433.0, cx: 320.0, cy: 240.0 }
+    }
+
+    #[test]
+    fn a_request_draws_the_unit_and_simulates_a_frame() {
+        let request: SensorRequest =
+            serde_json::from_str(r#"{"seed": 7, "intrinsics": [[433, 0, 320], [0, 433, 240], [0, 0, 1]]}"#).unwrap();
+        let (info, frame) = request.run(None).unwrap();
+        assert_eq!(info.unit, SensorUnit::draw(&SensorConfig::default(), nominal(), 7).unwrap());
+        assert!(frame.is_none() && info.stats.is_none());
+        let (points, normals) = ([0.0f32, 0.0, 0.5].repeat(4), [0.0f32, 0.0, -1.0].repeat(4));
+        let rendered =
+            RenderedFrame { width: 2, height: 2, points_in_camera: &points, normals_in_camera: &normals, rgb: &[] };
+        let (info, frame) = request.run(Some(&rendered)).unwrap();
+        let frame = frame.unwrap();
+        assert_eq!(frame.depth_m.len(), 4);
+        assert_eq!(info.stats, Some(frame.stats));
+        assert!(serde_json::from_str::<SensorRequest>(r#"{"seed": 1, "intrinsics": [], "bogus": 1}"#).is_err());
     }
 
     #[test]

@@ -106,6 +106,19 @@ pub struct Features {
     pub descriptors: Vec<Descriptor>,
 }
 
+impl Features {
+    /// The keypoints as rows `[x, y, level, angle_rad, score]`.
+    pub fn keypoint_rows(&self) -> Vec<[f32; 5]> {
+        self.keypoints.iter().map(|k| [k.x, k.y, f32::from(k.level), k.angle_rad, f32::from(k.score)]).collect()
+    }
+
+    /// The descriptors as 32 bytes each (the four words little-endian).
+    pub fn descriptor_bytes(&self) -> Vec<[u8; 32]> {
+        let bytes = |d: &Descriptor| std::array::from_fn(|i| d[i / 8].to_le_bytes()[i % 8]);
+        self.descriptors.iter().map(bytes).collect()
+    }
+}
+
 #[derive(Debug, Clone, Default)]
 struct Level {
     width: usize,
@@ -661,6 +674,15 @@ mod tests {
 
     fn extractor() -> OrbExtractor {
         OrbExtractor::new(OrbConfig::default()).unwrap()
+    }
+
+    #[test]
+    fn keypoint_rows_and_descriptor_bytes_follow_the_features() {
+        let kp = Keypoint { x: 3.0, y: 4.0, level: 2, scale: 1.44, angle_rad: 0.5, score: 17 };
+        let f = Features { keypoints: vec![kp], descriptors: vec![[1, 0x0203, 0, u64::MAX]] };
+        assert_eq!(f.keypoint_rows(), vec![[3.0, 4.0, 2.0, 0.5, 17.0]]);
+        let b = f.descriptor_bytes();
+        assert_eq!((b[0][0], b[0][8], b[0][9], b[0][16], b[0][31]), (1, 3, 2, 0, 255));
     }
 
     /// Rotate by `angle_rad` and scale by `scale` about the image centre (bilinear, grey 0 outside).

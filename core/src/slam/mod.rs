@@ -155,7 +155,8 @@ pub use metrics::{ate_rmse_m, rpe, Rpe};
 pub use noise::{PriorNoiseConfig, SyntheticPriorError};
 pub use pnp::{refine_pose, solve_pnp_ransac, Correspondence, PoseEstimate, PoseRefineConfig, RansacConfig};
 pub use relocalise::{
-    relocalise_frames, AppearanceConfig, AppearanceDatabase, Relocalisation, RelocalisationRecord, RgbdKeyframe,
+    relocalise_frames, AppearanceConfig, AppearanceDatabase, AppearanceRequest, Relocalisation, RelocalisationRecord,
+    RgbdKeyframe,
 };
 pub use tracker::{
     LostReason, ObservedPoint, PoseSource, TrackInput, TrackOutput, Tracker, TrackerConfig, TrackingState,

@@ -21,7 +21,7 @@
 //!    at least [`AppearanceConfig::min_inliers`] inliers (ORB-SLAM2: 50). The candidate with the
 //!    most inliers wins.
 
-use nalgebra::{Point3, Vector3};
+use nalgebra::{Matrix3, Matrix4, Point3, Vector3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
@@ -31,7 +31,8 @@ use super::matcher::{match_brute_force, MatchConfig};
 use super::pnp::{refine_pose, Correspondence, PoseRefineConfig};
 use super::SlamError;
 use crate::frame::{DepthImage, GreyImage};
-use crate::geometry::{PinholeCamera, Se3};
+use crate::geometry::{se3_from_matrix, PinholeCamera, Se3};
+use crate::map::validate::InvalidValue;
 use crate::topo::umeyama;
 
 /// Configuration of appearance-based relocalisation.
@@ -361,6 +362,32 @@ mod tests {
     }
 
     #[test]
+    fn a_request_builds_keyframes_and_names_the_bad_field() {
+        let scene = TabletopScene::tabletop(3);
+        let camera = PinholeCamera::from_fovy(64, 48, 58f64.to_radians()).unwrap();
+        let kf = keyframe(&scene, &camera, [0.1, 0.0, 0.5]);
+        let rows = |m: nalgebra::Matrix4<f64>| std::array::from_fn(|r| std::array::from_fn(|c| m[(r, c)]));
+        let k = camera.matrix();
+        let request = AppearanceRequest {
+            config: AppearanceConfig::default(),
+            intrinsics: std::array::from_fn(|r| std::array::from_fn(|c| k[(r, c)])),
+            prior_world_from_camera: vec![rows(kf.world_from_camera.to_homogeneous())],
+        };
+        let (keyframes, cam) = request.keyframes(vec![(kf.grey.clone(), kf.depth.clone())], None).unwrap();
+        assert_eq!(cam, camera);
+        assert!(
+            (keyframes[0].world_from_camera.to_homogeneous() - kf.world_from_camera.to_homogeneous()).abs().max()
+                < 1e-12
+        );
+        let err = request.keyframes(Vec::new(), None).unwrap_err();
+        assert_eq!(err.field, "prior_world_from_camera");
+        let mut bad = request.clone();
+        bad.prior_world_from_camera[0][3][3] = 2.0;
+        let err = bad.keyframes(vec![(kf.grey, kf.depth)], None).unwrap_err();
+        assert_eq!(err.field, "prior_world_from_camera[0]");
+    }
+
+    #[test]
     fn relocalises_a_nearby_view_without_a_prior() {
         let scene = TabletopScene::tabletop(3);
         let camera = PinholeCamera::from_fovy(640, 480, 58f64.to_radians()).unwrap();
@@ -387,5 +414,50 @@ mod tests {
             db.relocalise(&query.grey, &query.depth, &camera),
             Err(SlamError::TooFewInliers { required: 50, .. })
         ));
+    }
+}
+
+/// An appearance relocalisation request as the Python API gives it: the settings, the nominal
+/// intrinsics and the prior keyframes' poses (the images come separately).
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct AppearanceRequest {
+    /// Settings (missing keys take the defaults).
+    #[serde(default)]
+    pub config: AppearanceConfig,
+    /// Intrinsics 3x3 (rows) of every frame.
+    pub intrinsics: [[f64; 3]; 3],
+    /// Each prior keyframe's `world_from_camera` (4x4, rows).
+    pub prior_world_from_camera: Vec<[[f64; 4]; 4]>,
+}
+
+impl AppearanceRequest {
+    /// The prior keyframes from their `(grey, depth)` frames and this request's poses, and the
+    /// camera (of the first prior frame's size, else `first_query`'s). Errors name the field.
+    pub fn keyframes(
+        &self,
+        prior: Vec<(GreyImage, DepthImage)>,
+        first_query: Option<&(GreyImage, DepthImage)>,
+    ) -> Result<(Vec<RgbdKeyframe>, PinholeCamera), InvalidValue> {
+        if prior.len() != self.prior_world_from_camera.len() {
+            let reason = format!("{} poses for {} keyframes", self.prior_world_from_camera.len(), prior.len());
+            return Err(InvalidValue::new("prior_world_from_camera", reason));
+        }
+        let (w, h) = prior.first().or(first_query).map_or((1, 1), |(g, _)| (g.width, g.height));
+        let k = Matrix3::from_fn(|r, c| self.intrinsics[r][c]);
+        let camera =
+            PinholeCamera::from_matrix(w, h, &k).map_err(|e| InvalidValue::new("intrinsics", e.to_string()))?;
+        let keyframes = prior
+            .into_iter()
+            .zip(&self.prior_world_from_camera)
+            .enumerate()
+            .map(|(i, ((grey, depth), m))| {
+                let world_from_camera =
+                    se3_from_matrix(&Matrix4::from_fn(|r, c| m[r][c]), "prior_world_from_camera")
+                        .map_err(|e| InvalidValue::new(format!("prior_world_from_camera[{i}]"), e.to_string()))?;
+                Ok(RgbdKeyframe { grey, depth, camera, world_from_camera })
+            })
+            .collect::<Result<_, InvalidValue>>()?;
+        Ok((keyframes, camera))
     }
 }

@@ -8,7 +8,10 @@
 //! - [`System::process_frame`]: one frame in, the detections' map object ids out.
 //! - [`System::view_done`]: a view was reached and its frames fused.
 //! - [`System::next_view`]: the session's next view for the strategy in its config.
-//! - [`System::map`], [`System::pose_metrics`], [`System::grid_cells`]: what a run reports.
+//! - [`System::query`]: a strategy outside the core asks about candidate views, utilities and
+//!   the table ([`Query`] → [`Answer`]).
+//! - [`System::map`], [`System::progress`], [`System::pose_metrics`], [`System::grid_cells`]:
+//!   what a run reports.
 //! - [`capture::Capture`]: an episode's recorded inputs, replayed through a `System`.
 //!
 //! One frame (`process_frame`):
@@ -27,8 +30,10 @@
 
 pub mod capture;
 mod config;
+mod query;
 
 pub use config::{ConfigError, SystemConfig};
+pub use query::{Answer, Decision, Query, ScoredView, StepContext, TargetedView};
 
 use std::collections::BTreeMap;
 
@@ -60,6 +65,12 @@ pub enum SystemError {
     /// A tracker is configured but the frame has no grey image.
     #[error("grey: required when a tracker is configured")]
     MissingGrey,
+    /// A decision-step question was asked without the camera.
+    #[error("intrinsics: the camera is required by this query")]
+    MissingCamera,
+    /// Views were to be scored with a strategy that has no utility.
+    #[error("utility: expected object-driven or expected-gain, got {0:?}")]
+    NotAUtility(crate::explore::Strategy),
 }
 
 /// One frame for [`System::process_frame`].
@@ -112,6 +123,36 @@ pub struct GridCells {
     pub p_in_world: Vec<Point3<f64>>,
     /// Each cell's state.
     pub states: Vec<CellState>,
+}
+
+impl GridCells {
+    /// Each cell's state as a byte: 0 unknown, 1 free, 2 occupied.
+    pub fn state_codes(&self) -> Vec<u8> {
+        let code = |s: &CellState| match s {
+            CellState::Unknown => 0,
+            CellState::Free => 1,
+            CellState::Occupied => 2,
+        };
+        self.states.iter().map(code).collect()
+    }
+}
+
+/// How far exploration has come: the view count, the budget and the curves after each view.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Progress {
+    /// Views taken after Init.
+    pub views_taken: usize,
+    /// The view budget after Init (`explore.max_views`).
+    pub max_views: usize,
+    /// Mean normalised entropy of the surface grids after Init and after each view.
+    pub entropy_curve: Vec<f64>,
+    /// Fraction of the table top known (seen, or under a mapped object) after each view, Init
+    /// views included.
+    pub table_known_curve: Vec<f64>,
+    /// Unexplained table cells (object evidence no map object explains) after each view.
+    pub table_unexplained_curve: Vec<usize>,
+    /// The weighted count of table cells not known yet.
+    pub table_unknown_weight: f64,
 }
 
 /// The tracker, the object pipeline and the exploration session, wired per frame.
@@ -294,6 +335,19 @@ impl System {
         let objects: Vec<ObjectGtIds> =
             by_object.into_iter().map(|(object_id, gt_ids)| ObjectGtIds { object_id, gt_ids }).collect();
         association_metrics(&objects, gt_ids, &MetricsConfig::default())
+    }
+
+    /// The exploration's [`Progress`] now.
+    pub fn progress(&self) -> Progress {
+        let s = &self.session;
+        Progress {
+            views_taken: s.views_taken(),
+            max_views: s.max_views(),
+            entropy_curve: s.entropy_curve().to_vec(),
+            table_known_curve: s.table_known_curve().to_vec(),
+            table_unexplained_curve: s.table_unexplained_curve().to_vec(),
+            table_unknown_weight: s.table_unknown_weight(&self.pipeline.map()),
+        }
     }
 
     /// Every map object's surface-grid cells in the world frame.

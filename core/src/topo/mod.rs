@@ -17,6 +17,8 @@
 //!   pairs, a confidence and counters) or `NoMatch { reason }`.
 //! - [`relocalise`]: `prior_from_query` for a map built in a new session against a prior map, with
 //!   matched object ids.
+//! - [`report::MatchReport`]: a [`MatchResult`] with object ids and matrices, as the bindings
+//!   return it.
 //! - [`fit_pairs`]: the final transform for given correspondences (the last step of
 //!   [`match_maps`]; with the true correspondences, the noise floor of the pose estimate).
 //!
@@ -98,6 +100,7 @@
 
 mod descriptor;
 mod graph;
+pub mod report;
 mod solve;
 
 pub use descriptor::{similarity, DescriptorConfig, DescriptorSet, WalkStep};

@@ -4,6 +4,7 @@ use nalgebra::{Similarity3, Translation3, UnitQuaternion, Vector3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
+use super::report::{MatchReport, ReportDirection};
 use super::*;
 use crate::geometry::se3_from_yaw;
 use crate::map::{EstimateStage, Label, MapObject};
@@ -241,6 +242,28 @@ fn relocalise_returns_prior_from_query_and_ids() {
     assert_eq!(r.matched_ids, (0..6).map(|i| (i, 100 + i)).collect::<Vec<_>>());
     let err = relocalise(&ObjectMap::new(), &query, &MatchConfig::default());
     assert_eq!(err.err(), Some(TopoError::EmptyMap { which: MapSide::Prior }));
+
+    // The report states the same transform with ids, both ways.
+    let result = match_object_maps(&prior, &query, &MatchConfig::default());
+    let back = MatchReport::new(&result, &prior, &query, ReportDirection::PriorFromQuery);
+    let matrix = nalgebra::Matrix4::from_fn(|i, j| back.matrix.unwrap()[i][j]);
+    assert!((matrix - truth.inverse().to_homogeneous()).abs().max() < 1e-6);
+    assert_eq!(back.matched_ids, Some(r.matched_ids.clone()));
+    let forward = MatchReport::new(&result, &prior, &query, ReportDirection::QueryFromPrior);
+    let rotation = nalgebra::Matrix3::from_fn(|i, j| forward.rotation.unwrap()[i][j]);
+    assert!((rotation * forward.scale.unwrap() - truth.to_homogeneous().fixed_view::<3, 3>(0, 0)).abs().max() < 1e-6);
+    assert_eq!(forward.matched_ids, None);
+    assert!(forward.inliers.iter().all(|&(p, q, res)| q == p + 100 && res < 1e-6));
+    let json = serde_json::to_value(&forward).unwrap();
+    assert_eq!(json["matched"], true);
+    assert!(json.get("matched_ids").is_none());
+
+    // No match: a record naming the reason, no transform.
+    let none = match_object_maps(&ObjectMap::new(), &query, &MatchConfig::default());
+    let report = MatchReport::new(&none, &ObjectMap::new(), &query, ReportDirection::PriorFromQuery);
+    assert!(!report.matched && report.matrix.is_none() && report.confidence == 0.0);
+    assert_eq!(report.reason_kind, Some("empty_map"));
+    assert_eq!(report.matched_ids, Some(Vec::new()));
 }
 
 #[test]
