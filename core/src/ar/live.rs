@@ -24,11 +24,13 @@
 //!    surface, or no surface at all.
 //!
 //! The fused depth is one image, so the masks ([`super::occlusion_masks`]) are unchanged: a model
-//! pixel is visible when it is nearer than the fused depth.
+//! pixel is visible when it is nearer than the fused depth. Then [`remove_specks`] hides visible
+//! specks smaller than [`LiveDepthConfig::min_visible_px`] (single wrong returns and hole edges on
+//! a real surface in front of the model).
 
 use serde::{Deserialize, Serialize};
 
-use super::{bad, check_image, ArError};
+use super::{bad, check_image, ArError, COVER_HIDDEN, COVER_VISIBLE};
 use crate::frame::{DepthImage, GreyImage};
 use crate::geometry::PinholeCamera;
 
@@ -60,6 +62,9 @@ pub struct LiveDepthConfig {
     pub shadow_slack_px: f64,
     /// Scale the live depth to the map's (median ratio). Default true.
     pub fit_scale: bool,
+    /// Visible parts of a model (8-connected) with fewer pixels than this are hidden; 0 = keep
+    /// all. Default 8 (about a 3 × 3 block).
+    pub min_visible_px: usize,
 }
 
 /// What a depth image passed with a request is.
@@ -84,6 +89,7 @@ impl Default for LiveDepthConfig {
             baseline_m: 0.05,
             shadow_slack_px: 2.0,
             fit_scale: true,
+            min_visible_px: 8,
         }
     }
 }
@@ -217,6 +223,50 @@ pub fn fuse_live_depth(
         depth: DepthImage { width: w as u32, height: h as u32, data },
         summary: LiveSummary { shift_px: shift, scale, holes_px, dropped_px },
     })
+}
+
+/// Hide the visible pixels ([`COVER_VISIBLE`]) of `mask` (row-major, `width` wide) that belong to
+/// 8-connected visible components of fewer than `min_px` pixels; returns how many were hidden.
+pub fn remove_specks(mask: &mut [u8], width: usize, min_px: usize) -> usize {
+    if min_px <= 1 || width == 0 {
+        return 0;
+    }
+    let h = mask.len() / width;
+    let mut seen = vec![false; mask.len()];
+    let mut hidden = 0;
+    let mut component = Vec::new();
+    for start in 0..mask.len() {
+        if seen[start] || mask[start] != COVER_VISIBLE {
+            continue;
+        }
+        seen[start] = true;
+        component.clear();
+        component.push(start);
+        let mut k = 0;
+        while k < component.len() {
+            let i = component[k];
+            k += 1;
+            let (c, r) = ((i % width) as i64, (i / width) as i64);
+            for (dc, dr) in [(-1, -1), (0, -1), (1, -1), (-1, 0), (1, 0), (-1, 1), (0, 1), (1, 1)] {
+                let (nc, nr) = (c + dc, r + dr);
+                if nc < 0 || nr < 0 || nc >= width as i64 || nr >= h as i64 {
+                    continue;
+                }
+                let j = nr as usize * width + nc as usize;
+                if !seen[j] && mask[j] == COVER_VISIBLE {
+                    seen[j] = true;
+                    component.push(j);
+                }
+            }
+        }
+        if component.len() < min_px {
+            for &i in &component {
+                mask[i] = COVER_HIDDEN;
+            }
+            hidden += component.len();
+        }
+    }
+    hidden
 }
 
 /// The shift `(dx, dy)` maximising the mean grey gradient at the live silhouettes moved by it;
@@ -459,6 +509,25 @@ mod tests {
         // The block now sits on the square, at 0.5 m (map 1.0 clamped to live + band).
         assert!((at(&f.depth, 21, 13) - 0.506).abs() < 1e-5, "{}", at(&f.depth, 21, 13));
         assert!((at(&f.depth, 18, 13) - 1.0).abs() < 1e-5);
+    }
+
+    #[test]
+    fn specks_smaller_than_the_minimum_are_hidden() {
+        // A 3 × 3 visible block, a diagonal pair (8-connected: one component of 2) and a single pixel.
+        let w = 10;
+        let mut mask = vec![COVER_HIDDEN; w * 8];
+        for r in 1..4 {
+            for c in 1..4 {
+                mask[r * w + c] = COVER_VISIBLE;
+            }
+        }
+        mask[6 * w + 6] = COVER_VISIBLE;
+        mask[7 * w + 7] = COVER_VISIBLE;
+        mask[w + 8] = COVER_VISIBLE;
+        assert_eq!(remove_specks(&mut mask.clone(), w, 0), 0);
+        assert_eq!(remove_specks(&mut mask, w, 3), 3);
+        assert_eq!(mask.iter().filter(|m| **m == COVER_VISIBLE).count(), 9);
+        assert_eq!(remove_specks(&mut mask, w, 10), 9);
     }
 
     #[test]

@@ -44,7 +44,7 @@ use nalgebra::{Translation3, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 
 pub use interact::{pick, InteractionConfig, PickEvent};
-pub use live::{fuse_live_depth, DepthSource, LiveDepthConfig, LiveFusion, LiveSummary};
+pub use live::{fuse_live_depth, remove_specks, DepthSource, LiveDepthConfig, LiveFusion, LiveSummary};
 pub use occlusion::{occlusion_masks, render_scene_depth, ModelMask, RenderConfig, COVER_HIDDEN, COVER_VISIBLE};
 pub use physics::{drop_to_rest, ArPhysics, BodyState, ContactTarget, DropOutcome, PhysicsConfig};
 pub use request::{run_request, ArRequest, ArResponse};

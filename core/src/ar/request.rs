@@ -19,8 +19,9 @@ use nalgebra::Matrix4;
 use serde::{Deserialize, Serialize};
 
 use super::{
-    bad, drop_to_rest, fuse_live_depth, occlusion_masks, pick, register, render_scene_depth, ArConfig, ArError,
-    ArScene, DepthSource, DropOutcome, LiveSummary, PickEvent, RealObject, RegisteredModel, TableTop, VirtualModel,
+    bad, drop_to_rest, fuse_live_depth, occlusion_masks, pick, register, remove_specks, render_scene_depth, ArConfig,
+    ArError, ArScene, DepthSource, DropOutcome, LiveSummary, PickEvent, RealObject, RegisteredModel, TableTop,
+    VirtualModel,
 };
 use crate::frame::{DepthImage, GreyImage};
 use crate::geometry::{se3_from_matrix, PinholeCamera};
@@ -147,7 +148,12 @@ pub fn run_request(
                 }
             }
         };
-        let masks = occlusion_masks(&out.registered, &cam.intrinsics, &world_from_camera, &depth, &cfg.render)?;
+        let mut masks = occlusion_masks(&out.registered, &cam.intrinsics, &world_from_camera, &depth, &cfg.render)?;
+        if out.live.is_some() {
+            for m in &mut masks {
+                m.visible_px -= remove_specks(&mut m.coverage, cam.intrinsics.width as usize, cfg.live.min_visible_px);
+            }
+        }
         for m in masks {
             out.coverage.extend_from_slice(&m.coverage);
             out.masks.push(MaskSummary { name: m.name, silhouette_px: m.silhouette_px, visible_px: m.visible_px });
