@@ -162,6 +162,11 @@ fn bench_ar(c: &mut Criterion) {
     c.bench_function("ar_stage/live_fusion_640x480", |b| {
         b.iter(|| black_box(fuse_live_depth(&cam, &depth, &live, Some(&grey), &config.live)))
     });
+    // The same fusion without the registration shift search (a unit whose shift is known).
+    let known_shift = objslam_core::ar::LiveDepthConfig { max_shift_px: 0, ..config.live };
+    c.bench_function("ar_stage/live_fusion_no_shift_640x480", |b| {
+        b.iter(|| black_box(fuse_live_depth(&cam, &depth, &live, Some(&grey), &known_shift)))
+    });
     c.bench_function("ar_stage/masks_640x480", |b| {
         b.iter(|| black_box(occlusion_masks(&registered, &cam, &world_from_camera, &depth, &config.render)))
     });
