@@ -357,30 +357,50 @@ fn depth_scale(zs: &[f64], zm: &[f64]) -> f64 {
 const MIN_SCALE_PX: usize = 100;
 
 /// Per pixel, the (nearest, farthest) depth among the nearest returns left, right, above and below
-/// within `reach` pixels; (∞, −∞) when there is none.
+/// within `reach` pixels; (∞, −∞) when there is none. Every pass walks the image row by row.
 fn nearest_returns(z: &[f64], w: usize, h: usize, reach: usize) -> Vec<(f64, f64)> {
-    let mut out = vec![(f64::INFINITY, f64::NEG_INFINITY); w * h];
-    let mut scan = |idx: &mut dyn Iterator<Item = usize>| {
-        let mut last: Option<(usize, f64)> = None;
-        for (k, i) in idx.enumerate() {
-            if let Some((at, d)) = last {
-                if k - at <= reach {
-                    let o = &mut out[i];
-                    *o = (o.0.min(d), o.1.max(d));
-                }
-            }
-            if z[i] > 0.0 {
-                last = Some((k, z[i]));
+    fn put(o: &mut (f64, f64), last: Option<(usize, f64)>, k: usize, reach: usize) {
+        if let Some((at, d)) = last {
+            if k.abs_diff(at) <= reach {
+                *o = (o.0.min(d), o.1.max(d));
             }
         }
-    };
-    for r in 0..h {
-        scan(&mut (0..w).map(|c| r * w + c));
-        scan(&mut (0..w).rev().map(|c| r * w + c));
     }
-    for c in 0..w {
-        scan(&mut (0..h).map(|r| r * w + c));
-        scan(&mut (0..h).rev().map(|r| r * w + c));
+    let mut out = vec![(f64::INFINITY, f64::NEG_INFINITY); w * h];
+    for (row, out_row) in z.chunks_exact(w).zip(out.chunks_exact_mut(w)) {
+        let mut last = None;
+        for (c, (d, o)) in row.iter().zip(out_row.iter_mut()).enumerate() {
+            put(o, last, c, reach);
+            if *d > 0.0 {
+                last = Some((c, *d));
+            }
+        }
+        last = None;
+        for (c, (d, o)) in row.iter().zip(out_row.iter_mut()).enumerate().rev() {
+            put(o, last, c, reach);
+            if *d > 0.0 {
+                last = Some((c, *d));
+            }
+        }
+    }
+    // Columns: the last return above (then below) each column, carried from row to row.
+    let mut last: Vec<Option<(usize, f64)>> = vec![None; w];
+    for (r, (row, out_row)) in z.chunks_exact(w).zip(out.chunks_exact_mut(w)).enumerate() {
+        for ((d, o), l) in row.iter().zip(out_row.iter_mut()).zip(last.iter_mut()) {
+            put(o, *l, r, reach);
+            if *d > 0.0 {
+                *l = Some((r, *d));
+            }
+        }
+    }
+    last.fill(None);
+    for (r, (row, out_row)) in z.chunks_exact(w).zip(out.chunks_exact_mut(w)).enumerate().rev() {
+        for ((d, o), l) in row.iter().zip(out_row.iter_mut()).zip(last.iter_mut()) {
+            put(o, *l, r, reach);
+            if *d > 0.0 {
+                *l = Some((r, *d));
+            }
+        }
     }
     out
 }
@@ -509,6 +529,22 @@ mod tests {
         // The block now sits on the square, at 0.5 m (map 1.0 clamped to live + band).
         assert!((at(&f.depth, 21, 13) - 0.506).abs() < 1e-5, "{}", at(&f.depth, 21, 13));
         assert!((at(&f.depth, 18, 13) - 1.0).abs() < 1e-5);
+    }
+
+    #[test]
+    fn nearest_returns_look_along_rows_and_columns_within_reach() {
+        // 5 × 4, returns at (0, 1) = 1.0, (4, 1) = 3.0 and (2, 3) = 2.0 (column, row).
+        let (w, h) = (5, 4);
+        let mut z = vec![0.0; w * h];
+        z[w] = 1.0;
+        z[w + 4] = 3.0;
+        z[3 * w + 2] = 2.0;
+        let near = nearest_returns(&z, w, h, 2);
+        assert_eq!(near[w + 2], (1.0, 3.0)); // left and right, 2 px each
+        assert_eq!(near[w + 1], (1.0, 1.0)); // the right return is 3 px away
+        assert_eq!(near[2], (f64::INFINITY, f64::NEG_INFINITY)); // (2, 3) is 3 rows below
+        assert_eq!(near[w * 2 + 2], (2.0, 2.0)); // below
+        assert_eq!(near[3 * w + 2], (f64::INFINITY, f64::NEG_INFINITY)); // itself only
     }
 
     #[test]
