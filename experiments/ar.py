@@ -8,17 +8,20 @@ folders). Then, in a fresh simulator world of the same scene (objects settled as
   it from 0.4 m away and 0.3 m up, and a virtual model (a box or a cylinder, alternating) is
   placed on the table *behind* it, *in front* of it, and *between* it and its nearest neighbour
   (placements from the map, as an AR application would). Ours: the model's visible pixels against
-  the map's depth (``objslam.ar_run``); truth: the same model's visible pixels against the depth
-  SAPIEN renders of the real scene at that camera pose (robot pixels count as no surface: the arm
-  is not part of the object map); naive: the model's whole silhouette (an overlay without
-  occlusion). Score: IoU of visible pixels, ours vs truth and naive vs truth.
+  the map's depth fused with the live frame an RGB-D camera at that pose delivers (the run's
+  sensor model on SAPIEN's render: noise, scale error, flying pixels, stereo shadow, dropouts,
+  depth-to-colour registration error; ``objslam.ar_run`` with ``real_depth`` and ``grey``); map
+  only: against the map's depth alone; truth: the same model's visible pixels against the exact
+  depth SAPIEN renders of the real scene at that camera pose (robot pixels count as no surface,
+  in the live frame too, as the episodes mask them); naive: the model's whole silhouette (an
+  overlay without occlusion). Score: IoU of visible pixels against the truth's.
 - Collision. For each map object a 3 cm cube is dropped from 8 cm above its top (*onto*), and a
   flat 4x4x2.4 cm box slides along the table towards it from 10 cm beyond its side (*against*,
   fast enough to reach it). The same drops run in a world whose static colliders are the scene's
   true shapes at their settled poses; score: distance between the two rest positions (cm) and
   whether the virtual body touches the same real objects (and the table) in both.
 
-Rows: ``scene``, ``seed``, ``occlusion_iou`` (mean over views), ``occlusion_iou_naive``,
+Rows: ``scene``, ``seed``, ``occlusion_iou`` (mean over views), ``occlusion_iou_map``, ``occlusion_iou_naive``,
 ``rest_error_cm`` (median over drops), ``same_contact`` (share of drops), plus per-placement
 breakdowns. Re-run on other scenes: ``python experiments/ar.py --scenes scenes/hard*.toml --seeds 0 1``.
 """
@@ -31,13 +34,14 @@ import math
 import shlex
 import statistics
 import sys
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import sapien
 from objslam import _native
-from objslam.camera import SAPIEN_FROM_CV
+from objslam.camera import CV_FROM_GL, SAPIEN_FROM_CV, RgbdSensor
 from objslam.camera_path import look_at
 from objslam.config import load_run_config, to_dict
 from objslam.episode import run_episode
@@ -81,7 +85,8 @@ def model_half_height(shape: dict[str, Any]) -> float:
 
 
 class Truth:
-    """The simulator's view of a scene: settled true objects and a free camera for AR views."""
+    """The simulator's view of a scene: settled true objects, a free camera for AR views, and the
+    live depth an RGB-D camera at that pose would deliver."""
 
     def __init__(self, cfg: Any, scene: Any) -> None:
         self.world = SimWorld(scene, cfg.camera, np.random.default_rng([cfg.seed, 1]))
@@ -92,10 +97,31 @@ class Truth:
         self.camera = self.world.scene.add_camera(
             "ar_view", c.width, c.height, math.radians(c.fovy_deg), c.near_m, c.far_m
         )
+        self.camera_config = c
+        # The AR camera's sensor unit: the run's sensor model (depth noise, scale error, flying pixels,
+        # shadow, dropouts, depth-to-colour registration error); its colour intrinsics are the ones the
+        # AR composite is drawn with (the free camera renders with them).
+        exact_colour = replace(c.calibration, colour_focal_sigma_rel=0.0, colour_pp_sigma_px=0.0)
+        self.sensor = (
+            RgbdSensor(
+                replace(c, calibration=exact_colour),
+                seed=int(np.random.default_rng([cfg.seed, 2]).integers(1 << 62)),
+            )
+            if c.model == "d435"
+            else None
+        )
+        self.live_rng = np.random.default_rng([cfg.seed, 3])
+        self.frames = 0
+        self.rgb = np.zeros((c.height, c.width, 3), np.uint8)
+        """Colour image of the last view."""
+        self.live = np.zeros((c.height, c.width), np.float32)
+        """The sensor's depth of the last view (metres, 0 = no return): what the robot would have."""
+        self.grey = np.zeros((c.height, c.width), np.uint8)
+        """The sensor's colour image of the last view in grey (the image the AR composite is drawn into)."""
 
     def depth(self, world_from_camera: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """True depth (metres, 0 = nothing or robot) at a camera pose, and the pose SAPIEN used
-        (the colour image of that view is kept in :attr:`rgb`)."""
+        (the colour image of that view is kept in :attr:`rgb`, the sensor's depth in :attr:`live`)."""
         r = world_from_camera[:3, :3] @ SAPIEN_FROM_CV.T
         q = _quat_wxyz(r)
         self.camera.entity.set_pose(sapien.Pose(world_from_camera[:3, 3], q))
@@ -103,9 +129,21 @@ class Truth:
         self.camera.take_picture()
         pos = self.camera.get_picture("Position")
         seg = self.camera.get_picture("Segmentation")[..., 1].astype(np.uint32)
+        robot = np.isin(seg, list(self.world.robot_actor_ids))
         depth = np.where(pos[..., 3] < 1, -pos[..., 2], 0.0).astype(np.float32)
-        depth[np.isin(seg, list(self.world.robot_actor_ids))] = 0.0
+        depth[robot] = 0.0
         self.rgb = (np.clip(self.camera.get_picture("Color")[..., :3], 0, 1) * 255).astype(np.uint8)
+        # The live depth: the run's sensor model on the same render; the robot's own pixels are
+        # masked as the episodes' hand camera masks them (camera.mask_robot_depth).
+        if self.sensor is not None:
+            points = pos[..., :3] * CV_FROM_GL
+            points[(pos[..., 3] >= 1) | robot] = 0.0
+            normals = self.camera.get_picture("Normal")[..., :3] * CV_FROM_GL
+            colour, self.live = self.sensor.apply(points, normals, self.rgb, frame_index=self.frames)
+        else:
+            colour, self.live = self.rgb, self.camera_config.depth_noise.apply(depth, self.live_rng)
+        self.grey = np.round(colour.astype(np.float32).mean(axis=2)).astype(np.uint8)
+        self.frames += 1
         used = np.asarray(self.camera.get_model_matrix(), dtype=np.float64) @ np.diag([1.0, -1.0, -1.0, 1.0])
         return depth, used
 
@@ -146,12 +184,12 @@ def _iou(a: np.ndarray, b: np.ndarray) -> float | None:
 def save_composite(
     path: Path, rgb: np.ndarray, naive: np.ndarray, ours: np.ndarray, true: np.ndarray
 ) -> None:
-    """Three AR composites side by side: the naive overlay, ours (occluded where the map says), and the
-    truth (occluded where the simulator's depth says); virtual pixels in orange."""
+    """Three AR composites side by side: the naive overlay, ours (occluded where the map and the live
+    depth say), and the truth (occluded where the simulator's depth says); virtual pixels in orange."""
     import cv2
 
     panels = []
-    for mask, title in ((naive, "naive overlay"), (ours, "object map"), (true, "truth")):
+    for mask, title in ((naive, "naive overlay"), (ours, "map + live depth"), (true, "truth")):
         img = rgb.copy()
         img[mask] = (0.3 * img[mask] + 0.7 * np.array([255, 140, 0])).astype(np.uint8)
         cv2.putText(img, title, (10, 30), cv2.FONT_HERSHEY_SIMPLEX, 0.9, (255, 255, 255), 2)
@@ -160,16 +198,11 @@ def save_composite(
     cv2.imwrite(str(path), cv2.cvtColor(np.concatenate(panels, axis=1), cv2.COLOR_RGB2BGR))
 
 
-def occlusion_views(
-    map_objects: list[dict[str, Any]],
-    map_json: str,
-    table: dict[str, Any],
-    truth: Truth,
-    seed: int,
-    images: Path | None = None,
-) -> list[dict[str, Any]]:
-    """Behind / in front / between placements per map object; one IoU pair per view. With
-    ``images``, the first view of each placement is saved there as composites."""
+def view_plans(map_objects: list[dict[str, Any]], table: dict[str, Any], seed: int) -> list[dict[str, Any]]:
+    """The AR views of a map: per map object a virtual box or cylinder (alternating) on the table
+    behind it, in front of it, and between it and its nearest neighbour, each with the camera pose
+    that looks at it and the model request. Placements come from the map only, as an AR
+    application's would; a placement not clear of every map object is skipped."""
     rng = np.random.default_rng([seed, 39])
     out = []
     for i, o in enumerate(map_objects):
@@ -200,7 +233,6 @@ def occlusion_views(
                 continue
             eye = np.array([*(c[:2] + view_u * VIEW_DISTANCE_M), VIEW_HEIGHT_M])
             target = np.array([*((c[:2] + xy) / 2), min(c[2], hz)])
-            depth, world_from_camera = truth.depth(look_at(eye, target))
             model = {
                 "name": f"{kind}_{o['id']}",
                 "shape": shape,
@@ -210,28 +242,54 @@ def occlusion_views(
                     "yaw_rad": azimuth,
                 },
             }
-            req = {"table": table, "models": [model], "camera": _camera(truth, world_from_camera)}
-            _, ours, _ = _native.ar_run(json.dumps({**req, "map": json.loads(map_json)}))
-            _, true, _ = _native.ar_run(json.dumps({**req, "objects": truth.objects}), real_depth=depth)
-            visible_true = true[0] == 2
-            if not np.any(ours[0] > 0):
-                continue  # the model is out of view
-            # Both hiding the whole model is perfect agreement.
-            iou = _iou(ours[0] == 2, visible_true)
-            iou = 1.0 if iou is None else iou
-            iou_naive = _iou(ours[0] > 0, visible_true) or 0.0
-            if images is not None and not any(v["kind"] == kind for v in out):
-                save_composite(images / f"{kind}.png", truth.rgb, ours[0] > 0, ours[0] == 2, visible_true)
-            out.append(
-                {
-                    "kind": kind,
-                    "object": o["id"],
-                    "iou": iou,
-                    "iou_naive": iou_naive,
-                    "silhouette_px": int(np.count_nonzero(true[0] > 0)),
-                    "visible_true_px": int(np.count_nonzero(visible_true)),
-                }
-            )
+            out.append({"kind": kind, "object": o["id"], "look_at": look_at(eye, target), "model": model})
+    return out
+
+
+def occlusion_views(
+    map_objects: list[dict[str, Any]],
+    map_json: str,
+    table: dict[str, Any],
+    truth: Truth,
+    seed: int,
+    images: Path | None = None,
+) -> list[dict[str, Any]]:
+    """One IoU pair per view of :func:`view_plans`. With ``images``, the first view of each
+    placement is saved there as composites."""
+    out = []
+    for plan in view_plans(map_objects, table, seed):
+        kind = plan["kind"]
+        depth, world_from_camera = truth.depth(plan["look_at"])
+        req = {"table": table, "models": [plan["model"]], "camera": _camera(truth, world_from_camera)}
+        with_map = json.dumps({**req, "map": json.loads(map_json)})
+        answer, ours, _ = _native.ar_run(with_map, real_depth=truth.live, grey=truth.grey)
+        _, map_only, _ = _native.ar_run(with_map)
+        exact = {**req, "objects": truth.objects, "config": {"live": {"source": "exact"}}}
+        _, true, _ = _native.ar_run(json.dumps(exact), real_depth=depth)
+        visible_true = true[0] == 2
+        if not np.any(ours[0] > 0):
+            continue  # the model is out of view
+        # Both hiding the whole model is perfect agreement.
+        iou = _iou(ours[0] == 2, visible_true)
+        iou_map = _iou(map_only[0] == 2, visible_true)
+        iou_naive = _iou(ours[0] > 0, visible_true) or 0.0
+        if images is not None and not any(v["kind"] == kind for v in out):
+            save_composite(images / f"{kind}.png", truth.rgb, ours[0] > 0, ours[0] == 2, visible_true)
+        live = json.loads(answer)["live"]
+        out.append(
+            {
+                "kind": kind,
+                "object": plan["object"],
+                "iou": 1.0 if iou is None else iou,
+                "iou_map": 1.0 if iou_map is None else iou_map,
+                "iou_naive": iou_naive,
+                "silhouette_px": int(np.count_nonzero(true[0] > 0)),
+                "visible_true_px": int(np.count_nonzero(visible_true)),
+                "live_holes_px": int(np.count_nonzero((ours[0] > 0) & ~(truth.live > 0))),
+                "live_shift_px": live["shift_px"],
+                "live_scale": live["scale"],
+            }
+        )
     return out
 
 
@@ -340,6 +398,7 @@ def evaluate(cfg: Any, map_json: str, run_dir: str, images: Path | None = None) 
         "views": len(views),
         "drops": len(drops),
         "occlusion_iou": _mean([v["iou"] for v in views]),
+        "occlusion_iou_map": _mean([v["iou_map"] for v in views]),
         "occlusion_iou_naive": _mean([v["iou_naive"] for v in views]),
         "rest_error_cm": _median([d["rest_error_cm"] for d in drops]),
         "same_contact": _mean([float(d["same_contact"]) for d in drops]),
@@ -365,6 +424,9 @@ def write_reports(
     drops = [d for r in rows for d in r["drop_details"]]
     summary = {
         "mean_occlusion_iou": _mean([r["occlusion_iou"] for r in rows if r["occlusion_iou"] is not None]),
+        "mean_occlusion_iou_map": _mean(
+            [r["occlusion_iou_map"] for r in rows if r["occlusion_iou_map"] is not None]
+        ),
         "mean_occlusion_iou_naive": _mean(
             [r["occlusion_iou_naive"] for r in rows if r["occlusion_iou_naive"] is not None]
         ),
@@ -410,14 +472,17 @@ def write_reports(
         "Method (details in `experiments/ar.py`): maps from object-driven episodes; per map object a",
         "virtual box or cylinder is placed behind, in front of, and between it and its nearest neighbour,",
         "seen by a free 640x480 camera 0.4 m away and 0.3 m up. *ours* = its visible pixels against the",
-        "map's depth (objects and table), *naive* = its whole silhouette, truth = its visible pixels",
-        "against SAPIEN's rendered depth of the real scene (robot pixels count as empty). Drops: a 3 cm",
+        "map's depth (objects and table) fused with the live frame of the run's RGB-D sensor model at",
+        "that pose, *map only* = against the map's depth alone, *naive* = its whole silhouette, truth =",
+        "its visible pixels against SAPIEN's exact depth of the real scene (robot pixels count as empty).",
+        "Drops: a 3 cm",
         "cube falls onto each map object from 8 cm above its top; a flat box slides against its side;",
         "truth = the same drop among the scene's true shapes (rapier3d in both).",
         "",
         (
             f"- mean occlusion IoU **{_fmt(s['mean_occlusion_iou'])}**"
-            f" (naive overlay {_fmt(s['mean_occlusion_iou_naive'])}), over {s['views']} views;"
+            f" (map only {_fmt(s['mean_occlusion_iou_map'])}, naive overlay"
+            f" {_fmt(s['mean_occlusion_iou_naive'])}), over {s['views']} views;"
             f" behind {_fmt(s['mean_iou_behind'])} (naive {_fmt(s['mean_iou_naive_behind'])}),"
             f" front {_fmt(s['mean_iou_front'])} (naive {_fmt(s['mean_iou_naive_front'])}),"
             f" between {_fmt(s['mean_iou_between'])} (naive {_fmt(s['mean_iou_naive_between'])})"
@@ -431,13 +496,14 @@ def write_reports(
         ),
         "- targets: " + ", ".join(f"{k}: {'met' if v else 'NOT met'}" for k, v in targets.items()),
         "",
-        "| scene | seed | map / true objects | views | occlusion IoU | naive IoU | drops | rest error (cm, median) | same contact |",
-        "|---|---:|---:|---:|---:|---:|---:|---:|---:|",
+        "| scene | seed | map / true objects | views | occlusion IoU | map only | naive IoU | drops | rest error (cm, median) | same contact |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for r in rows:
         lines.append(
             f"| {r['scene']} | {r['seed']} | {r['map_objects']} / {r['true_objects']} | {r['views']} |"
-            f" {_fmt(r['occlusion_iou'])} | {_fmt(r['occlusion_iou_naive'])} | {r['drops']} |"
+            f" {_fmt(r['occlusion_iou'])} | {_fmt(r['occlusion_iou_map'])} | {_fmt(r['occlusion_iou_naive'])} |"
+            f" {r['drops']} |"
             f" {_fmt(r['rest_error_cm'], '.2f')} | {_fmt(r['same_contact'], '.2f')} |"
         )
     lines += [

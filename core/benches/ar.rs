@@ -1,7 +1,13 @@
 //! Time per AR frame at 640x480 (paper Table "Time analysis of augmented reality"): registration
 //! of three virtual models on a seven-object map + the map's depth image (objects and table) +
-//! the three occlusion masks + one physics frame (1/30 s in 4 sub-steps) of a rapier world whose
-//! bodies are landing (2 mm above their supports, so contacts are computed in the timed step).
+//! its fusion with a live RGB-D frame (registration shift search over ±8 px, scale, holes) + the
+//! three occlusion masks and their speck filter + one physics frame (1/30 s in 4 sub-steps) of a
+//! rapier world whose bodies are landing (2 mm above their supports, so contacts are computed in
+//! the timed step). This is what `run_request` does per frame with a live depth image.
+//!
+//! The live frame is made from the map's depth as a sensor would see it: shifted 3 px right and
+//! 1 px down (registration error), 1 % too far (scale error), ±1 mm seeded noise, and no return
+//! in a 6 px band left of every silhouette (stereo shadow); its grey image shades the true depth.
 //!
 //! The scene is `scenes/scene03.toml`'s layout written out (books, cans, bottle, cup, block on a
 //! 0.8 × 1.2 m table); the camera is the simulator's hand camera (58° vertical field of view)
@@ -17,11 +23,14 @@ use std::hint::black_box;
 use criterion::{criterion_group, criterion_main, BatchSize, Criterion};
 use nalgebra::{Matrix3, Point3, Translation3, UnitQuaternion, Vector3};
 use objslam_core::ar::{
-    occlusion_masks, register, render_scene_depth, ArConfig, ArPhysics, ArScene, Placement, RealObject, TableTop,
-    VirtualModel, VirtualShape,
+    fuse_live_depth, occlusion_masks, register, remove_specks, render_scene_depth, ArConfig, ArPhysics, ArScene,
+    Placement, RealObject, TableTop, VirtualModel, VirtualShape,
 };
+use objslam_core::frame::{DepthImage, GreyImage};
 use objslam_core::geometry::{ObjectGeometry, PinholeCamera, Se3, Shape};
 use objslam_core::map::Label;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
 
 fn object(id: u32, label: Label, xy: [f64; 2], yaw: f64, half: [f64; 3]) -> RealObject {
     RealObject {
@@ -77,6 +86,34 @@ fn camera() -> (PinholeCamera, Se3) {
     (cam, Se3::from_parts(Translation3::from(eye.coords), rot))
 }
 
+/// A live frame of `depth` as a sensor would deliver it (see the module docs), and its grey image.
+fn live_frame(depth: &DepthImage) -> (DepthImage, GreyImage) {
+    let (w, h) = (depth.width as usize, depth.height as usize);
+    let mut rng = ChaCha8Rng::seed_from_u64(39);
+    let mut live = vec![0.0f32; w * h];
+    for r in 1..h {
+        for c in 3..w {
+            let d = depth.data[(r - 1) * w + c - 3];
+            if d > 0.0 {
+                live[r * w + c] = d * 1.01 + rng.random_range(-0.001..0.001);
+            }
+        }
+    }
+    for r in 0..h {
+        for c in 0..w.saturating_sub(6) {
+            let (a, b) = (live[r * w + c], live[r * w + c + 6]);
+            if a > 0.0 && b > 0.0 && b < a - 0.02 {
+                live[r * w + c] = 0.0;
+            }
+        }
+    }
+    let grey = depth.data.iter().map(|d| (255.0 * (1.0 - d.clamp(0.0, 1.0))) as u8).collect();
+    (
+        DepthImage { width: depth.width, height: depth.height, data: live },
+        GreyImage { width: depth.width, height: depth.height, data: grey },
+    )
+}
+
 fn bench_ar(c: &mut Criterion) {
     let scene = scene();
     let models = vec![
@@ -86,6 +123,9 @@ fn bench_ar(c: &mut Criterion) {
     ];
     let config = ArConfig::default();
     let (cam, world_from_camera) = camera();
+    let (live, grey) = live_frame(
+        &render_scene_depth(&scene, &cam, &world_from_camera, &config.render).unwrap_or_else(|e| panic!("{e}")),
+    );
     c.bench_function("ar_frame_640x480", |b| {
         b.iter_batched(
             || {
@@ -97,10 +137,15 @@ fn bench_ar(c: &mut Criterion) {
             },
             |mut physics| {
                 let registered = register(&scene, &models).unwrap_or_else(|e| panic!("{e}"));
-                let depth = render_scene_depth(&scene, &cam, &world_from_camera, &config.render)
+                let map_depth = render_scene_depth(&scene, &cam, &world_from_camera, &config.render)
                     .unwrap_or_else(|e| panic!("{e}"));
-                let masks = occlusion_masks(&registered, &cam, &world_from_camera, &depth, &config.render)
+                let fused = fuse_live_depth(&cam, &map_depth, &live, Some(&grey), &config.live)
                     .unwrap_or_else(|e| panic!("{e}"));
+                let mut masks = occlusion_masks(&registered, &cam, &world_from_camera, &fused.depth, &config.render)
+                    .unwrap_or_else(|e| panic!("{e}"));
+                for m in &mut masks {
+                    remove_specks(&mut m.coverage, cam.width as usize, config.live.min_visible_px);
+                }
                 physics.step_frame();
                 black_box((masks, physics.states()))
             },
@@ -113,6 +158,14 @@ fn bench_ar(c: &mut Criterion) {
     c.bench_function("ar_stage/registration", |b| b.iter(|| black_box(register(&scene, &models))));
     c.bench_function("ar_stage/map_depth_640x480", |b| {
         b.iter(|| black_box(render_scene_depth(&scene, &cam, &world_from_camera, &config.render)))
+    });
+    c.bench_function("ar_stage/live_fusion_640x480", |b| {
+        b.iter(|| black_box(fuse_live_depth(&cam, &depth, &live, Some(&grey), &config.live)))
+    });
+    // The same fusion without the registration shift search (a unit whose shift is known).
+    let known_shift = objslam_core::ar::LiveDepthConfig { max_shift_px: 0, ..config.live };
+    c.bench_function("ar_stage/live_fusion_no_shift_640x480", |b| {
+        b.iter(|| black_box(fuse_live_depth(&cam, &depth, &live, Some(&grey), &known_shift)))
     });
     c.bench_function("ar_stage/masks_640x480", |b| {
         b.iter(|| black_box(occlusion_masks(&registered, &cam, &world_from_camera, &depth, &config.render)))

@@ -144,8 +144,11 @@ def load_map(path: str) -> str: ...
 def save_map(map_json: str, path: str) -> None: ...
 def map_objects_json(map_json: str) -> str: ...
 def ar_run(
-    request_json: str, real_depth: np.ndarray | None = None
-) -> tuple[str, np.ndarray, np.ndarray | None]: ...
+    request_json: str, real_depth: np.ndarray | None = None, grey: np.ndarray | None = None
+) -> tuple[str, np.ndarray, np.ndarray | None]:
+    """AR request (``objslam_core::ar::request``): ``(answer_json, coverage, depth)``. ``real_depth``
+    float32 (H, W) is a live frame fused with the map's depth (``grey`` uint8 (H, W): its image, for
+    the registration shift), or with ``config.live.source = "exact"`` the real depth itself."""
 def match_maps(
     prior_map_json: str, query_map_json: str, config_json: str | None = None, *, relocalise: bool = False
 ) -> dict[str, Any]:

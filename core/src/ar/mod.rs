@@ -15,7 +15,8 @@
 //! - Occlusion ([`occlusion`]): [`render_scene_depth`] rasterises the map objects and the table to
 //!   a depth image for a camera pose and intrinsics; [`occlusion_masks`] gives each registered
 //!   model's silhouette and the part of it that no real surface (and no nearer virtual model)
-//!   hides. The real depth can be any [`DepthImage`] (the map's, or a sensor's).
+//!   hides. The real depth can be any [`DepthImage`]: the map's, an exact one, or the map's
+//!   refined by a live sensor frame ([`live`]: [`fuse_live_depth`], depth-aware compositing).
 //! - Collision ([`physics`]): [`ArPhysics`] is a rapier3d world whose static colliders are the map
 //!   objects and the table and whose dynamic bodies are the virtual models;
 //!   [`ArPhysics::step_frame`] advances it by one frame (1 / `frame_rate_hz`);
@@ -33,6 +34,7 @@
 //! ([`ObjectGeometry::radius`]).
 
 pub mod interact;
+pub mod live;
 pub mod occlusion;
 pub mod physics;
 pub mod request;
@@ -42,6 +44,7 @@ use nalgebra::{Translation3, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 
 pub use interact::{pick, InteractionConfig, PickEvent};
+pub use live::{fuse_live_depth, remove_specks, DepthSource, LiveDepthConfig, LiveFusion, LiveSummary};
 pub use occlusion::{occlusion_masks, render_scene_depth, ModelMask, RenderConfig, COVER_HIDDEN, COVER_VISIBLE};
 pub use physics::{drop_to_rest, ArPhysics, BodyState, ContactTarget, DropOutcome, PhysicsConfig};
 pub use request::{run_request, ArRequest, ArResponse};
@@ -415,6 +418,8 @@ pub struct ArConfig {
     pub physics: PhysicsConfig,
     /// Pixel picking and events.
     pub interaction: InteractionConfig,
+    /// How a depth image passed with a request is used (live sensor frame or exact depth).
+    pub live: LiveDepthConfig,
 }
 
 /// The real depth as `f32` metres with "no surface" as +∞ (depth images hold 0 or NaN there).

@@ -7,8 +7,10 @@
 //!   half_extents}}`); `table`: a [`TableTop`].
 //! - `models`: [`VirtualModel`]s to register.
 //! - `camera`: `{intrinsics: {width, height, fx, fy, cx, cy}, world_from_camera: 4x4 row-major}`;
-//!   with it, the masks of the registered models are computed against the map's depth, or against
-//!   the caller's real depth image when one is passed to [`run_request`].
+//!   with it, the masks of the registered models are computed against the map's depth; when the
+//!   caller passes a depth image to [`run_request`], against the map's depth fused with it (a live
+//!   sensor frame, with its grey image for the registration shift: [`fuse_live_depth`]) or against
+//!   it alone (`config.live.source = "exact"`).
 //! - `picks`: pixels `[u, v]` to pick (needs `camera`).
 //! - `drop`: initial velocities `[vx, vy, vz]` (m/s), one per model: run [`drop_to_rest`].
 //! - `config`: an [`ArConfig`].
@@ -17,10 +19,11 @@ use nalgebra::Matrix4;
 use serde::{Deserialize, Serialize};
 
 use super::{
-    bad, drop_to_rest, occlusion_masks, pick, register, render_scene_depth, ArConfig, ArError, ArScene, DropOutcome,
-    PickEvent, RealObject, RegisteredModel, TableTop, VirtualModel,
+    bad, drop_to_rest, fuse_live_depth, occlusion_masks, pick, register, remove_specks, render_scene_depth, ArConfig,
+    ArError, ArScene, DepthSource, DropOutcome, LiveSummary, PickEvent, RealObject, RegisteredModel, TableTop,
+    VirtualModel,
 };
-use crate::frame::DepthImage;
+use crate::frame::{DepthImage, GreyImage};
 use crate::geometry::{se3_from_matrix, PinholeCamera};
 use crate::map::ObjectMap;
 
@@ -85,6 +88,8 @@ pub struct ArResponse {
     pub picks: Vec<Option<PickEvent>>,
     /// The drop's outcome, when a drop was requested.
     pub drop: Option<DropOutcome>,
+    /// What the live depth fusion found, when a live frame was passed.
+    pub live: Option<LiveSummary>,
     /// Model coverage images, `models × height × width` row-major, values 0 / 1 (hidden) / 2
     /// (visible); empty without a camera.
     #[serde(skip)]
@@ -114,9 +119,14 @@ impl ArRequest {
     }
 }
 
-/// Run a request. `real_depth` (same size as the camera; 0 = no return) replaces the map's
-/// rendered depth as the occluder of the masks.
-pub fn run_request(req: &ArRequest, real_depth: Option<DepthImage>) -> Result<ArResponse, ArError> {
+/// Run a request. `real_depth` (same size as the camera; 0 = no return) is a live sensor frame
+/// fused with the map's rendered depth (`grey`: its grey image, for the registration shift), or
+/// with `config.live.source = "exact"` the real depth used alone, as the occluder of the masks.
+pub fn run_request(
+    req: &ArRequest,
+    real_depth: Option<DepthImage>,
+    grey: Option<GreyImage>,
+) -> Result<ArResponse, ArError> {
     let scene = req.scene()?;
     let registered = register(&scene, &req.models)?;
     let mut out = ArResponse { registered, ..ArResponse::default() };
@@ -124,11 +134,26 @@ pub fn run_request(req: &ArRequest, real_depth: Option<DepthImage>) -> Result<Ar
     if let Some(cam) = &req.camera {
         let world_from_camera =
             se3_from_matrix(&Matrix4::from_fn(|r, c| cam.world_from_camera[r][c]), "camera.world_from_camera")?;
-        let depth = match real_depth {
-            Some(d) => d,
-            None => render_scene_depth(&scene, &cam.intrinsics, &world_from_camera, &cfg.render)?,
+        let depth = match (real_depth, cfg.live.source) {
+            (Some(d), DepthSource::Exact) => d,
+            (live, _) => {
+                let map_depth = render_scene_depth(&scene, &cam.intrinsics, &world_from_camera, &cfg.render)?;
+                match live {
+                    Some(live) => {
+                        let f = fuse_live_depth(&cam.intrinsics, &map_depth, &live, grey.as_ref(), &cfg.live)?;
+                        out.live = Some(f.summary);
+                        f.depth
+                    }
+                    None => map_depth,
+                }
+            }
         };
-        let masks = occlusion_masks(&out.registered, &cam.intrinsics, &world_from_camera, &depth, &cfg.render)?;
+        let mut masks = occlusion_masks(&out.registered, &cam.intrinsics, &world_from_camera, &depth, &cfg.render)?;
+        if out.live.is_some() {
+            for m in &mut masks {
+                m.visible_px -= remove_specks(&mut m.coverage, cam.intrinsics.width as usize, cfg.live.min_visible_px);
+            }
+        }
         for m in masks {
             out.coverage.extend_from_slice(&m.coverage);
             out.masks.push(MaskSummary { name: m.name, silhouette_px: m.silhouette_px, visible_px: m.visible_px });
@@ -167,7 +192,7 @@ mod tests {
             "picks": [[32.0, 24.0]],
             "drop": [[0.0, 0.0, 0.0]]
         }"#;
-        let r = run_request(&ArRequest::from_json(req).unwrap(), None).unwrap();
+        let r = run_request(&ArRequest::from_json(req).unwrap(), None, None).unwrap();
         assert_eq!(r.coverage.len(), 64 * 48);
         assert!(r.masks[0].visible_px > 0 && r.masks[0].visible_px == r.masks[0].silhouette_px);
         assert_eq!(r.picks[0].as_ref().map(|p| p.event.as_str()), Some("book_selected"));
