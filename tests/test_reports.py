@@ -61,6 +61,11 @@ def test_provenance_names_the_checked_out_commit() -> None:
     head = subprocess.run(["git", "rev-parse", "HEAD"], cwd=REPO, capture_output=True, text=True, check=True)
     p = provenance(["python", "experiments/x.py", "--set", "a=b c"], {"k": 1})
     assert p["commit"].removesuffix("-dirty") == head.stdout.strip()
+    # Dirty means changed code: a rewritten report under reports/ does not count.
+    code = subprocess.run(
+        ["git", "status", "--porcelain", "--", ".", ":(exclude)reports"], cwd=REPO, capture_output=True, text=True, check=True
+    )
+    assert p["commit"].endswith("-dirty") == bool(code.stdout.strip())
     assert p["command"] == "python experiments/x.py --set 'a=b c'"
     assert p["config"] == {"k": 1}
     assert f"{os.cpu_count()} cores" in p["machine"]

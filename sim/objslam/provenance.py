@@ -28,11 +28,12 @@ def _git(*args: str) -> str | None:
 
 def commit() -> str:
     """``git rev-parse HEAD`` of the repository, ``-dirty`` appended when ``git status --porcelain`` lists
-    anything; ``"unknown"`` outside a git checkout."""
+    anything outside ``reports/`` (the generated reports themselves, which a writer may rewrite while it
+    runs, do not make the code dirty); ``"unknown"`` outside a git checkout."""
     head = _git("rev-parse", "HEAD")
     if head is None:
         return "unknown"
-    status = _git("status", "--porcelain")
+    status = _git("status", "--porcelain", "--", ".", ":(exclude)reports")
     return head.strip() + ("-dirty" if status else "")
 
 
