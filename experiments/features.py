@@ -44,8 +44,6 @@ from typing import Any
 
 import cv2
 import numpy as np
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
 from objslam import _native
 from objslam.provenance import commit, machine, report_files
 

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import math
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -51,8 +50,7 @@ def test_pipeline_on_one_scene(tmp_path: Path) -> None:
     """One prior episode and 12 trials on hard01 (seed 0): the object method relocalises most
     6-keyframe queries within the report's thresholds, the records are complete and parallax is in
     range."""
-    sys.path.insert(0, str(REPO / "experiments"))
-    import reloc
+    import reloc  # experiments/ is on pytest's pythonpath (pyproject.toml)
 
     info, trials = reloc.scene_trials("scenes/hard/hard01.toml", 0, 0, [3, 6], None, 12)
     assert info["trials"] == 12 and info["prior_keyframes"] >= 10

@@ -18,14 +18,13 @@ Occluders per view (the virtual model and camera are the report's):
 Per view it also records the anchor's match (phantom / mesh / primitive), the true visible pixels,
 and how many of the model's pixels have no live return. Output: one JSON line per view.
 
-    python studies/ar_occlusion/diagnose.py --runs RUN_DIR ... --out runs/studies/ar_occlusion.jsonl
+    PYTHONPATH=experiments python studies/ar_occlusion/diagnose.py --runs RUN_DIR ... --out runs/studies/ar_occlusion.jsonl
 """
 
 from __future__ import annotations
 
 import argparse
 import json
-import sys
 from pathlib import Path
 from typing import Any
 
@@ -35,8 +34,7 @@ from objslam.config import load_run_config
 from objslam.scene import load_scene
 
 REPO = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(REPO / "experiments"))
-import ar
+import ar  # experiments/ar.py: run with PYTHONPATH=experiments (see the README's command)
 
 TAUS_MM = (3, 6, 10, 20)
 
