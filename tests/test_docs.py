@@ -51,3 +51,19 @@ def test_python_quick_start_runs(tmp_path, ci_overlay, monkeypatch, capsys) -> N
     assert namespace["quiet"].record.enabled is False
     out = capsys.readouterr().out
     assert "3D IoU" in out and "matched" in out
+
+
+def test_the_docs_stay_short_and_nothing_edits_the_import_path() -> None:
+    """The newcomer's docs keep their size (README at most 150 lines and 12,000 characters,
+    ARCHITECTURE at most 15,000 characters), and no Python file of the repository edits
+    ``sys.path`` (the package is installed; scripts import their neighbours as scripts do)."""
+    readme = (REPO / "README.md").read_text()
+    assert len(readme.splitlines()) <= 150 and len(readme) <= 12_000, (len(readme.splitlines()), len(readme))
+    assert len((REPO / "ARCHITECTURE.md").read_text()) <= 15_000
+    offenders = [
+        str(p.relative_to(REPO))
+        for folder in ("sim", "experiments", "tests", "studies", "scripts")
+        for p in (REPO / folder).rglob("*.py")
+        if "sys.path." + "insert" in p.read_text()
+    ]
+    assert offenders == []
