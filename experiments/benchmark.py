@@ -321,7 +321,10 @@ def write_reports(
     scenes = sorted({r["scene"] for r in ok})
     paired = paired_differences(ok, strategies)
     preset = sorted({r.get("preset") or "realistic" for r in ok})
-    workers = int((config or {}).get("workers") or (config or {}).get("sweep", {}).get("workers") or 1)
+    sweep = config or {}
+    while "sweep" in sweep and "workers" not in sweep:  # joined sweeps: the first sweep's settings
+        sweep = sweep["sweep"] or {}
+    workers = int(sweep.get("workers") or 1)
     time_use = throughput(ok, workers)
     report = {
         **provenance(command, config),
@@ -597,7 +600,7 @@ def main(argv: list[str] | None = None) -> int:
         rows.sort(key=lambda r: (r["scene"], STRATEGIES.index(r["strategy"]) if r["strategy"] in STRATEGIES else 99, r["seed"]))
         command = " + ".join([old["command"], *(e["command"] for e in extra)])
         also = {spec: e.get("config") for spec, e in zip(a.also, extra)}
-        config = {"sweep": old.get("config"), "also": also}
+        config = {"sweep": old.get("config"), "also": also} if also else old.get("config")
         write_reports(rows, Path(a.out), command, config)
         print(f"{len(rows)} episodes → {a.out}/pages/exploration.md")
         return 0
