@@ -280,9 +280,7 @@ def test_recorder_refuses_broadcast_views(tmp_path: Path) -> None:
 
 
 def _start_run(tmp_path: Path) -> subprocess.Popen:
-    cmd = [
-        sys.executable,
-        str(REPO / "experiments" / "run.py"),
+    args = [
         "--config",
         str(REPO / "experiments" / "configs" / "ci.toml"),
         "--set",
@@ -292,6 +290,16 @@ def _start_run(tmp_path: Path) -> subprocess.Popen:
         "--no-progress",
         "--no-compare",
     ]
+    # experiments/run.py as its own process. A shell starts background jobs with SIGINT ignored and
+    # Python keeps an ignored SIGINT, so the run first takes Python's default handler back: the test
+    # does not depend on how the test session was started.
+    script = str(REPO / "experiments" / "run.py")
+    boot = (
+        "import runpy, signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
+        f"sys.argv = [{script!r}, *sys.argv[1:]]; sys.path[0] = {str(Path(script).parent)!r}; "
+        f"runpy.run_path({script!r}, run_name='__main__')"
+    )
+    cmd = [sys.executable, "-c", boot, *args]
     return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=REPO)
 
 
