@@ -138,8 +138,9 @@ def paired_differences(ok: list[dict[str, Any]], strategies: list[str]) -> list[
     :func:`bootstrap_ci`, ``at = "end"`` (the final maps) and, for the metrics with an accuracy
     curve, ``at = "equal_views"`` (a's final map against b's map after as many views, b not init)."""
     out: list[dict[str, Any]] = []
+    ok = [r if r.get("split") else {**r, "split": scene_split(r["scene"])} for r in ok]
     by_key = {(r["strategy"], r["scene"], r["seed"]): r for r in ok}
-    splits = sorted({r.get("split") or scene_split(r["scene"]) for r in ok})
+    splits = sorted({r["split"] for r in ok})
     for split in [*splits, "all"] if len(splits) > 1 else splits:
         for a in strategies:
             for b in BASELINES:
@@ -149,7 +150,7 @@ def paired_differences(ok: list[dict[str, Any]], strategies: list[str]) -> list[
                     (r, by_key[(b, r["scene"], r["seed"])])
                     for r in ok
                     if r["strategy"] == a
-                    and (split == "all" or (r.get("split") or scene_split(r["scene"])) == split)
+                    and split in ("all", r["split"])
                     and (b, r["scene"], r["seed"]) in by_key
                 ]
                 for metric, has_curve in PAIRED_METRICS.items():

@@ -66,3 +66,33 @@ def test_compare_sweeps_pairs_one_strategy_with_another(tmp_path: Path) -> None:
     assert "--pair b=a" in text
     # Without --pair each strategy is paired with itself: no difference.
     assert "| a | 2 | 0.850 | 0.850 | +0.000 ± 0.000" in compare(sweep, sweep)
+
+
+def test_the_paired_bootstrap_interval_matches_scipy_and_pairs_by_scene_and_seed() -> None:
+    """``bootstrap_ci`` against scipy's percentile bootstrap of the mean (to a few thousandths at
+    10,000 resamples), and ``paired_differences`` pairs a strategy's rows with the baseline's on the
+    same scene and seed, per split and over all scenes."""
+    import numpy as np
+    from benchmark import bootstrap_ci, paired_differences
+    from scipy.stats import bootstrap
+
+    d = list(np.random.default_rng(3).normal(0.02, 0.03, size=14))
+    lo, hi = bootstrap_ci(d)
+    ref = bootstrap((np.array(d),), np.mean, n_resamples=10_000, method="percentile", random_state=0)
+    assert lo == pytest.approx(ref.confidence_interval.low, abs=3e-3)
+    assert hi == pytest.approx(ref.confidence_interval.high, abs=3e-3)
+    assert lo < np.mean(d) < hi
+
+    rows = [
+        {"strategy": s, "scene": sc, "seed": sd, "split": sp, "iou3d": v + (0.1 if s == "a" else 0.0) + 0.01 * sd,
+         "views": 5, "accuracy_curve": None}
+        for s in ("a", "random")
+        for sc, sp, v in (("hard01", "hard", 0.5), ("test01", "test", 0.6))
+        for sd in (0, 1, 2)
+    ]
+    paired = paired_differences(rows, ["a", "random"])
+    end = {p["split"]: p for p in paired if (p["a"], p["b"], p["metric"], p["at"]) == ("a", "random", "iou3d", "end")}
+    assert set(end) == {"hard", "test", "all"}
+    assert (end["hard"]["n"], end["test"]["n"], end["all"]["n"]) == (3, 3, 6)
+    for p in end.values():
+        assert p["mean_diff"] == pytest.approx(0.1) and p["ci_low"] == pytest.approx(0.1) and p["ci_high"] == pytest.approx(0.1)
