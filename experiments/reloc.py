@@ -31,6 +31,10 @@ Per scene (the realistic world, one SAPIEN process, scenes one after another):
    nearest in azimuth (where the ring has that many), binned by the base trial's parallax, with the share of true objects the query map holds
    (``observed_fraction``).
 
+Every scene's query maps, similarities and appearance estimates are kept in
+``runs/reloc/<scene>_seed<seed>.json``; ``--rematch`` takes them from there and runs only the object
+matching again (for work on the matcher).
+
 ``--reuse`` takes the prior run folders listed in the existing report when they are complete, else
 the newest complete one of the scene and seed under ``runs/`` that has ``keyframes.npz``.
 """
@@ -184,7 +188,7 @@ def scene_trials(
     max_trials: int | None,
     prior_views: int = 3,
 ) -> tuple[dict[str, Any], list[dict[str, Any]]]:
-    """Prior, pool and every trial of one scene."""
+    """Prior, query pool and every trial's query map and appearance estimate of one scene."""
     scene = load_scene(REPO / scene_path)
     prior_dir = prior_episode(scene_path, seed, reuse, prior_views)
     keyframes = dict(np.load(prior_dir / "keyframes.npz"))
@@ -221,7 +225,7 @@ def scene_trials(
         starts.append(base + rest)
     if max_trials is not None and len(starts) > max_trials:
         starts = random.Random(seed * 7919 + index).sample(starts, max_trials)
-    trials = []
+    queries = []
     t0 = time.perf_counter()
     for ti, run in enumerate(starts):
         base = run[: ks[0]]
@@ -237,26 +241,24 @@ def scene_trials(
             frames = run[:k]
             query_raw, poses = build_query_map(cfg, scene, [pool[f] for f in frames])
             ev = json.loads(_native.evaluate_map(gt_json, query_raw, None))
-            r = objslam.match_maps(prior_json, transform_map_json(query_raw, yaw, t, scale))
-            common = {
-                "scene": scene.name,
-                "trial": ti,
-                "query_keyframes": k,
-                "ring": pool[run[0]].ring,
-                "start_azimuth_deg": pool[run[0]].azimuth_deg,
-                "parallax_deg": parallax,
-                "parallax_bin": bin_of(parallax),
-                "query_objects": len(json.loads(query_raw)["objects"]),
-                "observed_fraction": ev["n_matched"] / max(1, ev["n_objects_gt"]),
-            }
-            obj = _score(np.asarray(r["matrix"]) if r["matched"] else None, truth)
-            trials.append({**common, "method": "objects", **obj, "reason": r["reason_kind"]})
             est = _estimate_appearance(frames, app, poses, truth)
-            trials.append({**common, "method": "appearance", **_score(est, truth), "reason": None})
-    print(
-        f"  trials: {len(starts)} × {ks} keyframes ({time.perf_counter() - t0:.0f} s)",
-        flush=True,
-    )
+            queries.append(
+                {
+                    "scene": scene.name,
+                    "trial": ti,
+                    "query_keyframes": k,
+                    "ring": pool[run[0]].ring,
+                    "start_azimuth_deg": pool[run[0]].azimuth_deg,
+                    "parallax_deg": parallax,
+                    "parallax_bin": bin_of(parallax),
+                    "query_objects": len(json.loads(query_raw)["objects"]),
+                    "observed_fraction": ev["n_matched"] / max(1, ev["n_objects_gt"]),
+                    "similarity": {"yaw": yaw, "translation": t, "scale": scale},
+                    "query_map": json.loads(query_raw),
+                    "appearance": None if est is None else est.tolist(),
+                }
+            )
+    print(f"  queries: {len(starts)} × {ks} keyframes ({time.perf_counter() - t0:.0f} s)", flush=True)
     info = {
         "scene": scene.name,
         "prior_run": _rel(prior_dir),
@@ -267,7 +269,24 @@ def scene_trials(
         "appearance_frames_relocalised": int(sum(a["ok"] for a in app)),
         "trials": len(starts),
     }
-    return info, trials
+    return info, queries
+
+
+def match_queries(prior_json: str, queries: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Both methods' trial records of a scene's queries: the object map matched against the prior
+    now, the appearance estimate as the query pool gave it."""
+    trials = []
+    for q in queries:
+        sim = q["similarity"]
+        truth = similarity_matrix(sim["yaw"], sim["translation"], sim["scale"])
+        common = {k: v for k, v in q.items() if k not in ("similarity", "query_map", "appearance")}
+        moved = transform_map_json(json.dumps(q["query_map"]), sim["yaw"], sim["translation"], sim["scale"])
+        r = objslam.match_maps(prior_json, moved)
+        obj = _score(np.asarray(r["matrix"]) if r["matched"] else None, truth)
+        trials.append({**common, "method": "objects", **obj, "reason": r["reason_kind"]})
+        est = None if q["appearance"] is None else np.asarray(q["appearance"], dtype=np.float64)
+        trials.append({**common, "method": "appearance", **_score(est, truth), "reason": None})
+    return trials
 
 
 def rows_of(trials: list[dict[str, Any]], k: int) -> list[dict[str, Any]]:
@@ -398,6 +417,13 @@ def main(argv: list[str] | None = None) -> int:
         action="store_true",
         help="reuse complete prior run folders (the report's, else the newest in runs/)",
     )
+    ap.add_argument(
+        "--rematch",
+        action="store_true",
+        help="take each scene's query maps and appearance estimates from runs/reloc/<scene>_seed<seed>.json "
+        "(written by every full run; the scene's record keeps the commit that made them) and run only the "
+        "object matching again",
+    )
     ap.add_argument("--out", default="reports", help="report folder")
     a = ap.parse_args(argv)
     scenes = a.scenes or [
@@ -445,9 +471,21 @@ def main(argv: list[str] | None = None) -> int:
             if name in previous
             else (_latest_prior(name, a.seed, a.prior_views) if a.reuse else None)
         )
-        info, tr = scene_trials(scene, i, a.seed, ks, reuse, a.max_trials, a.prior_views)
+        cache = REPO / "runs" / "reloc" / f"{name}_seed{a.seed}.json"
+        key = {"ks": ks, "max_trials": a.max_trials, "prior_views": a.prior_views}
+        if a.rematch and cache.exists() and json.loads(cache.read_text())["key"] == key:
+            stored = json.loads(cache.read_text())
+            info, queries = stored["info"], stored["queries"]
+            print(f"  queries: {len(queries)} from {_rel(cache)} (commit {stored['commit']})", flush=True)
+        else:
+            info, queries = scene_trials(scene, i, a.seed, ks, reuse, a.max_trials, a.prior_views)
+            info["queries_commit"] = prov["commit"]
+            cache.parent.mkdir(parents=True, exist_ok=True)
+            tmp = cache.with_suffix(".tmp")
+            tmp.write_text(json.dumps({"commit": prov["commit"], "key": key, "info": info, "queries": queries}))
+            tmp.replace(cache)
         infos.append(info)
-        trials.extend(tr)
+        trials.extend(match_queries((REPO / info["prior_run"] / "map.json").read_text(), queries))
     report = {
         **prov,
         "protocol": protocol,

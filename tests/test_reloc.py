@@ -52,7 +52,8 @@ def test_pipeline_on_one_scene(tmp_path: Path) -> None:
     range."""
     import reloc  # experiments/ is on pytest's pythonpath (pyproject.toml)
 
-    info, trials = reloc.scene_trials("scenes/hard/hard01.toml", 0, 0, [3, 6], None, 12)
+    info, queries = reloc.scene_trials("scenes/hard/hard01.toml", 0, 0, [3, 6], None, 12)
+    trials = reloc.match_queries((reloc.REPO / info["prior_run"] / "map.json").read_text(), queries)
     assert info["trials"] == 12 and info["prior_keyframes"] >= 10
     assert {t["method"] for t in trials} == {"objects", "appearance"}
     assert all(0.0 <= t["parallax_deg"] <= 180.0 for t in trials)
