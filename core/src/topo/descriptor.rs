@@ -8,6 +8,30 @@ use serde::{Deserialize, Serialize};
 use super::graph::TopoMap;
 use crate::map::Label;
 
+/// How two objects' labels are compared: in the matcher's candidate gate and in every walk step.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum LabelMatch {
+    /// The paper: equal labels.
+    Exact,
+    /// Beyond the paper, default: equal primitive ([`Label::shape`], the paper's cuboid-like and
+    /// cylinder-like classes). A detector confuses look-alikes of one shape (book and block, can and
+    /// bottle, cup and bowl) from some viewing directions, and a map seen from a few views keeps the
+    /// label those views gave; geometry (sizes, distances, angles, the pose solve) separates the rest.
+    #[default]
+    Shape,
+}
+
+impl LabelMatch {
+    /// Whether labels `a` and `b` agree.
+    pub fn agree(self, a: Label, b: Label) -> bool {
+        match self {
+            LabelMatch::Exact => a == b,
+            LabelMatch::Shape => a.shape() == b.shape(),
+        }
+    }
+}
+
 /// Descriptor generation and comparison settings.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -30,6 +54,9 @@ pub struct DescriptorConfig {
     pub distance_tolerance_rel: f64,
     /// Tolerance on the angle between consecutive edges, radians. Default 0.35 (20°).
     pub angle_tolerance_rad: f64,
+    /// How labels are compared (here and in the matcher's candidate gate). Default
+    /// [`LabelMatch::Shape`]; the paper: [`LabelMatch::Exact`].
+    pub label_match: LabelMatch,
 }
 
 impl Default for DescriptorConfig {
@@ -42,6 +69,7 @@ impl Default for DescriptorConfig {
             distance_tolerance: 0.04,
             distance_tolerance_rel: 0.15,
             angle_tolerance_rad: 0.35,
+            label_match: LabelMatch::default(),
         }
     }
 }
@@ -167,7 +195,8 @@ impl DescriptorSet {
 }
 
 /// Number of leading steps of `query` that agree with `prior` under the scale `scale`
-/// (query units per prior unit): same label, size, distance and (from the second step) angle.
+/// (query units per prior unit): agreeing labels (`label_match`), size, distance and (from the second
+/// step) angle.
 fn matched_prefix(prior: &[WalkStep], query: &[WalkStep], scale: f64, config: &DescriptorConfig) -> usize {
     let angle_tolerance_cos = config.angle_tolerance_rad.min(std::f64::consts::PI).cos();
     let mut k = 0;
@@ -177,7 +206,7 @@ fn matched_prefix(prior: &[WalkStep], query: &[WalkStep], scale: f64, config: &D
             <= config.distance_tolerance + config.distance_tolerance_rel * p.distance;
         // |α_q − α_p| ≤ tol  ⇔  cos(α_q − α_p) ≥ cos(tol), both angles in [0, π].
         let angle_ok = k == 0 || q.angle_cos * p.angle_cos + q.angle_sin * p.angle_sin >= angle_tolerance_cos;
-        if p.label != q.label || !size_ok || !dist_ok || !angle_ok {
+        if !config.label_match.agree(p.label, q.label) || !size_ok || !dist_ok || !angle_ok {
             break;
         }
         k += 1;

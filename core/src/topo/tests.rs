@@ -93,7 +93,9 @@ fn exact_copy_under_yaw_similarity_is_recovered_to_1e_6() {
     assert_eq!(m.inliers.len(), 9);
     assert!(m.inliers.iter().all(|p| p.prior == p.query));
     assert!(m.rms_residual < 1e-6);
-    assert!(m.confidence > 0.9, "{}", m.confidence);
+    // Sizes gate only gross mismatches by default, so hypotheses that pair look-alikes of one
+    // primitive explain a few objects too and the distinctiveness stays below 1.
+    assert!(m.confidence > 0.8, "{}", m.confidence);
 }
 
 #[test]
@@ -122,7 +124,11 @@ fn all_distinct_labels_stop_after_the_first_iteration() {
     // Query: a noisy subset (6 of 8) of the prior, transformed.
     let subset: Vec<TopoNode> = prior[1..7].to_vec();
     let query = transformed(&noisy(&subset, 5, 0.003, 0.02), &truth);
-    let m = expect_match(&match_maps(&prior, &query, &MatchConfig::default())).clone();
+    // Distinct labels under the paper's exact label comparison (under the default shape comparison,
+    // eight labels are two classes).
+    let exact = DescriptorConfig { label_match: LabelMatch::Exact, ..DescriptorConfig::default() };
+    let config = MatchConfig { descriptor: exact, ..MatchConfig::default() };
+    let m = expect_match(&match_maps(&prior, &query, &config)).clone();
     assert_eq!(m.stats.iterations, 1, "{:?}", m.stats);
     assert_eq!(m.inliers.len(), 6);
     assert!(m.inliers.iter().all(|p| p.prior == p.query + 1));
@@ -458,7 +464,9 @@ fn robust_fuse_discounts_one_badly_estimated_extent() {
             }
         })
         .collect();
-    let noise = NoiseModel::default();
+    // Sizes trusted to 5 % (the default trusts them to 30 %, and one bad extent then barely moves
+    // the scale at all).
+    let noise = NoiseModel { size_rel: 0.05, ..NoiseModel::default() };
     let scale_err = |kernel| {
         let t = robust_fuse(&truth, &cues, &noise, false, kernel, 2.0, 10).expect("none");
         (t.scaling() / truth.scaling() - 1.0).abs()
@@ -467,4 +475,34 @@ fn robust_fuse_discounts_one_badly_estimated_extent() {
         (scale_err(RobustKernel::None), scale_err(RobustKernel::Huber), scale_err(RobustKernel::Cauchy));
     assert!(ls > 0.005, "the outlier extent biases least squares: {ls}");
     assert!(huber < 0.5 * ls && cauchy < 0.5 * ls, "ls {ls} huber {huber} cauchy {cauchy}");
+}
+
+#[test]
+fn look_alike_labels_match_under_the_shape_comparison() {
+    // The query's detector called two objects by a look-alike label of the same primitive (book ->
+    // block, can -> bottle) and one by a label of another primitive (cup -> block).
+    let prior = layout(21, 8, &Label::ALL);
+    let truth = yaw_transform();
+    let mut query = transformed(&noisy(&prior, 6, 0.003, 0.02), &truth);
+    let relabel = |q: &mut Vec<TopoNode>, from: Label, to: Label| {
+        if let Some(n) = q.iter_mut().find(|n| n.label == from) {
+            n.label = to;
+        }
+    };
+    relabel(&mut query, Label::Book, Label::Block);
+    relabel(&mut query, Label::Can, Label::Bottle);
+    relabel(&mut query, Label::Cup, Label::Block);
+    let shape = expect_match(&match_maps(&prior, &query, &MatchConfig::default())).clone();
+    let exact_desc = DescriptorConfig { label_match: LabelMatch::Exact, ..DescriptorConfig::default() };
+    let exact = MatchConfig { descriptor: exact_desc, ..MatchConfig::default() };
+    let paper = expect_match(&match_maps(&prior, &query, &exact)).clone();
+    // Shape comparison: the look-alikes of one primitive are matched, the cup called a block is not.
+    assert_eq!(shape.inliers.len(), 7, "{:?}", shape.inliers);
+    assert!(shape.inliers.iter().all(|p| p.prior == p.query));
+    // Exact comparison: only the five objects with their own label.
+    assert_eq!(paper.inliers.len(), 5, "{:?}", paper.inliers);
+    for m in [&shape, &paper] {
+        let angle = m.rotation().angle_to(&truth.isometry.rotation).to_degrees();
+        assert!(angle < 2.0, "{angle}");
+    }
 }
