@@ -12,7 +12,8 @@
 //! The scene is `scenes/scene03.toml`'s layout written out (books, cans, bottle, cup, block on a
 //! 0.8 × 1.2 m table); the camera is the simulator's hand camera (58° vertical field of view)
 //! 0.45 m above the table looking down at 35° from vertical.
-//! `ar_stage/*` time the stages alone.
+//! `ar_stage/*` time the stages alone (the fusion stages on a fresh copy of the map's depth, which
+//! the fusion refines in place).
 //! Run: `cargo bench -p objslam-core --bench ar -- --warm-up-time 1 --measurement-time 3`.
 
 // `criterion_group!` generates an undocumented public function.
