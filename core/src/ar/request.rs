@@ -140,7 +140,7 @@ pub fn run_request(
                 let map_depth = render_scene_depth(&scene, &cam.intrinsics, &world_from_camera, &cfg.render)?;
                 match live {
                     Some(live) => {
-                        let f = fuse_live_depth(&cam.intrinsics, &map_depth, &live, grey.as_ref(), &cfg.live)?;
+                        let f = fuse_live_depth(&cam.intrinsics, map_depth, &live, grey.as_ref(), &cfg.live)?;
                         out.live = Some(f.summary);
                         f.depth
                     }
