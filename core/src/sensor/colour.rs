@@ -158,35 +158,47 @@ fn blur(cfg: &ColourConfig, unit: &SensorUnit, frame: &RenderedFrame<'_>, m: &Ma
     let packed: Vec<u64> =
         src.chunks_exact(3).map(|p| p[0] as u64 | (p[1] as u64) << 16 | (p[2] as u64) << 32).collect();
     let recip: Vec<u64> = (0..=64u64).map(|n| (1u64 << 32).checked_div(n).map_or(0, |q| q + 1)).collect();
-    let rot = m.fixed_view::<3, 3>(0, 0).into_owned();
-    let t = m.fixed_view::<3, 1>(0, 3).into_owned();
+    // Tap spacing as a share of the path, per tap count.
+    let step_of: Vec<f64> = (0..=64usize).map(|n| 1.0 / n.saturating_sub(1).max(1) as f64).collect();
+    let (r00, r01, r02) = (m[(0, 0)], m[(0, 1)], m[(0, 2)]);
+    let (r10, r11, r12) = (m[(1, 0)], m[(1, 1)], m[(1, 2)]);
+    let (r20, r21, r22) = (m[(2, 0)], m[(2, 1)], m[(2, 2)]);
+    let (tx, ty, tz) = (m[(0, 3)], m[(1, 3)], m[(2, 3)]);
     // Ray direction (x / z, y / z, 1) of each pixel centre, rotated: r = rot · (ax, ay, 1).
     let ax: Vec<f64> = (0..w).map(|x| (x as f64 + 0.5 - k.cx) / k.fx).collect();
     let (wi, hi) = (w as i64 - 1, h as i64 - 1);
+    // Per pixel of a row: depth along the ray, image motion (du, dv) and the projected depth.
+    let (mut zs, mut dus, mut dvs, mut qzs) = (vec![0.0f64; w], vec![0.0f64; w], vec![0.0f64; w], vec![0.0f64; w]);
     for y in 0..h {
         let ay = (y as f64 + 0.5 - k.cy) / k.fy;
-        let row_part = rot.column(1) * ay + rot.column(2);
-        for (x, &ax_x) in ax.iter().enumerate() {
-            let i = y * w + x;
-            let zp = pts[3 * i + 2] as f64;
-            let z = if zp.is_finite() && zp > 0.0 { zp } else { FAR_M };
-            let r = rot.column(0) * ax_x + row_part;
-            let qz = z * r.z + t.z;
-            if qz <= 1e-6 {
-                out[3 * i..3 * i + 3].copy_from_slice(&src[3 * i..3 * i + 3]);
-                continue;
-            }
+        let (px, py, pz) = (r01 * ay + r02, r11 * ay + r12, r21 * ay + r22);
+        // The motion of every pixel of the row first (no branches: the divisions pipeline), then
+        // its taps.
+        for (zo, p) in zs.iter_mut().zip(pts[3 * y * w..3 * (y + 1) * w].chunks_exact(3)) {
+            let zp = p[2] as f64;
+            *zo = if zp.is_finite() && zp > 0.0 { zp } else { FAR_M };
+        }
+        for ((((&z, &ax_x), du), dv), qzo) in zs.iter().zip(&ax).zip(&mut dus).zip(&mut dvs).zip(&mut qzs) {
+            let (rx, ry, rz) = (r00 * ax_x + px, r10 * ax_x + py, r20 * ax_x + pz);
+            let qz = z * rz + tz;
             let inv = 1.0 / qz;
-            let du = k.fx * ((z * r.x + t.x) * inv - ax_x);
-            let dv = k.fy * ((z * r.y + t.y) * inv - ay);
+            *du = k.fx * ((z * rx + tx) * inv - ax_x);
+            *dv = k.fy * ((z * ry + ty) * inv - ay);
+            *qzo = qz;
+        }
+        let row_out = &mut out[3 * y * w..3 * (y + 1) * w];
+        let row_src = &src[3 * y * w..3 * (y + 1) * w];
+        for (x, (((o, s), (&du, &dv)), &qz)) in
+            row_out.chunks_exact_mut(3).zip(row_src.chunks_exact(3)).zip(dus.iter().zip(&dvs)).zip(&qzs).enumerate()
+        {
             let len_sq = du * du + dv * dv;
-            if len_sq < 0.25 {
-                out[3 * i..3 * i + 3].copy_from_slice(&src[3 * i..3 * i + 3]);
+            if qz <= 1e-6 || len_sq < 0.25 {
+                o.copy_from_slice(s);
                 continue;
             }
             let taps = ((len_sq.sqrt() as usize) + 2).min(cfg.max_blur_taps).max(2);
             // Fixed point 16.16 along the path from −½ to +½ of the motion, centred on the pixel.
-            let step = 1.0 / (taps - 1) as f64;
+            let step = step_of[taps];
             let (mut fx, mut fy) =
                 (((x as f64 + 0.5 - 0.5 * du) * 65536.0) as i64, ((y as f64 + 0.5 - 0.5 * dv) * 65536.0) as i64);
             let (sx, sy) = ((du * step * 65536.0) as i64, (dv * step * 65536.0) as i64);
@@ -208,9 +220,9 @@ fn blur(cfg: &ColourConfig, unit: &SensorUnit, frame: &RenderedFrame<'_>, m: &Ma
                 }
             }
             let (n, rc) = (taps as u32, recip[taps]);
-            out[3 * i] = div_round((acc & 0xFFFF) as u32, n, rc);
-            out[3 * i + 1] = div_round((acc >> 16 & 0xFFFF) as u32, n, rc);
-            out[3 * i + 2] = div_round((acc >> 32 & 0xFFFF) as u32, n, rc);
+            o[0] = div_round((acc & 0xFFFF) as u32, n, rc);
+            o[1] = div_round((acc >> 16 & 0xFFFF) as u32, n, rc);
+            o[2] = div_round((acc >> 32 & 0xFFFF) as u32, n, rc);
         }
     }
     out
