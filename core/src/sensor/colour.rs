@@ -167,50 +167,65 @@ fn blur(cfg: &ColourConfig, unit: &SensorUnit, frame: &RenderedFrame<'_>, m: &Ma
     // Ray direction (x / z, y / z, 1) of each pixel centre, rotated: r = rot · (ax, ay, 1).
     let ax: Vec<f64> = (0..w).map(|x| (x as f64 + 0.5 - k.cx) / k.fx).collect();
     let (wi, hi) = (w as i64 - 1, h as i64 - 1);
-    // Per pixel of a row: depth along the ray, image motion (du, dv) and the projected depth.
-    let (mut zs, mut dus, mut dvs, mut qzs) = (vec![0.0f64; w], vec![0.0f64; w], vec![0.0f64; w], vec![0.0f64; w]);
+    // Per pixel of a row: depth along the ray, image motion (du, dv), its squared length and
+    // length, the projected depth and the path's start in pixels × 2^16.
+    let mut zs = vec![0.0f64; w];
+    let [mut dus, mut dvs, mut len_sqs, mut lens, mut qzs, mut start_xs, mut start_ys] =
+        [(); 7].map(|_| vec![0.0f64; w]);
     for y in 0..h {
         let ay = (y as f64 + 0.5 - k.cy) / k.fy;
         let (px, py, pz) = (r01 * ay + r02, r11 * ay + r12, r21 * ay + r22);
-        // The motion of every pixel of the row first (no branches: the divisions pipeline), then
-        // its taps.
+        // The motion of every pixel of the row first (no branches: the divisions and square roots
+        // run on two pixels at a time), then its taps.
         for (zo, p) in zs.iter_mut().zip(pts[3 * y * w..3 * (y + 1) * w].chunks_exact(3)) {
             let zp = p[2] as f64;
             *zo = if zp.is_finite() && zp > 0.0 { zp } else { FAR_M };
         }
-        for ((((&z, &ax_x), du), dv), qzo) in zs.iter().zip(&ax).zip(&mut dus).zip(&mut dvs).zip(&mut qzs) {
+        for x in 0..w {
+            let (z, ax_x) = (zs[x], ax[x]);
             let (rx, ry, rz) = (r00 * ax_x + px, r10 * ax_x + py, r20 * ax_x + pz);
             let qz = z * rz + tz;
             let inv = 1.0 / qz;
-            *du = k.fx * ((z * rx + tx) * inv - ax_x);
-            *dv = k.fy * ((z * ry + ty) * inv - ay);
-            *qzo = qz;
+            let du = k.fx * ((z * rx + tx) * inv - ax_x);
+            let dv = k.fy * ((z * ry + ty) * inv - ay);
+            let len_sq = du * du + dv * dv;
+            (dus[x], dvs[x], len_sqs[x], lens[x], qzs[x]) = (du, dv, len_sq, len_sq.sqrt(), qz);
+            start_xs[x] = (x as f64 + 0.5 - 0.5 * du) * 65536.0;
+            start_ys[x] = (y as f64 + 0.5 - 0.5 * dv) * 65536.0;
         }
         let row_out = &mut out[3 * y * w..3 * (y + 1) * w];
         let row_src = &src[3 * y * w..3 * (y + 1) * w];
-        for (x, (((o, s), (&du, &dv)), &qz)) in
-            row_out.chunks_exact_mut(3).zip(row_src.chunks_exact(3)).zip(dus.iter().zip(&dvs)).zip(&qzs).enumerate()
-        {
-            let len_sq = du * du + dv * dv;
-            if qz <= 1e-6 || len_sq < 0.25 {
+        for (x, (o, s)) in row_out.chunks_exact_mut(3).zip(row_src.chunks_exact(3)).enumerate() {
+            // Under half a pixel, or the surface behind the moved camera: the pixel stays.
+            if qzs[x] <= 1e-6 || len_sqs[x] < 0.25 {
                 o.copy_from_slice(s);
                 continue;
             }
-            let taps = ((len_sq.sqrt() as usize) + 2).min(cfg.max_blur_taps).max(2);
+            // Whole pixels of the path's length (a NaN length counts as 0).
+            let whole = if lens[x] >= 64.0 { 64 } else { lens[x] as i32 as usize };
+            let taps = (whole + 2).min(cfg.max_blur_taps).max(2);
             // Fixed point 16.16 along the path from −½ to +½ of the motion, centred on the pixel.
             let step = step_of[taps];
-            let (mut fx, mut fy) =
-                (((x as f64 + 0.5 - 0.5 * du) * 65536.0) as i64, ((y as f64 + 0.5 - 0.5 * dv) * 65536.0) as i64);
-            let (sx, sy) = ((du * step * 65536.0) as i64, (dv * step * 65536.0) as i64);
+            let (mut fx, mut fy) = (start_xs[x] as i64, start_ys[x] as i64);
+            let (sx, sy) = ((dus[x] * step * 65536.0) as i64, (dvs[x] * step * 65536.0) as i64);
             let mut acc = 0u64;
-            // The path is a line: inside the image at both ends means inside throughout.
+            // The path is a line: inside the image at both ends means inside throughout; on one
+            // row at both ends, on that row throughout.
             let (ex, ey) = (fx + (taps as i64 - 1) * sx, fy + (taps as i64 - 1) * sy);
             let inside = |a: i64, b: i64, hi: i64| (0..=hi).contains(&(a >> 16)) && (0..=hi).contains(&(b >> 16));
             if inside(fx, ex, wi) && inside(fy, ey, hi) {
-                for _ in 0..taps {
-                    acc += packed[(fy >> 16) as usize * w + (fx >> 16) as usize];
-                    fx += sx;
-                    fy += sy;
+                if fy >> 16 == ey >> 16 {
+                    let row = &packed[(fy >> 16) as usize * w..][..w];
+                    for _ in 0..taps {
+                        acc += row[(fx >> 16) as usize];
+                        fx += sx;
+                    }
+                } else {
+                    for _ in 0..taps {
+                        acc += packed[(fy >> 16) as usize * w + (fx >> 16) as usize];
+                        fx += sx;
+                        fy += sy;
+                    }
                 }
             } else {
                 for _ in 0..taps {

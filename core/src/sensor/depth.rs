@@ -287,36 +287,47 @@ pub fn stereo_depth(
     }
     // 4. Mixed depths at silhouettes, from the true depths of the neighbourhood (min / max over
     // the (2 band + 1)² window, valid depths only: along rows, then across them per output row).
+    // The row minima and maxima live in a ring of 2 band + 1 rows, each computed before its row
+    // takes mixed depths.
     let band = cfg.mixed_band_px;
     if band > 0 && cfg.mixed_fraction > 0.0 && h > 0 {
         let mut rng = SplitMix64::new(seed, &[TAG_DEPTH, frame_index, SUB_MIXED]);
-        let (mut row_lo, mut row_hi) = (vec![0.0f32; n], vec![0.0f32; n]);
+        let ring = 2 * band + 1;
+        let (mut ring_lo, mut ring_hi) = (vec![0.0f32; ring * w], vec![0.0f32; ring * w]);
         let mut pad = Vec::with_capacity(w + 2 * band);
-        for y in 0..h {
-            let r = y * w..(y + 1) * w;
-            row_min_max(&z[r.clone()], band, &mut pad, &mut row_lo[r.clone()], &mut row_hi[r]);
+        let mut row_extrema = |yy: usize, z: &[f32], ring_lo: &mut [f32], ring_hi: &mut [f32]| {
+            let r = (yy % ring) * w..(yy % ring + 1) * w;
+            row_min_max(&z[yy * w..(yy + 1) * w], band, &mut pad, &mut ring_lo[r.clone()], &mut ring_hi[r]);
+        };
+        for yy in 0..band.min(h) {
+            row_extrema(yy, &z, &mut ring_lo, &mut ring_hi);
         }
         let (mut lo, mut hi) = (vec![0.0f32; w], vec![0.0f32; w]);
+        let mut edge = vec![false; w];
+        let (jump_m, jump_rel) = (cfg.edge_jump_m, cfg.edge_jump_rel);
         for y in 0..h {
+            if y + band < h {
+                row_extrema(y + band, &z, &mut ring_lo, &mut ring_hi);
+            }
             let (y0, y1) = (y.saturating_sub(band), (y + band + 1).min(h));
-            lo.copy_from_slice(&row_lo[y0 * w..(y0 + 1) * w]);
-            hi.copy_from_slice(&row_hi[y0 * w..(y0 + 1) * w]);
+            let row = |yy: usize| (yy % ring) * w..(yy % ring + 1) * w;
+            lo.copy_from_slice(&ring_lo[row(y0)]);
+            hi.copy_from_slice(&ring_hi[row(y0)]);
             for yy in y0 + 1..y1 {
-                for (o, v) in lo.iter_mut().zip(&row_lo[yy * w..(yy + 1) * w]) {
+                for (o, v) in lo.iter_mut().zip(&ring_lo[row(yy)]) {
                     *o = o.min(*v);
                 }
-                for (o, v) in hi.iter_mut().zip(&row_hi[yy * w..(yy + 1) * w]) {
+                for (o, v) in hi.iter_mut().zip(&ring_hi[row(yy)]) {
                     *o = o.max(*v);
                 }
             }
+            // Silhouette pixels of the row first (no branches), then the draws at them, in order.
+            for (((e, st), &l), &u) in edge.iter_mut().zip(&state[y * w..(y + 1) * w]).zip(&lo).zip(&hi) {
+                *e = (*st == OK) & (((u - l) as f64) > jump_m + jump_rel * l as f64);
+            }
             let zr = &mut z[y * w..(y + 1) * w];
-            for (((zv, st), &l), &u) in zr.iter_mut().zip(&state[y * w..(y + 1) * w]).zip(&lo).zip(&hi) {
-                if *st != OK {
-                    continue;
-                }
-                if ((u - l) as f64) > cfg.edge_jump_m + cfg.edge_jump_rel * l as f64
-                    && rng.uniform() < cfg.mixed_fraction
-                {
+            for (((zv, &e), &l), &u) in zr.iter_mut().zip(&edge).zip(&lo).zip(&hi) {
+                if e && rng.uniform() < cfg.mixed_fraction {
                     *zv = l + (rng.uniform() as f32) * (u - l);
                     stats.mixed += 1;
                 }
