@@ -227,31 +227,38 @@ pub fn stereo_depth(
     let fb = unit.colour_true.fx * cfg.baseline_m;
     let (c0, c1) = (cfg.grazing_start_deg.to_radians().cos(), cfg.grazing_end_deg.to_radians().cos());
     let c0_sq = (c0 * c0) as f32;
+    // Per pixel of a row: the right-image coordinate and the squared cosine of incidence where a
+    // grazing dropout is possible (NaN elsewhere).
+    let (mut right_x, mut cos_sq) = (vec![0.0f64; w], vec![0.0f32; w]);
     for y in 0..h {
         let zr = &mut z[y * w..(y + 1) * w];
         let sr = &mut state[y * w..(y + 1) * w];
         let pr = &pts[3 * y * w..3 * (y + 1) * w];
         for ((zv, st), p) in zr.iter_mut().zip(sr.iter_mut()).zip(pr.chunks_exact(3)) {
             let v = p[2];
-            if v.is_finite() && v > 0.0 {
-                *zv = v;
-                stats.surface += 1;
-                let zi = v as f64;
-                if zi < cfg.min_range_m || zi > cfg.max_range_m {
-                    *st = RANGE;
-                    stats.out_of_range += 1;
-                }
+            let surface = v.is_finite() && v > 0.0;
+            let zi = v as f64;
+            let out = surface && (zi < cfg.min_range_m || zi > cfg.max_range_m);
+            *zv = if surface { v } else { 0.0 };
+            *st = if !surface {
+                NONE
+            } else if out {
+                RANGE
             } else {
-                *st = NONE;
-            }
+                OK
+            };
+            stats.surface += usize::from(surface);
+            stats.out_of_range += usize::from(out);
         }
         if cfg.shadow {
+            for (x, (r, zv)) in right_x.iter_mut().zip(zr.iter()).enumerate() {
+                *r = x as f64 - fb / *zv as f64;
+            }
             let mut m = f64::INFINITY;
-            for (x, (st, zv)) in sr.iter_mut().zip(zr.iter()).enumerate().rev() {
+            for (st, &r) in sr.iter_mut().zip(&right_x).rev() {
                 if *st == NONE {
                     continue;
                 }
-                let r = x as f64 - fb / *zv as f64;
                 if r > m + 1e-3 {
                     if *st == OK {
                         *st = SHADOW;
@@ -262,21 +269,19 @@ pub fn stereo_depth(
                 }
             }
         }
+        // Incidence of the whole row first (no branches), then the draws where it is grazing.
         let nr = &nrm[3 * y * w..3 * (y + 1) * w];
-        for ((st, p), nv) in sr.iter_mut().zip(pr.chunks_exact(3)).zip(nr.chunks_exact(3)) {
-            if *st != OK {
-                continue;
-            }
+        for (((c, st), p), nv) in cos_sq.iter_mut().zip(sr.iter()).zip(pr.chunks_exact(3)).zip(nr.chunks_exact(3)) {
             let (px, py, pz) = (p[0], p[1], p[2]);
             let (nx, ny, nz) = (nv[0], nv[1], nv[2]);
             let dot = px * nx + py * ny + pz * nz;
             let denom = (px * px + py * py + pz * pz) * (nx * nx + ny * ny + nz * nz);
-            if denom.is_nan() || denom <= 0.0 || denom.is_infinite() {
-                continue;
-            }
-            let cos_sq = dot * dot / denom;
-            if cos_sq < c0_sq {
-                let cos = (cos_sq as f64).sqrt();
+            let usable = *st == OK && denom > 0.0 && denom.is_finite();
+            *c = if usable { dot * dot / denom } else { f32::NAN };
+        }
+        for (st, &c) in sr.iter_mut().zip(&cos_sq) {
+            if c < c0_sq {
+                let cos = (c as f64).sqrt();
                 let p_drop = ((c0 - cos) / (c0 - c1)).clamp(0.0, 1.0);
                 if rng.uniform() < p_drop {
                     *st = GRAZING;
