@@ -69,17 +69,30 @@ pub fn colour_image(
         _ => src.to_vec(),
     };
     if cfg.shot_gain > 0.0 || cfg.read_noise > 0.0 {
-        let sigma: Vec<f32> =
-            (0..256).map(|i| (cfg.shot_gain * i as f64 + cfg.read_noise * cfg.read_noise).sqrt() as f32).collect();
+        let mut sigma = [0.0f32; 256];
+        for (i, s) in sigma.iter_mut().enumerate() {
+            *s = (cfg.shot_gain * i as f64 + cfg.read_noise * cfg.read_noise).sqrt() as f32;
+        }
         let table = normal_table();
         let mut rng = SplitMix64::new(seed, &[TAG_COLOUR, frame_index]);
-        for chunk in out[..3 * w * h].chunks_mut(5) {
-            let mut r = rng.next_u64();
-            for v in chunk {
-                let g = table[(r & 0xFFF) as usize];
-                r >>= 12;
-                let x = *v as f32 + sigma[*v as usize] * g + 0.5;
-                *v = x.clamp(0.0, 255.0) as u8;
+        // Five 12-bit quantile indices per 64-bit draw.
+        let noisy = |v: &mut u8, r: u64| {
+            let g = table[(r & 0xFFF) as usize];
+            let x = *v as f32 + sigma[*v as usize] * g + 0.5;
+            *v = x.clamp(0.0, 255.0) as u8;
+        };
+        let mut chunks = out[..3 * w * h].chunks_exact_mut(5);
+        for chunk in &mut chunks {
+            let r = rng.next_u64();
+            for (k, v) in chunk.iter_mut().enumerate() {
+                noisy(v, r >> (12 * k));
+            }
+        }
+        let rest = chunks.into_remainder();
+        if !rest.is_empty() {
+            let r = rng.next_u64();
+            for (k, v) in rest.iter_mut().enumerate() {
+                noisy(v, r >> (12 * k));
             }
         }
     }
@@ -87,12 +100,16 @@ pub fn colour_image(
 }
 
 /// Standard normal quantiles of the 4096 midpoints `(i + ½) / 4096`, rescaled to unit variance.
-fn normal_table() -> &'static [f32] {
-    static TABLE: OnceLock<Vec<f32>> = OnceLock::new();
+fn normal_table() -> &'static [f32; 4096] {
+    static TABLE: OnceLock<[f32; 4096]> = OnceLock::new();
     TABLE.get_or_init(|| {
         let q: Vec<f64> = (0..4096).map(|i| inverse_normal_cdf((i as f64 + 0.5) / 4096.0)).collect();
         let sd = (q.iter().map(|v| v * v).sum::<f64>() / q.len() as f64).sqrt();
-        q.iter().map(|v| (v / sd) as f32).collect()
+        let mut table = [0.0f32; 4096];
+        for (t, v) in table.iter_mut().zip(&q) {
+            *t = (v / sd) as f32;
+        }
+        table
     })
 }
 
