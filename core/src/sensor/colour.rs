@@ -69,17 +69,30 @@ pub fn colour_image(
         _ => src.to_vec(),
     };
     if cfg.shot_gain > 0.0 || cfg.read_noise > 0.0 {
-        let sigma: Vec<f32> =
-            (0..256).map(|i| (cfg.shot_gain * i as f64 + cfg.read_noise * cfg.read_noise).sqrt() as f32).collect();
+        let mut sigma = [0.0f32; 256];
+        for (i, s) in sigma.iter_mut().enumerate() {
+            *s = (cfg.shot_gain * i as f64 + cfg.read_noise * cfg.read_noise).sqrt() as f32;
+        }
         let table = normal_table();
         let mut rng = SplitMix64::new(seed, &[TAG_COLOUR, frame_index]);
-        for chunk in out[..3 * w * h].chunks_mut(5) {
-            let mut r = rng.next_u64();
-            for v in chunk {
-                let g = table[(r & 0xFFF) as usize];
-                r >>= 12;
-                let x = *v as f32 + sigma[*v as usize] * g + 0.5;
-                *v = x.clamp(0.0, 255.0) as u8;
+        // Five 12-bit quantile indices per 64-bit draw.
+        let noisy = |v: &mut u8, r: u64| {
+            let g = table[(r & 0xFFF) as usize];
+            let x = *v as f32 + sigma[*v as usize] * g + 0.5;
+            *v = x.clamp(0.0, 255.0) as u8;
+        };
+        let mut chunks = out[..3 * w * h].chunks_exact_mut(5);
+        for chunk in &mut chunks {
+            let r = rng.next_u64();
+            for (k, v) in chunk.iter_mut().enumerate() {
+                noisy(v, r >> (12 * k));
+            }
+        }
+        let rest = chunks.into_remainder();
+        if !rest.is_empty() {
+            let r = rng.next_u64();
+            for (k, v) in rest.iter_mut().enumerate() {
+                noisy(v, r >> (12 * k));
             }
         }
     }
@@ -87,12 +100,16 @@ pub fn colour_image(
 }
 
 /// Standard normal quantiles of the 4096 midpoints `(i + ½) / 4096`, rescaled to unit variance.
-fn normal_table() -> &'static [f32] {
-    static TABLE: OnceLock<Vec<f32>> = OnceLock::new();
+fn normal_table() -> &'static [f32; 4096] {
+    static TABLE: OnceLock<[f32; 4096]> = OnceLock::new();
     TABLE.get_or_init(|| {
         let q: Vec<f64> = (0..4096).map(|i| inverse_normal_cdf((i as f64 + 0.5) / 4096.0)).collect();
         let sd = (q.iter().map(|v| v * v).sum::<f64>() / q.len() as f64).sqrt();
-        q.iter().map(|v| (v / sd) as f32).collect()
+        let mut table = [0.0f32; 4096];
+        for (t, v) in table.iter_mut().zip(&q) {
+            *t = (v / sd) as f32;
+        }
+        table
     })
 }
 
@@ -158,47 +175,74 @@ fn blur(cfg: &ColourConfig, unit: &SensorUnit, frame: &RenderedFrame<'_>, m: &Ma
     let packed: Vec<u64> =
         src.chunks_exact(3).map(|p| p[0] as u64 | (p[1] as u64) << 16 | (p[2] as u64) << 32).collect();
     let recip: Vec<u64> = (0..=64u64).map(|n| (1u64 << 32).checked_div(n).map_or(0, |q| q + 1)).collect();
-    let rot = m.fixed_view::<3, 3>(0, 0).into_owned();
-    let t = m.fixed_view::<3, 1>(0, 3).into_owned();
+    // Tap spacing as a share of the path, per tap count.
+    let step_of: Vec<f64> = (0..=64usize).map(|n| 1.0 / n.saturating_sub(1).max(1) as f64).collect();
+    let (r00, r01, r02) = (m[(0, 0)], m[(0, 1)], m[(0, 2)]);
+    let (r10, r11, r12) = (m[(1, 0)], m[(1, 1)], m[(1, 2)]);
+    let (r20, r21, r22) = (m[(2, 0)], m[(2, 1)], m[(2, 2)]);
+    let (tx, ty, tz) = (m[(0, 3)], m[(1, 3)], m[(2, 3)]);
     // Ray direction (x / z, y / z, 1) of each pixel centre, rotated: r = rot · (ax, ay, 1).
     let ax: Vec<f64> = (0..w).map(|x| (x as f64 + 0.5 - k.cx) / k.fx).collect();
     let (wi, hi) = (w as i64 - 1, h as i64 - 1);
+    // Per pixel of a row: depth along the ray, image motion (du, dv), its squared length and
+    // length, the projected depth and the path's start in pixels × 2^16.
+    let mut zs = vec![0.0f64; w];
+    let [mut dus, mut dvs, mut len_sqs, mut lens, mut qzs, mut start_xs, mut start_ys] =
+        [(); 7].map(|_| vec![0.0f64; w]);
     for y in 0..h {
         let ay = (y as f64 + 0.5 - k.cy) / k.fy;
-        let row_part = rot.column(1) * ay + rot.column(2);
-        for (x, &ax_x) in ax.iter().enumerate() {
-            let i = y * w + x;
-            let zp = pts[3 * i + 2] as f64;
-            let z = if zp.is_finite() && zp > 0.0 { zp } else { FAR_M };
-            let r = rot.column(0) * ax_x + row_part;
-            let qz = z * r.z + t.z;
-            if qz <= 1e-6 {
-                out[3 * i..3 * i + 3].copy_from_slice(&src[3 * i..3 * i + 3]);
-                continue;
-            }
+        let (px, py, pz) = (r01 * ay + r02, r11 * ay + r12, r21 * ay + r22);
+        // The motion of every pixel of the row first (no branches: the divisions and square roots
+        // run on two pixels at a time), then its taps.
+        for (zo, p) in zs.iter_mut().zip(pts[3 * y * w..3 * (y + 1) * w].chunks_exact(3)) {
+            let zp = p[2] as f64;
+            *zo = if zp.is_finite() && zp > 0.0 { zp } else { FAR_M };
+        }
+        for x in 0..w {
+            let (z, ax_x) = (zs[x], ax[x]);
+            let (rx, ry, rz) = (r00 * ax_x + px, r10 * ax_x + py, r20 * ax_x + pz);
+            let qz = z * rz + tz;
             let inv = 1.0 / qz;
-            let du = k.fx * ((z * r.x + t.x) * inv - ax_x);
-            let dv = k.fy * ((z * r.y + t.y) * inv - ay);
+            let du = k.fx * ((z * rx + tx) * inv - ax_x);
+            let dv = k.fy * ((z * ry + ty) * inv - ay);
             let len_sq = du * du + dv * dv;
-            if len_sq < 0.25 {
-                out[3 * i..3 * i + 3].copy_from_slice(&src[3 * i..3 * i + 3]);
+            (dus[x], dvs[x], len_sqs[x], lens[x], qzs[x]) = (du, dv, len_sq, len_sq.sqrt(), qz);
+            start_xs[x] = (x as f64 + 0.5 - 0.5 * du) * 65536.0;
+            start_ys[x] = (y as f64 + 0.5 - 0.5 * dv) * 65536.0;
+        }
+        let row_out = &mut out[3 * y * w..3 * (y + 1) * w];
+        let row_src = &src[3 * y * w..3 * (y + 1) * w];
+        for (x, (o, s)) in row_out.chunks_exact_mut(3).zip(row_src.chunks_exact(3)).enumerate() {
+            // Under half a pixel, or the surface behind the moved camera: the pixel stays.
+            if qzs[x] <= 1e-6 || len_sqs[x] < 0.25 {
+                o.copy_from_slice(s);
                 continue;
             }
-            let taps = ((len_sq.sqrt() as usize) + 2).min(cfg.max_blur_taps).max(2);
+            // Whole pixels of the path's length (a NaN length counts as 0).
+            let whole = if lens[x] >= 64.0 { 64 } else { lens[x] as i32 as usize };
+            let taps = (whole + 2).min(cfg.max_blur_taps).max(2);
             // Fixed point 16.16 along the path from −½ to +½ of the motion, centred on the pixel.
-            let step = 1.0 / (taps - 1) as f64;
-            let (mut fx, mut fy) =
-                (((x as f64 + 0.5 - 0.5 * du) * 65536.0) as i64, ((y as f64 + 0.5 - 0.5 * dv) * 65536.0) as i64);
-            let (sx, sy) = ((du * step * 65536.0) as i64, (dv * step * 65536.0) as i64);
+            let step = step_of[taps];
+            let (mut fx, mut fy) = (start_xs[x] as i64, start_ys[x] as i64);
+            let (sx, sy) = ((dus[x] * step * 65536.0) as i64, (dvs[x] * step * 65536.0) as i64);
             let mut acc = 0u64;
-            // The path is a line: inside the image at both ends means inside throughout.
+            // The path is a line: inside the image at both ends means inside throughout; on one
+            // row at both ends, on that row throughout.
             let (ex, ey) = (fx + (taps as i64 - 1) * sx, fy + (taps as i64 - 1) * sy);
             let inside = |a: i64, b: i64, hi: i64| (0..=hi).contains(&(a >> 16)) && (0..=hi).contains(&(b >> 16));
             if inside(fx, ex, wi) && inside(fy, ey, hi) {
-                for _ in 0..taps {
-                    acc += packed[(fy >> 16) as usize * w + (fx >> 16) as usize];
-                    fx += sx;
-                    fy += sy;
+                if fy >> 16 == ey >> 16 {
+                    let row = &packed[(fy >> 16) as usize * w..][..w];
+                    for _ in 0..taps {
+                        acc += row[(fx >> 16) as usize];
+                        fx += sx;
+                    }
+                } else {
+                    for _ in 0..taps {
+                        acc += packed[(fy >> 16) as usize * w + (fx >> 16) as usize];
+                        fx += sx;
+                        fy += sy;
+                    }
                 }
             } else {
                 for _ in 0..taps {
@@ -208,9 +252,9 @@ fn blur(cfg: &ColourConfig, unit: &SensorUnit, frame: &RenderedFrame<'_>, m: &Ma
                 }
             }
             let (n, rc) = (taps as u32, recip[taps]);
-            out[3 * i] = div_round((acc & 0xFFFF) as u32, n, rc);
-            out[3 * i + 1] = div_round((acc >> 16 & 0xFFFF) as u32, n, rc);
-            out[3 * i + 2] = div_round((acc >> 32 & 0xFFFF) as u32, n, rc);
+            o[0] = div_round((acc & 0xFFFF) as u32, n, rc);
+            o[1] = div_round((acc >> 16 & 0xFFFF) as u32, n, rc);
+            o[2] = div_round((acc >> 32 & 0xFFFF) as u32, n, rc);
         }
     }
     out

@@ -37,7 +37,7 @@
 //! than the colour's and the band falls outside the registered image), temporal noise
 //! correlation, multipath and specular surfaces.
 
-use super::{check, round_fast, RenderedFrame, SensorError, SensorUnit, SplitMix64, TAG_DEPTH};
+use super::{check, RenderedFrame, SensorError, SensorUnit, SplitMix64, TAG_DEPTH};
 use nalgebra::{Matrix3, Vector3};
 use serde::{Deserialize, Serialize};
 
@@ -227,31 +227,38 @@ pub fn stereo_depth(
     let fb = unit.colour_true.fx * cfg.baseline_m;
     let (c0, c1) = (cfg.grazing_start_deg.to_radians().cos(), cfg.grazing_end_deg.to_radians().cos());
     let c0_sq = (c0 * c0) as f32;
+    // Per pixel of a row: the right-image coordinate and the squared cosine of incidence where a
+    // grazing dropout is possible (NaN elsewhere).
+    let (mut right_x, mut cos_sq) = (vec![0.0f64; w], vec![0.0f32; w]);
     for y in 0..h {
         let zr = &mut z[y * w..(y + 1) * w];
         let sr = &mut state[y * w..(y + 1) * w];
         let pr = &pts[3 * y * w..3 * (y + 1) * w];
         for ((zv, st), p) in zr.iter_mut().zip(sr.iter_mut()).zip(pr.chunks_exact(3)) {
             let v = p[2];
-            if v.is_finite() && v > 0.0 {
-                *zv = v;
-                stats.surface += 1;
-                let zi = v as f64;
-                if zi < cfg.min_range_m || zi > cfg.max_range_m {
-                    *st = RANGE;
-                    stats.out_of_range += 1;
-                }
+            let surface = v.is_finite() && v > 0.0;
+            let zi = v as f64;
+            let out = surface && (zi < cfg.min_range_m || zi > cfg.max_range_m);
+            *zv = if surface { v } else { 0.0 };
+            *st = if !surface {
+                NONE
+            } else if out {
+                RANGE
             } else {
-                *st = NONE;
-            }
+                OK
+            };
+            stats.surface += usize::from(surface);
+            stats.out_of_range += usize::from(out);
         }
         if cfg.shadow {
+            for (x, (r, zv)) in right_x.iter_mut().zip(zr.iter()).enumerate() {
+                *r = x as f64 - fb / *zv as f64;
+            }
             let mut m = f64::INFINITY;
-            for (x, (st, zv)) in sr.iter_mut().zip(zr.iter()).enumerate().rev() {
+            for (st, &r) in sr.iter_mut().zip(&right_x).rev() {
                 if *st == NONE {
                     continue;
                 }
-                let r = x as f64 - fb / *zv as f64;
                 if r > m + 1e-3 {
                     if *st == OK {
                         *st = SHADOW;
@@ -262,21 +269,19 @@ pub fn stereo_depth(
                 }
             }
         }
+        // Incidence of the whole row first (no branches), then the draws where it is grazing.
         let nr = &nrm[3 * y * w..3 * (y + 1) * w];
-        for ((st, p), nv) in sr.iter_mut().zip(pr.chunks_exact(3)).zip(nr.chunks_exact(3)) {
-            if *st != OK {
-                continue;
-            }
+        for (((c, st), p), nv) in cos_sq.iter_mut().zip(sr.iter()).zip(pr.chunks_exact(3)).zip(nr.chunks_exact(3)) {
             let (px, py, pz) = (p[0], p[1], p[2]);
             let (nx, ny, nz) = (nv[0], nv[1], nv[2]);
             let dot = px * nx + py * ny + pz * nz;
             let denom = (px * px + py * py + pz * pz) * (nx * nx + ny * ny + nz * nz);
-            if denom.is_nan() || denom <= 0.0 || denom.is_infinite() {
-                continue;
-            }
-            let cos_sq = dot * dot / denom;
-            if cos_sq < c0_sq {
-                let cos = (cos_sq as f64).sqrt();
+            let usable = *st == OK && denom > 0.0 && denom.is_finite();
+            *c = if usable { dot * dot / denom } else { f32::NAN };
+        }
+        for (st, &c) in sr.iter_mut().zip(&cos_sq) {
+            if c < c0_sq {
+                let cos = (c as f64).sqrt();
                 let p_drop = ((c0 - cos) / (c0 - c1)).clamp(0.0, 1.0);
                 if rng.uniform() < p_drop {
                     *st = GRAZING;
@@ -287,36 +292,47 @@ pub fn stereo_depth(
     }
     // 4. Mixed depths at silhouettes, from the true depths of the neighbourhood (min / max over
     // the (2 band + 1)² window, valid depths only: along rows, then across them per output row).
+    // The row minima and maxima live in a ring of 2 band + 1 rows, each computed before its row
+    // takes mixed depths.
     let band = cfg.mixed_band_px;
     if band > 0 && cfg.mixed_fraction > 0.0 && h > 0 {
         let mut rng = SplitMix64::new(seed, &[TAG_DEPTH, frame_index, SUB_MIXED]);
-        let (mut row_lo, mut row_hi) = (vec![0.0f32; n], vec![0.0f32; n]);
+        let ring = 2 * band + 1;
+        let (mut ring_lo, mut ring_hi) = (vec![0.0f32; ring * w], vec![0.0f32; ring * w]);
         let mut pad = Vec::with_capacity(w + 2 * band);
-        for y in 0..h {
-            let r = y * w..(y + 1) * w;
-            row_min_max(&z[r.clone()], band, &mut pad, &mut row_lo[r.clone()], &mut row_hi[r]);
+        let mut row_extrema = |yy: usize, z: &[f32], ring_lo: &mut [f32], ring_hi: &mut [f32]| {
+            let r = (yy % ring) * w..(yy % ring + 1) * w;
+            row_min_max(&z[yy * w..(yy + 1) * w], band, &mut pad, &mut ring_lo[r.clone()], &mut ring_hi[r]);
+        };
+        for yy in 0..band.min(h) {
+            row_extrema(yy, &z, &mut ring_lo, &mut ring_hi);
         }
         let (mut lo, mut hi) = (vec![0.0f32; w], vec![0.0f32; w]);
+        let mut edge = vec![false; w];
+        let (jump_m, jump_rel) = (cfg.edge_jump_m, cfg.edge_jump_rel);
         for y in 0..h {
+            if y + band < h {
+                row_extrema(y + band, &z, &mut ring_lo, &mut ring_hi);
+            }
             let (y0, y1) = (y.saturating_sub(band), (y + band + 1).min(h));
-            lo.copy_from_slice(&row_lo[y0 * w..(y0 + 1) * w]);
-            hi.copy_from_slice(&row_hi[y0 * w..(y0 + 1) * w]);
+            let row = |yy: usize| (yy % ring) * w..(yy % ring + 1) * w;
+            lo.copy_from_slice(&ring_lo[row(y0)]);
+            hi.copy_from_slice(&ring_hi[row(y0)]);
             for yy in y0 + 1..y1 {
-                for (o, v) in lo.iter_mut().zip(&row_lo[yy * w..(yy + 1) * w]) {
+                for (o, v) in lo.iter_mut().zip(&ring_lo[row(yy)]) {
                     *o = o.min(*v);
                 }
-                for (o, v) in hi.iter_mut().zip(&row_hi[yy * w..(yy + 1) * w]) {
+                for (o, v) in hi.iter_mut().zip(&ring_hi[row(yy)]) {
                     *o = o.max(*v);
                 }
             }
+            // Silhouette pixels of the row first (no branches), then the draws at them, in order.
+            for (((e, st), &l), &u) in edge.iter_mut().zip(&state[y * w..(y + 1) * w]).zip(&lo).zip(&hi) {
+                *e = (*st == OK) & (((u - l) as f64) > jump_m + jump_rel * l as f64);
+            }
             let zr = &mut z[y * w..(y + 1) * w];
-            for (((zv, st), &l), &u) in zr.iter_mut().zip(&state[y * w..(y + 1) * w]).zip(&lo).zip(&hi) {
-                if *st != OK {
-                    continue;
-                }
-                if ((u - l) as f64) > cfg.edge_jump_m + cfg.edge_jump_rel * l as f64
-                    && rng.uniform() < cfg.mixed_fraction
-                {
+            for (((zv, &e), &l), &u) in zr.iter_mut().zip(&edge).zip(&lo).zip(&hi) {
+                if e && rng.uniform() < cfg.mixed_fraction {
                     *zv = l + (rng.uniform() as f32) * (u - l);
                     stats.mixed += 1;
                 }
@@ -409,6 +425,26 @@ pub(crate) fn correlated_field(width: usize, height: usize, cell_px: f64, rng: &
     out
 }
 
+/// The target pixels `[x0, x1) × [y0, y1)` a depth pixel covers, and its depth there.
+#[derive(Debug, Clone, Copy, Default)]
+struct Rect {
+    x0: usize,
+    x1: usize,
+    y0: usize,
+    y1: usize,
+    z: f32,
+}
+
+/// `v` rounded to the nearest integer (halves up), for a bound of a rectangle on an axis of `n`
+/// pixels: clamped to `[-2, n + 2]` first (rounding is monotonic, so no bound changes once it is
+/// clamped to `[0, n]`), then shifted by 2^20 so that a truncating cast rounds down (libm's
+/// `round` is not inlined on baseline x86-64).
+#[inline]
+fn round_index(v: f64, n: usize) -> i32 {
+    const OFF: f64 = (1u64 << 20) as f64;
+    ((v.clamp(-2.0, n as f64 + 2.0) + 0.5 + OFF) as i32) - (1 << 20)
+}
+
 /// Widening of each registered pixel's rectangle, pixels (no pinholes from rounding).
 const EPS: f64 = 0.02;
 
@@ -424,40 +460,62 @@ fn register(cfg: &StereoDepthConfig, unit: &SensorUnit, z: &[f32], w: usize, h: 
     let (kt, ka) = (&unit.colour_true, &unit.colour_assumed);
     // m · (ray direction of continuous image point (u, v)) = u' · col0 + v' · col1 + col2.
     let (c0, c1, c2) = (m.column(0).into_owned(), m.column(1).into_owned(), m.column(2).into_owned());
-    let col_dir: Vec<Vector3<f64>> = (0..=w).map(|x| c0 * ((x as f64 - kt.cx) / kt.fx)).collect();
+    // Per column and row of corners, the direction's components (columns apart, so that the
+    // corner pass runs on whole rows at a time).
+    let col_scale: Vec<f64> = (0..=w).map(|x| (x as f64 - kt.cx) / kt.fx).collect();
+    let col_x: Vec<f64> = col_scale.iter().map(|s| c0.x * s).collect();
+    let col_y: Vec<f64> = col_scale.iter().map(|s| c0.y * s).collect();
+    let col_z: Vec<f64> = col_scale.iter().map(|s| c0.z * s).collect();
     let row_dir: Vec<Vector3<f64>> = (0..=h).map(|y| c1 * ((y as f64 - kt.cy) / kt.fy) + c2).collect();
     let mut out = vec![f32::INFINITY; w * h];
-    let (wf, hf) = (w as f64, h as f64);
+    // Per depth pixel of a row: the projected corners' extent (x and y, low and high), the depth,
+    // whether it lands in front of the colour camera, then the target rectangle [x0, x1) × [y0, y1).
+    let (mut lo_x, mut hi_x, mut lo_y, mut hi_y) = (vec![0.0f64; w], vec![0.0f64; w], vec![0.0f64; w], vec![0.0f64; w]);
+    let mut zq = vec![0.0f32; w];
+    let mut hit = vec![false; w];
+    let mut rects = vec![Rect::default(); w];
     for y in 0..h {
         let (ra, rb) = (row_dir[y], row_dir[y + 1]);
-        for (x, &zv) in z[y * w..(y + 1) * w].iter().enumerate() {
-            if zv <= 0.0 {
-                continue;
-            }
+        // The corners of the whole row first (no branches, so that the divisions pipeline).
+        for x in 0..w {
+            let zv = z[y * w + x];
+            let skip = zv <= 0.0;
             let zv = zv as f64;
             // The pixel's two corners (x, y) and (x + 1, y + 1) at its depth, in the colour frame.
-            let qa = (col_dir[x] + ra) * zv + t;
-            let qb = (col_dir[x + 1] + rb) * zv + t;
-            if qa.z <= 1e-6 || qb.z <= 1e-6 {
-                continue;
-            }
-            let inv = 1.0 / (qa.z * qb.z);
-            let (ia, ib) = (qb.z * inv, qa.z * inv);
-            let (ax, ay) = (ka.fx * qa.x * ia + ka.cx, ka.fy * qa.y * ia + ka.cy);
-            let (bx, by) = (ka.fx * qb.x * ib + ka.cx, ka.fy * qb.y * ib + ka.cy);
+            let (qax, qay, qaz) =
+                ((col_x[x] + ra.x) * zv + t.x, (col_y[x] + ra.y) * zv + t.y, (col_z[x] + ra.z) * zv + t.z);
+            let (qbx, qby, qbz) =
+                ((col_x[x + 1] + rb.x) * zv + t.x, (col_y[x + 1] + rb.y) * zv + t.y, (col_z[x + 1] + rb.z) * zv + t.z);
+            let inv = 1.0 / (qaz * qbz);
+            let (ia, ib) = (qbz * inv, qaz * inv);
+            let (ax, ay) = (ka.fx * qax * ia + ka.cx, ka.fy * qay * ia + ka.cy);
+            let (bx, by) = (ka.fx * qbx * ib + ka.cx, ka.fy * qby * ib + ka.cy);
             // Pixel (x, y) spans [x, x + 1) in continuous coordinates; fill the target pixels whose
             // centres the projected corners enclose, a hair wider than the corners so rounding
             // leaves no pinholes between neighbours.
-            let zq = ((qa.z + qb.z) * 0.5) as f32;
-            let x0 = round_fast(ax.min(bx) - EPS).max(0.0) as usize;
-            let x1 = round_fast(ax.max(bx) + EPS).clamp(0.0, wf) as usize;
-            let y0 = round_fast(ay.min(by) - EPS).max(0.0) as usize;
-            let y1 = round_fast(ay.max(by) + EPS).clamp(0.0, hf) as usize;
-            let x0 = x0.min(x1);
-            for ty in y0..y1 {
-                for o in &mut out[ty * w + x0..ty * w + x1] {
-                    if zq < *o {
-                        *o = zq;
+            lo_x[x] = ax.min(bx) - EPS;
+            hi_x[x] = ax.max(bx) + EPS;
+            lo_y[x] = ay.min(by) - EPS;
+            hi_y[x] = ay.max(by) + EPS;
+            zq[x] = ((qaz + qbz) * 0.5) as f32;
+            hit[x] = !(skip || qaz <= 1e-6 || qbz <= 1e-6);
+        }
+        for (x, rect) in rects.iter_mut().enumerate() {
+            let x1 = round_index(hi_x[x], w).clamp(0, w as i32);
+            let x0 = round_index(lo_x[x], w).max(0).min(x1);
+            let y0 = round_index(lo_y[x], h).max(0);
+            let y1 = round_index(hi_y[x], h).clamp(0, h as i32);
+            *rect = if hit[x] {
+                Rect { x0: x0 as usize, x1: x1 as usize, y0: y0 as usize, y1: y1 as usize, z: zq[x] }
+            } else {
+                Rect::default()
+            };
+        }
+        for r in &rects {
+            for ty in r.y0..r.y1 {
+                for o in &mut out[ty * w + r.x0..ty * w + r.x1] {
+                    if r.z < *o {
+                        *o = r.z;
                     }
                 }
             }

@@ -224,14 +224,6 @@ impl SplitMix64 {
     }
 }
 
-/// `x` rounded to the nearest integer (halves up), for |x| < 2^20: a cast instead of libm's
-/// `round`, which is not inlined on baseline x86-64 and dominated the frame's cost.
-#[inline]
-pub(crate) fn round_fast(x: f64) -> f64 {
-    const OFF: f64 = (1u64 << 20) as f64;
-    ((x + 0.5 + OFF) as i64) as f64 - OFF
-}
-
 /// Stream tags of the per-episode and per-frame draws.
 pub(crate) const TAG_UNIT: u64 = 1;
 pub(crate) const TAG_DEPTH: u64 = 2;
