@@ -28,6 +28,16 @@ pub const BLUR_RADIUS_PX: usize = 3;
 /// Largest distance of a rotated pattern point from the keypoint along x or y, pixels
 /// (|(−13, −13)| = 18.4 rounded).
 const PATTERN_REACH_PX: usize = 18;
+/// Column offsets −15..=15 of the orientation patch.
+const U_WEIGHTS: [i16; 2 * HALF_PATCH_PX + 1] = {
+    let mut u = [0i16; 2 * HALF_PATCH_PX + 1];
+    let mut i = 0;
+    while i < u.len() {
+        u[i] = i as i16 - HALF_PATCH_PX as i16;
+        i += 1;
+    }
+    u
+};
 /// Side of the Harris window, pixels (OpenCV's ORB: 7), with `HARRIS_K` 0.04.
 pub const HARRIS_BLOCK_PX: usize = 7;
 /// Orientation bins of the pre-rotated descriptor pattern (1.4° each; the steering error at the
@@ -398,30 +408,36 @@ impl OrbExtractor {
         let w = level.width;
         for c in &self.corners {
             let (x, y) = (c.x as usize, c.y as usize);
-            // Intensity centroid over the radius-15 disc.
+            // Intensity centroid over the radius-15 disc, a row pair (±v) at a time on 31-wide
+            // i16 rows zeroed outside the disc (multiply-adds of i16 pairs into i32).
             let center = y * w + x;
             let img = &level.image;
-            let mut m10: i32 = 0;
-            let mut m01: i32 = 0;
             let hp = HALF_PATCH_PX;
-            if let Some(mid) = img.get(center - hp..=center + hp) {
-                for (u, &p) in (-(hp as i32)..=hp as i32).zip(mid) {
-                    m10 += u * i32::from(p);
-                }
-            }
-            for v in 1..=hp {
+            let (mut m10, mut m01) = (0i32, 0i32);
+            let mut sum = [0i16; 2 * HALF_PATCH_PX + 1];
+            let mut dif = [0i16; 2 * HALF_PATCH_PX + 1];
+            for v in 0..=hp {
                 let d = self.umax[v];
-                let (lo_row, hi_row) = (center - v * w, center + v * w);
-                let (Some(up), Some(dn)) = (img.get(lo_row - d..=lo_row + d), img.get(hi_row - d..=hi_row + d)) else {
+                sum.iter_mut().for_each(|e| *e = 0);
+                dif.iter_mut().for_each(|e| *e = 0);
+                let (up_row, dn_row) = (center - v * w, center + v * w);
+                let (Some(up), Some(dn)) = (img.get(up_row - d..=up_row + d), img.get(dn_row - d..=dn_row + d)) else {
                     continue;
                 };
-                let mut v_sum: i32 = 0;
-                for ((u, &minus), &plus) in (-(d as i32)..=d as i32).zip(up).zip(dn) {
-                    let (plus, minus) = (i32::from(plus), i32::from(minus));
-                    v_sum += plus - minus;
-                    m10 += u * (plus + minus);
+                let (s_row, d_row) = (&mut sum[hp - d..=hp + d], &mut dif[hp - d..=hp + d]);
+                for (((s, e), &a), &b) in s_row.iter_mut().zip(d_row.iter_mut()).zip(up).zip(dn) {
+                    let (a, b) = (i16::from(a), i16::from(b));
+                    *s = if v == 0 { a } else { a + b };
+                    *e = b - a;
                 }
-                m01 += v as i32 * v_sum;
+                let mut row_m10 = 0i32;
+                let mut row_sum = 0i32;
+                for ((&s, &e), &u) in sum.iter().zip(&dif).zip(&U_WEIGHTS) {
+                    row_m10 += i32::from(s) * i32::from(u);
+                    row_sum += i32::from(e);
+                }
+                m10 += row_m10;
+                m01 += v as i32 * row_sum;
             }
             let angle = (m01 as f32).atan2(m10 as f32);
             // Steered pattern from the table of ANGLE_BINS rotations.
@@ -754,18 +770,20 @@ fn gaussian_blur(level: &mut Level, rows: &mut Vec<u16>) {
             }
         }
     }
-    // Vertical pass: u32 sums, rounded back to 8 bits.
-    let mut acc = vec![0u32; m];
+    // Vertical pass in u16: each term (h g 256) >> 16 (a multiply-high), their sum ≤ 255 × 256,
+    // rounded back to 8 bits.
+    let mut acc = vec![0u16; m];
     for y in R..h - R {
         acc.iter_mut().for_each(|a| *a = 0);
         for (k, &g) in GAUSS_7.iter().enumerate() {
+            let g = g << 8;
             let row = &rows[(y - R + k) * w + R..(y - R + k) * w + R + m];
             for (a, &v) in acc.iter_mut().zip(row) {
-                *a += u32::from(v) * u32::from(g);
+                *a += ((u32::from(v) * u32::from(g)) >> 16) as u16;
             }
         }
         for (o, &a) in level.blurred[y * w + R..y * w + R + m].iter_mut().zip(&acc) {
-            *o = ((a + 32768) >> 16) as u8;
+            *o = ((u32::from(a) + 128) >> 8) as u8;
         }
     }
 }
