@@ -11,7 +11,8 @@ tilt with a 5 degree rotation), bilinear, zero outside.
 
 Both extractors run with the same settings, single-threaded: 1000 features, 8 levels, scale
 factor 1.2, FAST threshold 20, patch 31 px (OpenCV: ``cv2.ORB_create`` with those arguments,
-Harris ranking; the core: ``OrbConfig`` with those fields, FAST on a grid).
+Harris ranking; the core: ``OrbConfig`` with those fields and its defaults otherwise: Harris
+ranking with ``spread_share`` 0.2 of each level's features spread over 30 px grid cells).
 
 Per image, warp and extractor:
 

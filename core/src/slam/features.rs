@@ -1,10 +1,10 @@
-//! ORB-style features: pyramid, FAST-9 with grid distribution, intensity-centroid orientation,
-//! steered 256-bit BRIEF descriptors (Rublee et al. 2011, as used by ORB-SLAM2).
+//! ORB features: pyramid, FAST-9 with 3x3 non-maximum suppression, Harris ranking spread over a
+//! grid, intensity-centroid orientation, steered BRIEF with the learned 256-pair pattern on a
+//! Gaussian-smoothed level (Rublee et al. 2011, as in OpenCV and ORB-SLAM2).
 
-use rand::{Rng, SeedableRng};
-use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
+use super::orb_pattern::LEARNED_PATTERN;
 use super::SlamError;
 use crate::frame::GreyImage;
 
@@ -19,16 +19,29 @@ pub fn hamming(a: &Descriptor, b: &Descriptor) -> u32 {
 
 /// Radius of the orientation patch (intensity centroid), pixels of the level (ORB: 15).
 pub const HALF_PATCH_PX: usize = 15;
-/// Keypoints are kept this far from the border of their level, pixels (patch + box smoothing).
+/// Keypoints are kept this far from the border of their level, pixels (the rotated pattern
+/// reaches 18.4 px from the keypoint).
 pub const EDGE_PX: usize = 19;
-/// Radius of the box filter smoothing each level before the binary tests (2 → 5x5, as the 5x5
-/// sub-window averages of the ORB paper; 3 → 7x7 did not improve matching on our tests).
-pub const BLUR_RADIUS_PX: usize = 2;
-/// Descriptor sampling points lie within this radius of the keypoint (so that any rotation of the
-/// pattern plus the smoothing box stays inside [`EDGE_PX`]); uniform over the disc.
-pub const PATTERN_RADIUS_PX: f64 = 16.0;
+/// Radius of the Gaussian smoothing each level before the binary tests (3 → 7x7, σ = 2 px, as
+/// OpenCV's ORB).
+pub const BLUR_RADIUS_PX: usize = 3;
+/// Largest distance of a rotated pattern point from the keypoint along x or y, pixels
+/// (|(−13, −13)| = 18.4 rounded).
+const PATTERN_REACH_PX: usize = 18;
+/// Column offsets −15..=15 of the orientation patch.
+const U_WEIGHTS: [i16; 2 * HALF_PATCH_PX + 1] = {
+    let mut u = [0i16; 2 * HALF_PATCH_PX + 1];
+    let mut i = 0;
+    while i < u.len() {
+        u[i] = i as i16 - HALF_PATCH_PX as i16;
+        i += 1;
+    }
+    u
+};
+/// Side of the Harris window, pixels (OpenCV's ORB: 7), with `HARRIS_K` 0.04.
+pub const HARRIS_BLOCK_PX: usize = 7;
 /// Orientation bins of the pre-rotated descriptor pattern (1.4° each; the steering error at the
-/// 16-px pattern rim is ≤ 0.2 px; 128 bins cost ~3 points of recall on the warp tests).
+/// 18-px pattern rim is ≤ 0.23 px).
 pub const ANGLE_BINS: usize = 256;
 /// Number of binary tests of a descriptor.
 pub const DESCRIPTOR_BITS: usize = 256;
@@ -45,15 +58,30 @@ pub struct OrbConfig {
     pub scale_factor: f64,
     /// FAST threshold, grey levels (ORB-SLAM2 `iniThFAST`: 20).
     pub fast_threshold: u8,
-    /// Lower FAST threshold used only in grid cells with no corner at `fast_threshold`
-    /// (ORB-SLAM2 `minThFAST`: 7).
+    /// Lower FAST threshold used only in grid cells with no corner at `fast_threshold`, off when
+    /// not below it (default 20: off, as OpenCV; ORB-SLAM2 `minThFAST`: 7). Weak corners spread
+    /// the features into flat regions but match less reliably.
     pub fast_min_threshold: u8,
     /// Side of the grid cells used to spread features, pixels of each level (ORB-SLAM2: 30).
-    /// Features are taken round-robin over cells (best of each cell first), by FAST score.
     pub cell_size_px: usize,
-    /// Seed of the descriptor's sampling pattern (256 point pairs uniform over a 16-px disc).
-    /// Descriptors are only comparable between extractors with the same seed.
-    pub pattern_seed: u64,
+    /// Share of each level's features taken round-robin over the grid cells (emptiest cells
+    /// first, the strongest corner of a cell first), in [0, 1]; the others are the level's
+    /// strongest corners. 1 spreads the features most evenly, 0 ranks by strength alone (OpenCV).
+    pub spread_share: f64,
+    /// What ranks the corners of a level: the Harris response (default, OpenCV's ORB) or the
+    /// FAST score.
+    pub ranking: Ranking,
+}
+
+/// The score that ranks corners within a level.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Ranking {
+    /// Harris corner response over a [`HARRIS_BLOCK_PX`] window (k = 0.04) of the level; the
+    /// FAST score preselects twice the level's quota first.
+    Harris,
+    /// FAST score (the largest threshold at which the segment test still passes).
+    Fast,
 }
 
 impl Default for OrbConfig {
@@ -63,9 +91,10 @@ impl Default for OrbConfig {
             n_levels: 8,
             scale_factor: 1.2,
             fast_threshold: 20,
-            fast_min_threshold: 7,
+            fast_min_threshold: 20,
             cell_size_px: 30,
-            pattern_seed: 0x0_5eed_0e0b,
+            spread_share: 0.2,
+            ranking: Ranking::Harris,
         }
     }
 }
@@ -132,8 +161,14 @@ struct Level {
 struct Corner {
     x: u32,
     y: u32,
+    /// FAST score.
     score: u16,
-    key: u32,
+    /// Ranking strength (larger is better): the FAST score or the Harris response's ordered bits.
+    strength: u32,
+    /// Grid cell.
+    cell: u32,
+    /// Round of the round-robin over cells in which the corner is taken.
+    round: u32,
 }
 
 /// The 16 pixels of the radius-3 Bresenham circle, clockwise from the top.
@@ -166,12 +201,12 @@ pub struct OrbExtractor {
     umax: [usize; HALF_PATCH_PX + 1],
     score_buf: Vec<u16>,
     corners: Vec<Corner>,
-    col_sums: Vec<u16>,
+    blur_rows: Vec<u16>,
     features_per_level: Vec<usize>,
 }
 
 impl OrbExtractor {
-    /// Check the configuration and draw the sampling pattern.
+    /// Check the configuration and rotate the sampling pattern.
     pub fn new(config: OrbConfig) -> Result<Self, SlamError> {
         if !(config.scale_factor.is_finite() && config.scale_factor > 1.0) {
             return Err(SlamError::Config {
@@ -188,34 +223,21 @@ impl OrbExtractor {
         if config.cell_size_px < 4 {
             return Err(SlamError::Config { field: "orb.cell_size_px", reason: "must be ≥ 4".into() });
         }
-        if config.fast_min_threshold == 0 || config.fast_min_threshold > config.fast_threshold {
-            return Err(SlamError::Config {
-                field: "orb.fast_min_threshold",
-                reason: "must be in 1..=fast_threshold".into(),
-            });
+        if config.fast_min_threshold == 0 {
+            return Err(SlamError::Config { field: "orb.fast_min_threshold", reason: "must be ≥ 1".into() });
         }
-        let mut rng = ChaCha8Rng::seed_from_u64(config.pattern_seed);
-        let draw = |rng: &mut ChaCha8Rng| loop {
-            // Uniform over the disc of radius PATTERN_RADIUS_PX, rounded to whole pixels.
-            let x = rng.random_range(-PATTERN_RADIUS_PX..=PATTERN_RADIUS_PX).round();
-            let y = rng.random_range(-PATTERN_RADIUS_PX..=PATTERN_RADIUS_PX).round();
-            if x * x + y * y <= PATTERN_RADIUS_PX * PATTERN_RADIUS_PX {
-                return (x as f32, y as f32);
-            }
-        };
-        let mut pattern = Vec::with_capacity(DESCRIPTOR_BITS);
-        while pattern.len() < DESCRIPTOR_BITS {
-            let (a, b) = (draw(&mut rng), draw(&mut rng));
-            if a != b {
-                pattern.push([a.0, a.1, b.0, b.1]);
-            }
+        if !(0.0..=1.0).contains(&config.spread_share) {
+            return Err(SlamError::Config {
+                field: "orb.spread_share",
+                reason: format!("{} not in [0, 1]", config.spread_share),
+            });
         }
         let mut umax = [0usize; HALF_PATCH_PX + 1];
         for (v, u) in umax.iter_mut().enumerate() {
             let r2 = (HALF_PATCH_PX * HALF_PATCH_PX - v * v) as f64;
             *u = r2.sqrt().round() as usize;
         }
-        // Features per level: geometric in the level's area ratio (ORB-SLAM2).
+        // Features per level: geometric with ratio 1 / scale_factor (OpenCV, ORB-SLAM2).
         let inv = 1.0 / config.scale_factor;
         let n = config.n_levels;
         let first = config.n_features as f64 * (1.0 - inv) / (1.0 - inv.powi(n as i32));
@@ -233,8 +255,11 @@ impl OrbExtractor {
         let mut rotated = Vec::with_capacity(ANGLE_BINS * DESCRIPTOR_BITS);
         for bin in 0..ANGLE_BINS {
             let (s, c) = (std::f32::consts::TAU * bin as f32 / ANGLE_BINS as f32).sin_cos();
-            for p in &pattern {
-                let r = |x: f32, y: f32| [round_i(x * c - y * s) as i8, round_i(x * s + y * c) as i8];
+            for p in &LEARNED_PATTERN {
+                let r = |x: i8, y: i8| {
+                    let (x, y) = (f32::from(x), f32::from(y));
+                    [round_i(x * c - y * s) as i8, round_i(x * s + y * c) as i8]
+                };
                 let (a, b) = (r(p[0], p[1]), r(p[2], p[3]));
                 rotated.push([a[0], a[1], b[0], b[1]]);
             }
@@ -246,7 +271,7 @@ impl OrbExtractor {
             umax,
             score_buf: Vec::new(),
             corners: Vec::new(),
-            col_sums: Vec::new(),
+            blur_rows: Vec::new(),
             features_per_level,
         })
     }
@@ -289,7 +314,6 @@ impl OrbExtractor {
                 })
                 .collect();
             self.score_buf = vec![0; w0 * h0];
-            self.col_sums = vec![0; w0];
         }
         if let Some(l0) = self.levels.first_mut() {
             l0.image.copy_from_slice(&image.data);
@@ -301,7 +325,7 @@ impl OrbExtractor {
             }
         }
         for level in &mut self.levels {
-            box_blur(level, &mut self.col_sums);
+            gaussian_blur(level, &mut self.blur_rows);
         }
     }
 
@@ -326,7 +350,7 @@ impl OrbExtractor {
         if weak < strong {
             let mut has_strong = vec![false; ncx * ncy];
             for c in &self.corners {
-                if let Some(f) = has_strong.get_mut(c.key as usize) {
+                if let Some(f) = has_strong.get_mut(c.cell as usize) {
                     *f = true;
                 }
             }
@@ -362,19 +386,17 @@ impl OrbExtractor {
                 *v = 0;
             }
         }
-        if self.corners.len() > want {
-            // Round-robin over cells: rank within the cell first, then the FAST score.
-            self.corners.sort_unstable_by_key(|c| (c.key, u16::MAX - c.score));
-            let mut rank = 0u32;
-            let mut prev = u32::MAX;
+        let spread = (self.config.spread_share * want as f64).round() as usize;
+        if self.config.ranking == Ranking::Harris {
+            // Preselect by FAST score (spread over the grid as well), then rank by Harris.
+            select_spread(&mut self.corners, 2 * want, 2 * spread);
+            let img = &level.image;
             for c in &mut self.corners {
-                rank = if c.key == prev { rank + 1 } else { 0 };
-                prev = c.key;
-                c.key = rank;
+                let r = harris_response(img, w, c.x as usize, c.y as usize);
+                c.strength = ordered_bits(r);
             }
-            self.corners.select_nth_unstable_by_key(want, |c| (c.key, u16::MAX - c.score, c.y, c.x));
-            self.corners.truncate(want);
         }
+        select_spread(&mut self.corners, want, spread);
         // Deterministic output order.
         self.corners.sort_unstable_by_key(|c| (c.y, c.x));
     }
@@ -386,30 +408,36 @@ impl OrbExtractor {
         let w = level.width;
         for c in &self.corners {
             let (x, y) = (c.x as usize, c.y as usize);
-            // Intensity centroid over the radius-15 disc.
+            // Intensity centroid over the radius-15 disc, a row pair (±v) at a time on 31-wide
+            // i16 rows zeroed outside the disc (multiply-adds of i16 pairs into i32).
             let center = y * w + x;
             let img = &level.image;
-            let mut m10: i32 = 0;
-            let mut m01: i32 = 0;
             let hp = HALF_PATCH_PX;
-            if let Some(mid) = img.get(center - hp..=center + hp) {
-                for (u, &p) in (-(hp as i32)..=hp as i32).zip(mid) {
-                    m10 += u * i32::from(p);
-                }
-            }
-            for v in 1..=hp {
+            let (mut m10, mut m01) = (0i32, 0i32);
+            let mut sum = [0i16; 2 * HALF_PATCH_PX + 1];
+            let mut dif = [0i16; 2 * HALF_PATCH_PX + 1];
+            for v in 0..=hp {
                 let d = self.umax[v];
-                let (lo_row, hi_row) = (center - v * w, center + v * w);
-                let (Some(up), Some(dn)) = (img.get(lo_row - d..=lo_row + d), img.get(hi_row - d..=hi_row + d)) else {
+                sum.iter_mut().for_each(|e| *e = 0);
+                dif.iter_mut().for_each(|e| *e = 0);
+                let (up_row, dn_row) = (center - v * w, center + v * w);
+                let (Some(up), Some(dn)) = (img.get(up_row - d..=up_row + d), img.get(dn_row - d..=dn_row + d)) else {
                     continue;
                 };
-                let mut v_sum: i32 = 0;
-                for ((u, &minus), &plus) in (-(d as i32)..=d as i32).zip(up).zip(dn) {
-                    let (plus, minus) = (i32::from(plus), i32::from(minus));
-                    v_sum += plus - minus;
-                    m10 += u * (plus + minus);
+                let (s_row, d_row) = (&mut sum[hp - d..=hp + d], &mut dif[hp - d..=hp + d]);
+                for (((s, e), &a), &b) in s_row.iter_mut().zip(d_row.iter_mut()).zip(up).zip(dn) {
+                    let (a, b) = (i16::from(a), i16::from(b));
+                    *s = if v == 0 { a } else { a + b };
+                    *e = b - a;
                 }
-                m01 += v as i32 * v_sum;
+                let mut row_m10 = 0i32;
+                let mut row_sum = 0i32;
+                for ((&s, &e), &u) in sum.iter().zip(&dif).zip(&U_WEIGHTS) {
+                    row_m10 += i32::from(s) * i32::from(u);
+                    row_sum += i32::from(e);
+                }
+                m10 += row_m10;
+                m01 += v as i32 * row_sum;
             }
             let angle = (m01 as f32).atan2(m10 as f32);
             // Steered pattern from the table of ANGLE_BINS rotations.
@@ -418,8 +446,8 @@ impl OrbExtractor {
             let blur = &level.blurred;
             let wi = w as isize;
             let mut desc = [0u64; 4];
-            // The patch (radius PATTERN_RADIUS_PX ≤ EDGE_PX) lies inside the level.
-            let r = PATTERN_RADIUS_PX as usize;
+            // The rotated pattern (radius ≤ PATTERN_REACH_PX ≤ EDGE_PX) lies inside the level.
+            let r = PATTERN_REACH_PX;
             let (p0, p1) = (center - r * w - r, center + r * w + r + 1);
             if let (Some(rot), Some(patch)) =
                 (self.rotated.get(bin * DESCRIPTOR_BITS..(bin + 1) * DESCRIPTOR_BITS), blur.get(p0..p1))
@@ -499,7 +527,14 @@ fn scan_fast(img: &[u8], area: &ScanArea, xs: (usize, usize), ys: (usize, usize)
                         continue;
                     }
                     let cid = ((y - EDGE_PX) / area.cell) * area.ncx + (x - EDGE_PX) / area.cell;
-                    out.push(Corner { x: x as u32, y: y as u32, score: score as u16, key: cid as u32 });
+                    out.push(Corner {
+                        x: x as u32,
+                        y: y as u32,
+                        score: score as u16,
+                        strength: u32::from(score as u16),
+                        cell: cid as u32,
+                        round: 0,
+                    });
                 }
             }
             done_to = (x0 + LANES).min(x_to);
@@ -599,6 +634,82 @@ fn arc_score(diff: &[i16; 16]) -> i16 {
     best - 1
 }
 
+/// Keep `want` of `corners`: the `want − spread` strongest, then `spread` more taken round-robin
+/// over the grid cells, the cells holding the fewest chosen corners first, each cell's strongest
+/// first (ties by position). `spread = want` spreads most evenly, `spread = 0` ranks by strength
+/// alone (OpenCV's `retainBest`).
+fn select_spread(corners: &mut Vec<Corner>, want: usize, spread: usize) {
+    if corners.len() <= want {
+        return;
+    }
+    let best = want - spread.min(want);
+    let by_strength = |c: &Corner| (u32::MAX - c.strength, c.y, c.x);
+    if best > 0 {
+        corners.select_nth_unstable_by_key(best, by_strength);
+    }
+    // Round of each corner: 0 for the strongest; else 1 + the chosen corners in its cell + its
+    // rank among the rest of its cell.
+    corners[best..].sort_unstable_by_key(|c| (c.cell, u32::MAX - c.strength, c.y, c.x));
+    let n_cells = corners.iter().map(|c| c.cell as usize + 1).max().unwrap_or(0);
+    let mut chosen = vec![0u32; n_cells];
+    for c in &mut corners[..best] {
+        if let Some(n) = chosen.get_mut(c.cell as usize) {
+            *n += 1;
+        }
+        c.round = 0;
+    }
+    let (mut rank, mut prev) = (0u32, u32::MAX);
+    for c in &mut corners[best..] {
+        rank = if c.cell == prev { rank + 1 } else { 0 };
+        prev = c.cell;
+        c.round = 1 + chosen.get(c.cell as usize).copied().unwrap_or(0) + rank;
+    }
+    corners.select_nth_unstable_by_key(want, |c| (c.round, u32::MAX - c.strength, c.y, c.x));
+    corners.truncate(want);
+}
+
+/// An `f32` as a `u32` of the same order (larger float, larger integer; NaN last).
+#[inline]
+fn ordered_bits(v: f32) -> u32 {
+    let b = v.to_bits();
+    if b >> 31 == 1 {
+        !b
+    } else {
+        b | (1 << 31)
+    }
+}
+
+/// Harris corner response `det M − 0.04 trace² M` of the structure tensor `M` summed over the
+/// [`HARRIS_BLOCK_PX`] window centred on `(x, y)`, with 3x3 Sobel gradients (OpenCV's ORB). The
+/// window and its gradients stay inside the level (keypoints are [`EDGE_PX`] from its border).
+fn harris_response(img: &[u8], w: usize, x: usize, y: usize) -> f32 {
+    const B: usize = HARRIS_BLOCK_PX;
+    const R: usize = B / 2;
+    // The window's rows and the one above and below, B + 2 columns each, as i16.
+    let mut rows = [[0i16; B + 2]; B + 2];
+    for (k, row) in rows.iter_mut().enumerate() {
+        let start = (y + k - R - 1) * w + x - R - 1;
+        if let Some(src) = img.get(start..start + B + 2) {
+            for (d, &v) in row.iter_mut().zip(src) {
+                *d = i16::from(v);
+            }
+        }
+    }
+    let (mut a, mut b, mut c) = (0i32, 0i32, 0i32);
+    for k in 1..=B {
+        let (up, mid, dn) = (&rows[k - 1], &rows[k], &rows[k + 1]);
+        for i in 1..=B {
+            let dx = i32::from((mid[i + 1] - mid[i - 1]) * 2 + (up[i + 1] - up[i - 1]) + (dn[i + 1] - dn[i - 1]));
+            let dy = i32::from((dn[i] - up[i]) * 2 + (dn[i - 1] - up[i - 1]) + (dn[i + 1] - up[i + 1]));
+            a += dx * dx;
+            b += dy * dy;
+            c += dx * dy;
+        }
+    }
+    let (a, b, c) = (a as f32, b as f32, c as f32);
+    a * b - c * c - 0.04 * (a + b) * (a + b)
+}
+
 /// Bilinear downscale of `src` into `dst` (sizes already set), fixed point (8-bit weights).
 fn resize_bilinear(src: &Level, dst: &mut Level) {
     let (sw, sh, dw, dh) = (src.width, src.height, dst.width, dst.height);
@@ -632,36 +743,47 @@ fn resize_bilinear(src: &Level, dst: &mut Level) {
     }
 }
 
-/// Box smoothing (side `2 BLUR_RADIUS_PX + 1`) of a level into its `blurred` buffer (borders
-/// copied unsmoothed).
-fn box_blur(level: &mut Level, col_sums: &mut Vec<u16>) {
+/// Gaussian weights of the smoothing before the binary tests (σ = 2 px, 7 taps, sum 256).
+const GAUSS_7: [u16; 2 * BLUR_RADIUS_PX + 1] = [18, 33, 49, 56, 49, 33, 18];
+
+/// Separable Gaussian smoothing ([`GAUSS_7`]) of a level into its `blurred` buffer (fixed point;
+/// the `BLUR_RADIUS_PX` rows and columns along the border copied unsmoothed). `rows` holds the
+/// horizontal pass of every row.
+fn gaussian_blur(level: &mut Level, rows: &mut Vec<u16>) {
     const R: usize = BLUR_RADIUS_PX;
     const N: usize = 2 * R + 1;
-    // Fixed-point reciprocal of the box area.
-    const INV: u32 = (65536 / (N * N)) as u32;
     let (w, h) = (level.width, level.height);
     level.blurred.copy_from_slice(&level.image);
     if w < N || h < N {
         return;
     }
-    col_sums.resize(w, 0);
+    rows.resize(w * h, 0);
     let img = &level.image;
-    for y in R..h - R {
-        let top = &img[(y - R) * w..(y - R + 1) * w];
-        col_sums[..w].iter_mut().zip(top).for_each(|(s, &v)| *s = u16::from(v));
-        for dy in 1..N {
-            let row = &img[(y - R + dy) * w..(y - R + dy + 1) * w];
-            col_sums[..w].iter_mut().zip(row).for_each(|(s, &v)| *s += u16::from(v));
-        }
-        let m = w - 2 * R;
-        let out = &mut level.blurred[y * w + R..][..m];
-        let cs = &col_sums[..w];
-        for (i, o) in out.iter_mut().enumerate() {
-            let mut sum = 0u32;
-            for k in 0..N {
-                sum += u32::from(cs[i + k]);
+    let m = w - 2 * R;
+    // Horizontal pass: u16 sums (≤ 255 × 256).
+    for (src, dst) in img.chunks_exact(w).zip(rows.chunks_exact_mut(w)) {
+        let out = &mut dst[R..R + m];
+        out.iter_mut().for_each(|o| *o = 0);
+        for (k, &g) in GAUSS_7.iter().enumerate() {
+            for (o, &v) in out.iter_mut().zip(&src[k..k + m]) {
+                *o += u16::from(v) * g;
             }
-            *o = ((sum * INV + 32768) >> 16) as u8;
+        }
+    }
+    // Vertical pass in u16: each term (h g 256) >> 16 (a multiply-high), their sum ≤ 255 × 256,
+    // rounded back to 8 bits.
+    let mut acc = vec![0u16; m];
+    for y in R..h - R {
+        acc.iter_mut().for_each(|a| *a = 0);
+        for (k, &g) in GAUSS_7.iter().enumerate() {
+            let g = g << 8;
+            let row = &rows[(y - R + k) * w + R..(y - R + k) * w + R + m];
+            for (a, &v) in acc.iter_mut().zip(row) {
+                *a += ((u32::from(v) * u32::from(g)) >> 16) as u16;
+            }
+        }
+        for (o, &a) in level.blurred[y * w + R..y * w + R + m].iter_mut().zip(&acc) {
+            *o = ((u32::from(a) + 128) >> 8) as u8;
         }
     }
 }

@@ -48,13 +48,14 @@
 //!
 //! # Per-frame algorithm (`slam`)
 //! 1. ORB features ([`OrbConfig`]): 8 levels, factor 1.2 (bilinear); FAST-9 (16 pixels at a
-//!    time, OpenCV-style segment test) at the low threshold 7, scored by the largest passing
-//!    threshold, 3x3 non-maximum suppression; corners below the threshold 20 are kept only in
-//!    30-px grid cells with no corner ≥ 20 (the selection ORB-SLAM2's 20 / 7 two-pass detection
-//!    makes); 1000 features split over levels geometrically and taken round-robin over cells
-//!    (best of every cell first); orientation by intensity centroid (radius 15); 256-bit steered
-//!    BRIEF on a 5x5 box-smoothed level with a seeded pattern uniform over a 16-px disc,
-//!    pre-rotated to 256 angles. Depth is read at each keypoint's (rounded) pixel.
+//!    time, OpenCV-style segment test) at threshold 20, scored by the largest passing
+//!    threshold, 3x3 non-maximum suppression; 1000 features split over levels geometrically;
+//!    per level twice the quota preselected by FAST score, then ranked by the Harris response
+//!    (7x7, k = 0.04), the strongest taken and a share (`spread_share`, 0.5 for tracking) spread
+//!    round-robin over 30-px grid cells (emptiest cells first); orientation by intensity
+//!    centroid (radius 15); 256-bit steered BRIEF with the learned pattern of ORB on a
+//!    Gaussian-smoothed level (7x7, σ = 2), pre-rotated to 256 angles. Depth is read at each
+//!    keypoint's (rounded) pixel.
 //! 2. Empty map: the frame initialises it (map points from every keypoint with depth) at the
 //!    prior; it needs [`TrackerConfig::min_init_points`] keypoints with depth.
 //! 3. Seed: the last pose times the prior's motion since the last frame (nearly exact within a
@@ -136,20 +137,21 @@
 //!
 //! Frames and units: `world_from_camera` in OpenCV camera axes, metres, pixels of level 0.
 //! Determinism: every random choice is seeded ([`RansacConfig::seed`] mixed with the frame index,
-//! [`OrbConfig::pattern_seed`]); map points live in a `BTreeMap`.
+//! the ORB pattern is a fixed table); map points live in a `BTreeMap`.
 
 pub mod ba;
 pub mod features;
 pub mod matcher;
 pub mod metrics;
 pub mod noise;
+mod orb_pattern;
 pub mod pnp;
 pub mod relocalise;
 pub mod synthetic;
 pub mod tracker;
 
 pub use ba::{BundleConfig, BundleObservation, BundleProblem};
-pub use features::{hamming, Descriptor, Features, Keypoint, OrbConfig, OrbExtractor};
+pub use features::{hamming, Descriptor, Features, Keypoint, OrbConfig, OrbExtractor, Ranking};
 pub use matcher::{match_brute_force, FeatureMatch, KeypointGrid, MatchConfig};
 pub use metrics::{ate_rmse_m, rpe, Rpe};
 pub use noise::{PriorNoiseConfig, SyntheticPriorError};

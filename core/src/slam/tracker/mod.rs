@@ -49,7 +49,9 @@ pub enum PoseSource {
 pub struct TrackerConfig {
     /// Pose source (`slam`, `kinematics`, `ground_truth`).
     pub pose_source: PoseSource,
-    /// Feature extraction.
+    /// Feature extraction (default: [`OrbConfig`]'s with half of each level's features spread
+    /// over the grid, `spread_share` 0.5: tracking and the object points want keypoints on every
+    /// surface, not only the most textured).
     pub orb: OrbConfig,
     /// The estimator's assumed error of the kinematic prior (gauge-fit weights, prior and motion
     /// gates); its own tuning, independent of the robot's actual error (default 1 cm / 1° per
@@ -163,7 +165,7 @@ impl Default for TrackerConfig {
     fn default() -> Self {
         Self {
             pose_source: PoseSource::Slam,
-            orb: OrbConfig::default(),
+            orb: OrbConfig { spread_share: 0.5, ..OrbConfig::default() },
             prior_noise: PriorNoiseConfig::default(),
             ransac: RansacConfig::default(),
             refine: PoseRefineConfig::default(),
