@@ -128,7 +128,7 @@ def missed(m: dict) -> int:
 
 
 def test_discovery_finds_the_object_the_paper_rule_leaves_unmapped(tmp_path, ci_overlay) -> None:
-    """Against the scene file: with a 35° camera the Init views of scene03 (seed 1) miss an object;
+    """Against the scene file: with a 35° camera the Init views of scene03 (seed 7) miss an object;
     the paper's stopping rule (object-driven-discovery with its discovery settings off) ends once the
     mapped objects are explored and never maps it, looking at the unseen table before stopping (explore.discovery_before_stop, with the budget reserve of
     the run defaults) finds it. The scenario holds with a cylinder's top at its highest point (with
@@ -138,7 +138,7 @@ def test_discovery_finds_the_object_the_paper_rule_leaves_unmapped(tmp_path, ci_
         "preset": '"ideal"',  # the scenario was found in the ideal world
         "scene": '"scenes/scene03.toml"',
         "camera.fovy_deg": 35.0,
-        "seed": 1,
+        "seed": 7,
         "map.param.cylinder.top_from_face": "false",
     }
     paper = run_episode(
