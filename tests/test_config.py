@@ -76,3 +76,18 @@ def test_grasp_and_place_settings_are_run_config_tables() -> None:
     assert cfg.grasp.contact_retries == 0 and cfg.place.feel_support is False
     with pytest.raises(ConfigError, match=r"grasp\.contact_retry"):
         load_run_config(overrides=["grasp.contact_retry=1"])
+
+
+def test_a_run_folder_config_with_a_retired_key_still_loads(tmp_path) -> None:
+    """A stored run config that names a setting the code no longer has loads with a warning; the
+    same key given as an override is an error naming it."""
+    from objslam.config import RETIRED_KEYS, ConfigError, load_run_config
+
+    key = next(iter(RETIRED_KEYS))
+    stored = tmp_path / "config.toml"
+    stored.write_text('[slam.orb]\npattern_seed = 7\nn_features = 900\n')
+    with pytest.warns(UserWarning, match=key):
+        cfg = load_run_config(overlays=[stored])
+    assert cfg.slam["orb"]["n_features"] == 900
+    with pytest.raises(ConfigError, match="pattern_seed"):
+        load_run_config(overrides=[f"{key}=7"])

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import warnings
 from dataclasses import dataclass, field, fields, is_dataclass
 from pathlib import Path
 from typing import Any, get_type_hints
@@ -352,6 +353,25 @@ def _read(path: Path) -> dict[str, Any]:
         raise ConfigError(f"{path}: {e}") from e
 
 
+RETIRED_KEYS: dict[str, str] = {
+    "slam.orb.pattern_seed": "the BRIEF test pattern is a fixed table (OpenCV's learned pattern), not drawn from a seed",
+}
+"""Settings the code no longer has, with why. A run folder's ``config.toml`` written when they existed
+still loads: they are dropped from overlay files with a warning (given as ``--set`` they are errors)."""
+
+
+def _drop_retired(layer: dict[str, Any], source: Path) -> dict[str, Any]:
+    for key, why in RETIRED_KEYS.items():
+        *parents, leaf = key.split(".")
+        table = layer
+        for p in parents:
+            table = table.get(p) if isinstance(table, dict) else None
+        if isinstance(table, dict) and leaf in table:
+            del table[leaf]
+            warnings.warn(f"{source}: {key} ignored ({why})", stacklevel=3)
+    return layer
+
+
 def available_presets() -> tuple[str, ...]:
     """The default's preset (``realistic``) and the overlays in ``experiments/configs/presets/``."""
     default = _read(CONFIG_DIR / "default.toml").get("preset", "realistic")
@@ -371,7 +391,7 @@ def load_run_config(
     else the default's; a preset other than the default's overlays ``presets/<preset>.toml``."""
     data = _read(CONFIG_DIR / "default.toml")
     layers = [parse_override(o) for o in overrides]
-    overlay_data = [_read(Path(p)) for p in overlays]
+    overlay_data = [_drop_retired(_read(Path(p)), Path(p)) for p in overlays]
     chosen_preset = preset
     if chosen_preset is None:
         for layer in [*overlay_data, *layers]:
