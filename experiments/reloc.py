@@ -495,8 +495,8 @@ def main(argv: list[str] | None = None) -> int:
         )
         cache = REPO / "runs" / "reloc" / f"{name}_seed{a.seed}.json"
         key = {"ks": ks, "max_trials": a.max_trials, "prior_views": a.prior_views}
-        if a.rematch and cache.exists() and json.loads(cache.read_text())["key"] == key:
-            stored = json.loads(cache.read_text())
+        stored = json.loads(cache.read_text()) if a.rematch and cache.exists() else None
+        if stored is not None and stored["key"] == key:
             info, queries = stored["info"], stored["queries"]
             print(f"  queries: {len(queries)} from {_rel(cache)} (commit {stored['commit']})", flush=True)
         else:
