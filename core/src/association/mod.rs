@@ -573,6 +573,20 @@ impl GlobalObject {
         }
     }
 
+    /// [`Self::to_map_object_raw`] without the cloud, for callers that need only ids, labels and
+    /// observations: no points, centre = mean centroid, zero extent (no copy, no quantiles).
+    pub fn to_map_object_without_cloud(&self) -> MapObject {
+        MapObject {
+            id: self.id,
+            label: self.label(),
+            world_from_object: se3_from_yaw(self.mean_centroid().unwrap_or_else(Vector3::zeros), 0.0),
+            half_extents: Vector3::zeros(),
+            observations: self.observations.iter().map(|o| o.observation).collect(),
+            points_in_world: Vec::new(),
+            stage: EstimateStage::Raw,
+        }
+    }
+
     fn new(id: u32, voxel_m: f64) -> Self {
         Self {
             id,

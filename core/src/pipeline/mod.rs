@@ -186,15 +186,16 @@ pub struct PipelineConfig {
     /// folds then; `relabel_vote_ratio` = 0 disables both). Default 0 (off): at 0.25 on the hard
     /// suite (studies/mesh_oversplit) it removed duplicates but also folded neighbours.
     pub relabel_co_observed_share: f64,
-    /// Phantoms on another object's surface: an object with at most 1/`relabel_vote_ratio` of the
-    /// observations of another, whose raw box intersects the other's, and at least this share of
-    /// whose cloud lies within `consolidate_cloud_radius_m` of the other's cloud, is folded into it
-    /// (its points are dropped when the labels differ), even when the two were boxed in common frames. A
-    /// false positive whose box covers part of a real object (a table distractor behind a
-    /// bottle's top, a stray box on a carton) sees only that object's surface, while a real
-    /// neighbour, however close, shows its own. Fraction; above 1 disables. Default 2 (off): at 0.9
-    /// on the hard suite (studies/mesh_oversplit) a fold grew the host's cloud until it covered
-    /// flat neighbours in a row, which were folded in turn.
+    /// Phantoms on another object's surface: an object (nothing folded into it) with at most
+    /// 1/`relabel_vote_ratio` of the observations of another, boxed only in frames where the other
+    /// was boxed too, whose raw box intersects the other's, and at least this share of whose cloud
+    /// lies within `consolidate_cloud_radius_m` of the other's cloud, is folded into it (its points
+    /// are dropped when the labels differ). The host's observations and cloud are its own, from
+    /// before any fold, so one fold never enables the next. A false positive whose box covers part
+    /// of a real object (a table distractor behind a bottle's top, a stray box on a carton) sees
+    /// only that object's surface, while a real neighbour, however close, shows its own. Fraction;
+    /// above 1 disables. Default 2 (off): at 0.9 on the hard suite (studies/mesh_oversplit) it
+    /// removed extra objects on two scenes of seven and lost a real one on a third.
     pub consolidate_covered_share: f64,
     /// Neighbour radius of the cloud-overlap test, metres (about the depth noise at 0.5 m plus
     /// the sampling step of the local clouds).
@@ -477,7 +478,7 @@ impl ObjectPipeline {
         }
         if self.config.parameterize {
             let segments = grey.and_then(|g| detect_segments(g, &self.config.lsd).ok());
-            let map = self.raw_map();
+            let map = self.raw_map_with(false);
             for (di, id) in out.assigned.iter().enumerate() {
                 let (Some(id), Some(det)) = (id, frame.detections.get(di)) else { continue };
                 let Some(obj) = map.get(*id) else { continue };
@@ -538,6 +539,10 @@ impl ObjectPipeline {
     /// Fold overlapping same-label objects into the older one (see `PipelineConfig::consolidate`).
     fn consolidate(&mut self) {
         loop {
+            // The phantom fold compares with the objects before any fold (none: the fold is off).
+            let unfolded =
+                if self.config.consolidate_covered_share <= 1.0 { self.base_map() } else { ObjectMap::default() };
+            let own: BTreeMap<u32, &MapObject> = unfolded.objects.iter().map(|o| (o.id, o)).collect();
             let map = self.raw_map();
             let frames: Vec<BTreeSet<u32>> =
                 map.objects.iter().map(|o| o.observations.iter().map(|ob| ob.frame).collect()).collect();
@@ -545,7 +550,7 @@ impl ObjectPipeline {
             'pairs: for (i, a) in map.objects.iter().enumerate() {
                 for (j, b) in map.objects.iter().enumerate().skip(i + 1) {
                     let common = frames[i].intersection(&frames[j]).count();
-                    if let Some((minor, major)) = self.covered_phantom(a, b) {
+                    if let Some((minor, major)) = self.covered_phantom(a, b, &own) {
                         fold = Some((minor, major, a.label != b.label));
                         break 'pairs;
                     }
@@ -620,9 +625,12 @@ impl ObjectPipeline {
     }
 
     /// The phantom fold of `consolidate_covered_share`: `(phantom id, host id)` when the less
-    /// observed of `a` and `b` has at most 1/`relabel_vote_ratio` of the other's observations and
-    /// its cloud lies on the other's surface.
-    fn covered_phantom(&self, a: &MapObject, b: &MapObject) -> Option<(u32, u32)> {
+    /// observed of `a` and `b` is a single association object (nothing folded into it yet), has at
+    /// most 1/`relabel_vote_ratio` of the other's own observations, was boxed only in frames where
+    /// the other was boxed too, and its cloud lies on the other's own surface. "Own" is the host's
+    /// association object before any fold (`own`), so a fold never grows the evidence for the next
+    /// one: a host's cloud enlarged by a folded phantom cannot reach over its neighbours.
+    fn covered_phantom(&self, a: &MapObject, b: &MapObject, own: &BTreeMap<u32, &MapObject>) -> Option<(u32, u32)> {
         let (ratio, need, r) = (
             self.config.relabel_vote_ratio,
             self.config.consolidate_covered_share,
@@ -631,18 +639,26 @@ impl ObjectPipeline {
         if ratio <= 0.0 || need > 1.0 || r <= 0.0 {
             return None;
         }
-        let (na, nb) = (a.observations.len().max(1) as f64, b.observations.len().max(1) as f64);
-        let (minor, major) = if na * ratio <= nb {
-            (a, b)
+        let (own_a, own_b) = (own.get(&a.id)?, own.get(&b.id)?);
+        let (na, nb) = (own_a.observations.len().max(1) as f64, own_b.observations.len().max(1) as f64);
+        let (minor, host) = if na * ratio <= nb {
+            (a, own_b)
         } else if nb * ratio <= na {
-            (b, a)
+            (b, own_a)
         } else {
             return None;
         };
-        if crate::geometry::intersection_volume(&minor.geometry(), &major.geometry()) <= 0.0 {
+        if own.get(&minor.id).is_none_or(|m| m.observations.len() != minor.observations.len()) {
             return None;
         }
-        (cloud_share_within(&minor.points_in_world, &major.points_in_world, r) >= need).then_some((minor.id, major.id))
+        let host_frames: BTreeSet<u32> = host.observations.iter().map(|o| o.frame).collect();
+        if !minor.observations.iter().all(|o| host_frames.contains(&o.frame)) {
+            return None;
+        }
+        if crate::geometry::intersection_volume(&minor.geometry(), &host.geometry()) <= 0.0 {
+            return None;
+        }
+        (cloud_share_within(&minor.points_in_world, &host.points_in_world, r) >= need).then_some((minor.id, host.id))
     }
 
     /// The cloud-overlap test of `consolidate_cloud_overlap` (only for intersecting raw boxes).
@@ -659,17 +675,36 @@ impl ObjectPipeline {
         cloud_share_within(small, large, r) >= need
     }
 
-    /// The association's objects with pipeline-level folds applied (extent = trimmed AABB of the
-    /// union of the folded clouds, label = majority over observations), no observation filter.
-    fn raw_map(&self) -> ObjectMap {
-        let base = match &self.mapper {
+    /// The association's objects as they are, before the pipeline's folds.
+    fn base_map(&self) -> ObjectMap {
+        self.base_map_with(true)
+    }
+
+    /// [`Self::base_map`]; without `clouds` the ensemble's objects carry no points and no extent
+    /// (labels, ids and observations only).
+    fn base_map_with(&self, clouds: bool) -> ObjectMap {
+        match &self.mapper {
             Mapper::Naive(m) => m.map().clone(),
             Mapper::Ensemble(a) => {
-                let objects: Vec<MapObject> = a.objects().map(GlobalObject::to_map_object_raw).collect();
+                let raw =
+                    if clouds { GlobalObject::to_map_object_raw } else { GlobalObject::to_map_object_without_cloud };
+                let objects: Vec<MapObject> = a.objects().map(raw).collect();
                 let next_id = objects.iter().map(|o| o.id + 1).max().unwrap_or(0);
                 ObjectMap { objects, next_id }
             }
-        };
+        }
+    }
+
+    /// The association's objects with pipeline-level folds applied (extent = trimmed AABB of the
+    /// union of the folded clouds, label = majority over observations), no observation filter.
+    fn raw_map(&self) -> ObjectMap {
+        self.raw_map_with(true)
+    }
+
+    /// [`Self::raw_map`]; without `clouds`, labels, ids and observations only (see
+    /// [`Self::base_map_with`]).
+    fn raw_map_with(&self, clouds: bool) -> ObjectMap {
+        let base = self.base_map_with(clouds);
         if self.merged_into.is_empty() {
             return base;
         }

@@ -1,0 +1,76 @@
+//! Time the whole per-frame system (tracking → gauge → object pipeline → grids) on the recorded
+//! inputs of an episode (`experiments/capture.py`, format in `objslam_core::system::capture`).
+//!
+//! `cargo run --release -p objslam-core --example system_replay -- <capture dir> [repeats]`
+//!
+//! Replays the capture `repeats` times (default 3), each time on a fresh system, timing every
+//! `process_frame` (the core's per-frame work; loading the frame's images is not timed) and every
+//! `view_done` (the per-view refresh of the estimates). Prints the median, mean and 90th percentile
+//! of each over all repeats, and the map's object count and mean 3D IoU against the capture's
+//! ground truth (so a faster variant that changes the map shows it).
+
+use std::path::Path;
+use std::time::Instant;
+
+use anyhow::{anyhow, Result};
+use nalgebra::Matrix4;
+use objslam_core::eval::{estimates_from_map, evaluate, EvalConfig};
+use objslam_core::geometry::se3_from_matrix;
+use objslam_core::system::capture::{Capture, CaptureEvent};
+use objslam_core::system::FrameInput;
+
+/// (median, mean, 90th percentile) of `v`, ms.
+fn summary(v: &mut [f64]) -> (f64, f64, f64) {
+    if v.is_empty() {
+        return (f64::NAN, f64::NAN, f64::NAN);
+    }
+    v.sort_by(f64::total_cmp);
+    let at = |q: f64| v[((v.len() - 1) as f64 * q).round() as usize];
+    (at(0.5), v.iter().sum::<f64>() / v.len() as f64, at(0.9))
+}
+
+fn main() -> Result<()> {
+    let args: Vec<String> = std::env::args().collect();
+    let dir = Path::new(args.get(1).ok_or_else(|| anyhow!("usage: system_replay <capture dir> [repeats]"))?);
+    let repeats: usize = match args.get(2) {
+        Some(s) => s.parse().map_err(|_| anyhow!("repeats: not a count: {s}"))?,
+        None => 3,
+    };
+    let capture = Capture::open(dir)?;
+    let (mut frame_ms, mut view_ms) = (Vec::new(), Vec::new());
+    let mut last = None;
+    for _ in 0..repeats {
+        let mut system = capture.system()?;
+        for event in &capture.events {
+            match event {
+                CaptureEvent::Frame(f) => {
+                    let (frame, grey) = capture.load_frame(f)?;
+                    let gt = se3_from_matrix(&Matrix4::from_row_slice(&f.world_from_camera_gt), "gt")?;
+                    let t = Instant::now();
+                    system.process_frame(FrameInput {
+                        frame,
+                        grey: Some(&grey),
+                        view_index: f.view_index,
+                        world_from_camera_gt: Some(gt),
+                    })?;
+                    frame_ms.push(t.elapsed().as_secs_f64() * 1e3);
+                }
+                CaptureEvent::ViewDone { counts_as_view } => {
+                    let t = Instant::now();
+                    system.view_done(*counts_as_view);
+                    view_ms.push(t.elapsed().as_secs_f64() * 1e3);
+                }
+            }
+        }
+        last = Some(system);
+    }
+    let (fm, fa, f90) = summary(&mut frame_ms);
+    let (vm, va, v90) = summary(&mut view_ms);
+    println!("process_frame: {} frames, median {fm:.2} ms, mean {fa:.2} ms, p90 {f90:.2} ms", frame_ms.len());
+    println!("view_done:     {} views, median {vm:.2} ms, mean {va:.2} ms, p90 {v90:.2} ms", view_ms.len());
+    if let Some(system) = last {
+        let ev = evaluate(&capture.header.ground_truth, &estimates_from_map(&system.map()), &EvalConfig::default());
+        println!("map: {} objects for {} true, mean 3D IoU {:.3}", ev.n_objects_est, ev.n_objects_gt, ev.mean.iou3d);
+    }
+    Ok(())
+}
