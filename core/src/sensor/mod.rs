@@ -38,6 +38,7 @@ pub mod depth;
 
 use nalgebra::{Matrix3, Matrix4, Rotation3, Vector3};
 use serde::{Deserialize, Serialize};
+use std::sync::OnceLock;
 use thiserror::Error;
 
 pub use colour::{colour_image, ColourConfig};
@@ -222,6 +223,74 @@ impl SplitMix64 {
         let u2 = self.uniform();
         (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
     }
+
+    /// Fills `out` with standard normals for bulk draws: the normal quantile of a 12-bit uniform
+    /// ([`normal_table`]), five per 64-bit draw.
+    pub(crate) fn fill_normal(&mut self, out: &mut [f32]) {
+        let table = normal_table();
+        for chunk in out.chunks_mut(5) {
+            let r = self.next_u64();
+            for (k, v) in chunk.iter_mut().enumerate() {
+                *v = table[((r >> (12 * k)) & 0xFFF) as usize];
+            }
+        }
+    }
+}
+
+/// Standard normal quantiles of the `n` midpoints `(i + ½) / n`, rescaled to unit variance.
+pub(crate) fn normal_quantiles(n: usize) -> Vec<f32> {
+    let q: Vec<f64> = (0..n).map(|i| inverse_normal_cdf((i as f64 + 0.5) / n as f64)).collect();
+    let sd = (q.iter().map(|v| v * v).sum::<f64>() / n as f64).sqrt();
+    q.iter().map(|v| (v / sd) as f32).collect()
+}
+
+/// [`normal_quantiles`] of 4096 midpoints (tails cut at ±3.5 σ).
+pub(crate) fn normal_table() -> &'static [f32] {
+    static TABLE: OnceLock<Vec<f32>> = OnceLock::new();
+    TABLE.get_or_init(|| normal_quantiles(4096))
+}
+
+/// Acklam's rational approximation of the standard normal quantile (relative error < 1.2e-9).
+fn inverse_normal_cdf(p: f64) -> f64 {
+    const A: [f64; 6] = [
+        -39.696_830_286_653_76,
+        220.946_098_424_520_5,
+        -275.928_510_446_968_7,
+        138.357_751_867_269,
+        -30.664_798_066_147_16,
+        2.506_628_277_459_239,
+    ];
+    const B: [f64; 5] = [
+        -54.476_098_798_224_06,
+        161.585_836_858_040_9,
+        -155.698_979_859_886_6,
+        66.801_311_887_719_72,
+        -13.280_681_552_885_72,
+    ];
+    const C: [f64; 6] = [
+        -7.784_894_002_430_293e-3,
+        -0.322_396_458_041_136_5,
+        -2.400_758_277_161_838,
+        -2.549_732_539_343_734,
+        4.374_664_141_464_968,
+        2.938_163_982_698_783,
+    ];
+    const D: [f64; 4] =
+        [7.784_695_709_041_462e-3, 0.322_467_129_070_039_8, 2.445_134_137_142_996, 3.754_408_661_907_416];
+    let tail = |q: f64| {
+        (((((C[0] * q + C[1]) * q + C[2]) * q + C[3]) * q + C[4]) * q + C[5])
+            / ((((D[0] * q + D[1]) * q + D[2]) * q + D[3]) * q + 1.0)
+    };
+    if p < 0.024_25 {
+        tail((-2.0 * p.ln()).sqrt())
+    } else if p > 1.0 - 0.024_25 {
+        -tail((-2.0 * (1.0 - p).ln()).sqrt())
+    } else {
+        let q = p - 0.5;
+        let r = q * q;
+        (((((A[0] * r + A[1]) * r + A[2]) * r + A[3]) * r + A[4]) * r + A[5]) * q
+            / (((((B[0] * r + B[1]) * r + B[2]) * r + B[3]) * r + B[4]) * r + 1.0)
+    }
 }
 
 /// Stream tags of the per-episode and per-frame draws.
@@ -321,6 +390,11 @@ pub fn simulate_frame(
     }
     if !frame.rgb.is_empty() && frame.rgb.len() != 3 * n {
         return Err(SensorError::BufferLength { field: "rgb", expected: 3 * n, actual: frame.rgb.len() });
+    }
+    if !frame.rgb.is_empty() {
+        for (field, side) in [("width", frame.width), ("height", frame.height)] {
+            check(field, side as f64, side <= colour::MAX_SIDE_PX, "at most 65536 pixels for the colour model")?;
+        }
     }
     let (depth_m, stats) = stereo_depth(&config.stereo, unit, frame, seed, frame_index);
     let rgb = if frame.rgb.is_empty() {
