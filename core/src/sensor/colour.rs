@@ -380,7 +380,8 @@ impl<'a> MotionBlur<'a> {
             _ => self.boxes::<MIXED>(y),
         }
         // The rows of sums the row reads (of either array, at most).
-        let (lo, hi) = self.i0[..w].iter().chain(&self.i1[..w]).fold((u32::MAX, 0), |(lo, hi), &i| (lo.min(i), hi.max(i)));
+        let (lo, hi) =
+            self.i0[..w].iter().chain(&self.i1[..w]).fold((u32::MAX, 0), |(lo, hi), &i| (lo.min(i), hi.max(i)));
         if mode != COLS {
             self.rows.ensure(self.src, w, lo as usize / (w + 1), hi as usize / (w + 1));
         }

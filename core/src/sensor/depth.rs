@@ -22,8 +22,9 @@
 //!    (`z_near + α (z_far − z_near)`, α uniform): the matching window straddles both surfaces.
 //! 5. **Disparity noise**: the disparity `d = f·B/z` gets an error of RMS
 //!    [`StereoDepthConfig::subpixel_rms_px`], spatially correlated as block matching makes it (a
-//!    unit-variance field interpolated bilinearly from independent values on a grid of
-//!    [`StereoDepthConfig::correlation_px`] depth pixels, normalised per pixel); to first order the
+//!    unit-variance field interpolated bilinearly from independent standard normals on a grid of
+//!    [`StereoDepthConfig::correlation_px`] depth pixels, normalised per pixel; the normals are
+//!    the normal quantiles of 12-bit uniforms, tails cut at ±3.5 σ); to first order the
 //!    depth RMS is `z² · s / (f · B)` (Intel's tuning white paper), 1.04 mm at 0.5 m with the
 //!    defaults. Then the unit's **depth-scale** error multiplies every value.
 //! 6. **Registration**: each depth pixel's two corners go through the depth intrinsic error and
@@ -31,6 +32,9 @@
 //!    the rectangle between them is filled, nearest surface kept (librealsense's align-to-colour).
 //!    Colour pixels no depth pixel reaches stay 0.
 //! 7. **Quantisation** to [`StereoDepthConfig::unit_m`] (the 16-bit depth unit, 1 mm by default).
+//!
+//! The random draws of steps 3 and 4 come from a stream per row of `(seed, frame index)`, so rows
+//! can be computed in any order, by any thread, with the same result.
 //!
 //! Not modelled: depth motion blur (the D435's depth imagers have a global shutter and short
 //! exposure), the invalid band at the depth image's left border (the depth field of view is wider
@@ -164,6 +168,20 @@ pub struct DepthStats {
     pub valid_out: usize,
 }
 
+impl DepthStats {
+    /// The counts of two parts of a frame together.
+    pub(crate) fn plus(&self, o: &Self) -> Self {
+        Self {
+            surface: self.surface + o.surface,
+            out_of_range: self.out_of_range + o.out_of_range,
+            shadow: self.shadow + o.shadow,
+            grazing: self.grazing + o.grazing,
+            mixed: self.mixed + o.mixed,
+            valid_out: self.valid_out + o.valid_out,
+        }
+    }
+}
+
 /// Invalid-pixel causes on the rendered grid.
 const OK: u8 = 0;
 const NONE: u8 = 1;
@@ -186,40 +204,104 @@ pub fn stereo_depth(
     seed: u64,
     frame_index: u64,
 ) -> (Vec<f32>, DepthStats) {
-    let (w, h) = (frame.width, frame.height);
-    let mut stats = DepthStats::default();
-    let mut z = vec![0.0f32; w * h];
-    let mut state = vec![OK; w * h];
-    // 1-3 on every row first: the silhouette test of a row reads the true depths of its neighbours.
-    let surfaces = Surfaces::new(cfg, unit, seed, frame_index);
-    for (y, (zr, sr)) in z.chunks_exact_mut(w.max(1)).zip(state.chunks_exact_mut(w.max(1))).enumerate() {
-        let pr = &frame.points_in_camera[3 * y * w..3 * (y + 1) * w];
-        let nr = &frame.normals_in_camera[3 * y * w..3 * (y + 1) * w];
-        surfaces.row(y, pr, nr, zr, sr, &mut stats);
-    }
-    // 4-7 a row at a time: mixed depths, disparity noise and scale, registration and quantisation.
-    let cell = (cfg.correlation_px * unit.colour_true.fx / cfg.focal_px).max(1.0);
-    let mut field = CorrelatedField::new(w, h, cell, &mut SplitMix64::new(seed, &[TAG_DEPTH, frame_index, SUB_FIELD]));
-    let mut silhouettes = Silhouettes::new(cfg, w);
-    let mut registration = Registration::new(cfg, unit, w, h);
-    let mut out = vec![f32::INFINITY; w * h];
-    let (mut row, mut noise) = (vec![0.0f32; w], vec![0.0f32; w]);
-    let k_noise = (cfg.subpixel_rms_px / (cfg.focal_px * cfg.baseline_m)) as f32;
-    let scale = unit.depth_scale as f32;
-    for y in 0..h {
-        let sr = &state[y * w..(y + 1) * w];
-        row.copy_from_slice(&z[y * w..(y + 1) * w]);
-        stats.mixed += silhouettes.row(&z, sr, y, &mut row, seed, frame_index);
-        // 5. z' = f·B / (f·B / z + s·e) · scale = z · scale / (1 + s·e·z / (f·B)).
-        field.row(y, &mut noise);
-        for ((zv, &st), &e) in row.iter_mut().zip(sr).zip(&noise) {
-            let den = 1.0 + k_noise * e * *zv;
-            *zv = if st == OK && den > 0.0 { *zv * scale / den } else { 0.0 };
-        }
-        registration.row(y, &row, &mut out);
-    }
-    stats.valid_out = registration.finish(&mut out);
+    let n = frame.width * frame.height;
+    let job = DepthFrame::new(cfg, unit, frame, seed, frame_index);
+    let (mut z, mut state) = (vec![0.0f32; n], vec![OK; n]);
+    let mut stats = job.surfaces(0, &mut z, &mut state);
+    let mut out = vec![f32::INFINITY; n];
+    stats.mixed = job.register(0..frame.height, &z, &state, &mut out);
+    stats.valid_out = job.finish(&mut out);
     (out, stats)
+}
+
+/// The depth model of one frame in parts that can run on separate rows, in any order, with the
+/// same result: steps 1-3 on rows ([`Self::surfaces`]), then, once every row has them, steps 4-6
+/// on rows into a z-buffer ([`Self::register`]; z-buffers of separate rows merge by their
+/// minimum), then step 7 ([`Self::finish`]).
+pub(crate) struct DepthFrame<'a> {
+    cfg: &'a StereoDepthConfig,
+    unit: &'a SensorUnit,
+    frame: &'a RenderedFrame<'a>,
+    seed: u64,
+    frame_index: u64,
+    surfaces: Surfaces,
+    field: CorrelatedField,
+}
+
+impl<'a> DepthFrame<'a> {
+    pub(crate) fn new(
+        cfg: &'a StereoDepthConfig,
+        unit: &'a SensorUnit,
+        frame: &'a RenderedFrame<'a>,
+        seed: u64,
+        frame_index: u64,
+    ) -> Self {
+        let cell = (cfg.correlation_px * unit.colour_true.fx / cfg.focal_px).max(1.0);
+        let mut rng = SplitMix64::new(seed, &[TAG_DEPTH, frame_index, SUB_FIELD]);
+        Self {
+            cfg,
+            unit,
+            frame,
+            seed,
+            frame_index,
+            surfaces: Surfaces::new(cfg, unit, seed, frame_index),
+            field: CorrelatedField::new(frame.width, frame.height, cell, &mut rng),
+        }
+    }
+
+    /// Steps 1-3 on rows `y0..` (as many as `z` holds): the true depth (0 without a surface) and
+    /// each pixel's state; the counts.
+    pub(crate) fn surfaces(&self, y0: usize, z: &mut [f32], state: &mut [u8]) -> DepthStats {
+        let w = self.frame.width;
+        let mut stats = DepthStats::default();
+        let mut scratch = vec![0.0f32; w];
+        for (y, (zr, sr)) in (y0..).zip(z.chunks_exact_mut(w.max(1)).zip(state.chunks_exact_mut(w.max(1)))) {
+            let pr = &self.frame.points_in_camera[3 * y * w..3 * (y + 1) * w];
+            let nr = &self.frame.normals_in_camera[3 * y * w..3 * (y + 1) * w];
+            stats = stats.plus(&self.surfaces.row(y, pr, nr, zr, sr, &mut scratch));
+        }
+        stats
+    }
+
+    /// Steps 4-6 on `rows`, from every row's true depth `z` and `state`, into the z-buffer `zbuf`
+    /// (the whole image, +inf = nothing yet); returns the count of mixed depths.
+    pub(crate) fn register(&self, rows: std::ops::Range<usize>, z: &[f32], state: &[u8], zbuf: &mut [f32]) -> usize {
+        let (cfg, w) = (self.cfg, self.frame.width);
+        let mut silhouettes = Silhouettes::new(cfg, w);
+        let mut registration = Registration::new(self.unit, w, self.frame.height);
+        let (mut row, mut noise, mut between) = (vec![0.0f32; w], vec![0.0f32; w], vec![0.0f32; self.field.gw]);
+        let k_noise = (cfg.subpixel_rms_px / (cfg.focal_px * cfg.baseline_m)) as f32;
+        let scale = self.unit.depth_scale as f32;
+        let mut mixed = 0;
+        for y in rows {
+            let sr = &state[y * w..(y + 1) * w];
+            row.copy_from_slice(&z[y * w..(y + 1) * w]);
+            mixed += silhouettes.row(z, sr, y, &mut row, self.seed, self.frame_index);
+            // 5. z' = f·B / (f·B / z + s·e) · scale = z · scale / (1 + s·e·z / (f·B)).
+            self.field.row(y, &mut between, &mut noise);
+            for ((zv, &st), &e) in row.iter_mut().zip(sr).zip(&noise) {
+                let den = 1.0 + k_noise * e * *zv;
+                *zv = if st == OK && den > 0.0 { *zv * scale / den } else { 0.0 };
+            }
+            registration.row(y, &row, zbuf);
+        }
+        mixed
+    }
+
+    /// Step 7: the z-buffer as depth quantised to `unit_m` (0 = no return); returns the count
+    /// with a depth.
+    pub(crate) fn finish(&self, zbuf: &mut [f32]) -> usize {
+        // Adding this to an `f64` below 2^51 rounds it to an integer (halves to even).
+        const ROUND_F64: f64 = 6_755_399_441_055_744.0; // 1.5 · 2^52
+        let q = self.cfg.unit_m;
+        let inv_q = if q > 0.0 { 1.0 / q } else { 0.0 };
+        for v in zbuf.iter_mut() {
+            let m = *v as f64;
+            let quantised = if q > 0.0 { ((m * inv_q + ROUND_F64) - ROUND_F64) * q } else { m };
+            *v = if *v == f32::INFINITY { 0.0 } else { quantised as f32 };
+        }
+        zbuf.iter().filter(|v| **v > 0.0).count()
+    }
 }
 
 /// Steps 1-3 (range, the second imager's shadow, grazing incidence) on one row of the rendered
@@ -251,11 +333,22 @@ impl Surfaces {
         }
     }
 
-    fn row(&self, y: usize, pts: &[f32], nrm: &[f32], z: &mut [f32], state: &mut [u8], stats: &mut DepthStats) {
-        let (mut surface, mut out) = (0usize, 0usize);
+    /// Row `y`: `pts`, `nrm` its rendered points and normals; `scratch` (length of the row) is
+    /// overwritten.
+    fn row(
+        &self,
+        y: usize,
+        pts: &[f32],
+        nrm: &[f32],
+        z: &mut [f32],
+        state: &mut [u8],
+        scratch: &mut [f32],
+    ) -> DepthStats {
+        let mut stats = DepthStats::default();
+        let (mut surface, mut out) = (0u32, 0u32);
         for ((zv, st), p) in z.iter_mut().zip(state.iter_mut()).zip(pts.chunks_exact(3)) {
             let v = p[2];
-            let is_surface = v.is_finite() && v > 0.0;
+            let is_surface = v > 0.0 && v < f32::INFINITY;
             let is_out = is_surface && (v < self.min_z || v > self.max_z);
             *zv = if is_surface { v } else { 0.0 };
             *st = if !is_surface {
@@ -265,20 +358,23 @@ impl Surfaces {
             } else {
                 OK
             };
-            surface += usize::from(is_surface);
-            out += usize::from(is_out);
+            surface += u32::from(is_surface);
+            out += u32::from(is_out);
         }
-        stats.surface += surface;
-        stats.out_of_range += out;
+        stats.surface = surface as usize;
+        stats.out_of_range = out as usize;
         if self.shadow {
-            // Right-image coordinate u − f·B/z, scanned from the right: a pixel whose coordinate
-            // lies beyond the least one to its right is hidden from the right imager.
+            // Right-image coordinate u − f·B/z (the whole row first, so that it runs on several
+            // pixels at a time), scanned from the right: a pixel whose coordinate lies beyond the
+            // least one to its right is hidden from the right imager.
+            for (x, (r, &zv)) in scratch.iter_mut().zip(z.iter()).enumerate() {
+                *r = x as i32 as f32 - self.fb / zv;
+            }
             let mut least = f32::INFINITY;
-            for (x, (st, &zv)) in state.iter_mut().zip(z.iter()).enumerate().rev() {
+            for (st, &r) in state.iter_mut().zip(scratch.iter()).rev() {
                 if *st == NONE {
                     continue;
                 }
-                let r = x as f32 - self.fb / zv;
                 if r > least + 1e-3 {
                     if *st == OK {
                         *st = SHADOW;
@@ -292,26 +388,30 @@ impl Surfaces {
         // Grazing: cos² = (p·n)² / (|p|² |n|²) below cos²(start) makes a pixel a candidate; the
         // square root and the draw only there.
         let c0_sq = (self.cos_start * self.cos_start) as f32;
-        let candidate = |st: u8, p: &[f32], n: &[f32]| {
+        let mut candidates = 0u32;
+        for ((c, &st), (p, n)) in scratch.iter_mut().zip(state.iter()).zip(pts.chunks_exact(3).zip(nrm.chunks_exact(3)))
+        {
             let dot = p[0] * n[0] + p[1] * n[1] + p[2] * n[2];
             let denom = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]) * (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
-            let usable = st == OK && denom > 0.0 && denom.is_finite();
-            (usable && dot * dot < c0_sq * denom).then(|| (dot * dot / denom) as f64)
-        };
-        if !state.iter().zip(pts.chunks_exact(3)).zip(nrm.chunks_exact(3)).any(|((&st, p), n)| candidate(st, p, n).is_some())
-        {
-            return;
+            let is = st == OK && denom > 0.0 && denom < f32::INFINITY && dot * dot < c0_sq * denom;
+            *c = if is { dot * dot / denom } else { -1.0 };
+            candidates += u32::from(is);
+        }
+        if candidates == 0 {
+            return stats;
         }
         let mut rng = SplitMix64::new(self.seed, &[TAG_DEPTH, self.frame_index, SUB_GRAZING, y as u64]);
-        for ((st, p), n) in state.iter_mut().zip(pts.chunks_exact(3)).zip(nrm.chunks_exact(3)) {
-            if let Some(c_sq) = candidate(*st, p, n) {
-                let p_drop = ((self.cos_start - c_sq.sqrt()) / (self.cos_start - self.cos_end)).clamp(0.0, 1.0);
+        for (st, &c_sq) in state.iter_mut().zip(scratch.iter()) {
+            if c_sq >= 0.0 {
+                let p_drop =
+                    ((self.cos_start - (c_sq as f64).sqrt()) / (self.cos_start - self.cos_end)).clamp(0.0, 1.0);
                 if rng.uniform() < p_drop {
                     *st = GRAZING;
                     stats.grazing += 1;
                 }
             }
         }
+        stats
     }
 }
 
@@ -362,8 +462,8 @@ impl Silhouettes {
         }
         for yy in y0 + 1..y1 {
             for ((lo, hi), &v) in col_lo.iter_mut().zip(col_hi.iter_mut()).zip(&z[yy * w..(yy + 1) * w]) {
-                *lo = lo.min(if v > 0.0 { v } else { f32::INFINITY });
-                *hi = hi.max(v);
+                *lo = min_f(if v > 0.0 { v } else { f32::INFINITY }, *lo);
+                *hi = max_f(v, *hi);
             }
         }
         self.lo.copy_from_slice(&self.col_lo[..w]);
@@ -372,8 +472,8 @@ impl Silhouettes {
             for ((lo, hi), (&l, &u)) in
                 self.lo.iter_mut().zip(self.hi.iter_mut()).zip(self.col_lo[k..k + w].iter().zip(&self.col_hi[k..k + w]))
             {
-                *lo = lo.min(l);
-                *hi = hi.max(u);
+                *lo = min_f(l, *lo);
+                *hi = max_f(u, *hi);
             }
         }
         let (jump_m, jump_rel) = (self.jump_m, self.jump_rel);
@@ -404,8 +504,6 @@ pub(crate) struct CorrelatedField {
     xs: Vec<(usize, f32, f32)>,
     /// Per row: grid row, interpolation weight, normalisation.
     ys: Vec<(usize, f32, f32)>,
-    /// Scratch: the current row interpolated between its two grid rows.
-    between: Vec<f32>,
 }
 
 impl CorrelatedField {
@@ -425,16 +523,16 @@ impl CorrelatedField {
                 .collect()
         };
         let xs = axis(width).into_iter().map(|(i, a, nx)| (i, (1.0 - a) * nx, a * nx)).collect();
-        Self { width, gw, grid, xs, ys: axis(height), between: vec![0.0; gw] }
+        Self { width, gw, grid, xs, ys: axis(height) }
     }
 
-    /// Row `y` of the field into `out` (length `width`).
-    pub(crate) fn row(&mut self, y: usize, out: &mut [f32]) {
+    /// Row `y` of the field into `out` (length `width`); `between` (length `gw`) is scratch for
+    /// the row interpolated between its two grid rows.
+    pub(crate) fn row(&self, y: usize, between: &mut [f32], out: &mut [f32]) {
         let (j, b, ny) = self.ys[y];
         let gw = self.gw;
         let (r0, r1) = (&self.grid[j * gw..(j + 1) * gw], &self.grid[(j + 1) * gw..(j + 2) * gw]);
         let (w0, w1) = ((1.0 - b) * ny, b * ny);
-        let between = &mut self.between;
         for ((o, v0), v1) in between.iter_mut().zip(r0).zip(r1) {
             *o = v0 * w0 + v1 * w1;
         }
@@ -447,10 +545,11 @@ impl CorrelatedField {
 /// The whole field as an image (tests).
 #[cfg(test)]
 pub(crate) fn correlated_field(width: usize, height: usize, cell_px: f64, rng: &mut SplitMix64) -> Vec<f32> {
-    let mut f = CorrelatedField::new(width, height, cell_px, rng);
+    let f = CorrelatedField::new(width, height, cell_px, rng);
+    let mut between = vec![0.0f32; f.gw];
     let mut out = vec![0.0f32; width * height];
     for (y, row) in out.chunks_exact_mut(width).enumerate() {
-        f.row(y, row);
+        f.row(y, &mut between, row);
     }
     out
 }
@@ -505,7 +604,6 @@ struct Registration {
     t: [f32; 3],
     /// Assumed colour intrinsics fx, fy, cx, cy.
     k: [f32; 4],
-    unit_m: f64,
     /// Scratch per depth pixel of a row: the projected corners' extent, the depth, then the
     /// target rectangle `[x0, x1) × [y0, y1)`.
     lo_x: Vec<f32>,
@@ -517,7 +615,7 @@ struct Registration {
 }
 
 impl Registration {
-    fn new(cfg: &StereoDepthConfig, unit: &SensorUnit, w: usize, h: usize) -> Self {
+    fn new(unit: &SensorUnit, w: usize, h: usize) -> Self {
         let e = &unit.registration_error;
         let r = Matrix3::new(e[0][0], e[0][1], e[0][2], e[1][0], e[1][1], e[1][2], e[2][0], e[2][1], e[2][2]);
         let s = unit.depth_focal_ratio;
@@ -541,7 +639,6 @@ impl Registration {
             row_dir,
             t: [t.x as f32, t.y as f32, t.z as f32],
             k: [ka.fx as f32, ka.fy as f32, ka.cx as f32, ka.cy as f32],
-            unit_m: cfg.unit_m,
             lo_x: vec![0.0; w],
             hi_x: vec![0.0; w],
             lo_y: vec![0.0; w],
@@ -567,8 +664,10 @@ impl Registration {
         for x in 0..w {
             let zv = z[x];
             // The pixel's two corners (x, y) and (x + 1, y + 1) at its depth, in the colour frame.
-            let (qax, qay, qaz) = ((ca_x[x] + ra[0]) * zv + tx, (ca_y[x] + ra[1]) * zv + ty, (ca_z[x] + ra[2]) * zv + tz);
-            let (qbx, qby, qbz) = ((cb_x[x] + rb[0]) * zv + tx, (cb_y[x] + rb[1]) * zv + ty, (cb_z[x] + rb[2]) * zv + tz);
+            let (qax, qay, qaz) =
+                ((ca_x[x] + ra[0]) * zv + tx, (ca_y[x] + ra[1]) * zv + ty, (ca_z[x] + ra[2]) * zv + tz);
+            let (qbx, qby, qbz) =
+                ((cb_x[x] + rb[0]) * zv + tx, (cb_y[x] + rb[1]) * zv + ty, (cb_z[x] + rb[2]) * zv + tz);
             let inv = 1.0 / (qaz * qbz);
             let (ia, ib) = (qbz * inv, qaz * inv);
             let (ax, ay) = (fx * qax * ia + cx, fy * qay * ia + cy);
@@ -595,21 +694,6 @@ impl Registration {
                 }
             }
         }
-    }
-
-    /// Turns the z-buffer into depth quantised to `unit_m` (0 = no return); returns the count with
-    /// a depth.
-    fn finish(&self, out: &mut [f32]) -> usize {
-        // Adding this to an `f64` below 2^51 rounds it to an integer (halves to even).
-        const ROUND_F64: f64 = 6_755_399_441_055_744.0; // 1.5 · 2^52
-        let q = self.unit_m;
-        let inv_q = if q > 0.0 { 1.0 / q } else { 0.0 };
-        for v in out.iter_mut() {
-            let m = *v as f64;
-            let quantised = if q > 0.0 { ((m * inv_q + ROUND_F64) - ROUND_F64) * q } else { m };
-            *v = if *v == f32::INFINITY { 0.0 } else { quantised as f32 };
-        }
-        out.iter().filter(|v| **v > 0.0).count()
     }
 }
 
