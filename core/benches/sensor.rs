@@ -2,7 +2,8 @@
 //! D435-class depth model (shadow scan, grazing, silhouettes, correlated noise, registration) and
 //! the colour model (shot + read noise, motion blur of a camera moving 0.3 m/s and 0.5 rad/s over
 //! a 15 ms exposure), on a synthetic scene: a table plane 0.5 m away tilted 30°, with a box and a
-//! cylinder-like bump standing on it, textured colour. Target: ≤ 5 ms per frame.
+//! cylinder-like bump standing on it, textured colour. Target: ≤ 5 ms per frame (the model runs
+//! on two threads where the machine has two cores).
 //! Run: `cargo bench --bench sensor -- --warm-up-time 1 --measurement-time 3`.
 
 // `criterion_group!` generates an undocumented public function.

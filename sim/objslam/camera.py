@@ -105,8 +105,6 @@ class ColourConfig:
     """Signal-dependent noise variance per 8-bit level (σ ≈ 2 levels at mid grey)."""
     read_noise: float = 1.0
     """Signal-independent noise, standard deviation in 8-bit levels."""
-    max_blur_taps: int = 12
-    """Most samples along a pixel's blur path."""
 
 
 @dataclass(frozen=True)
@@ -181,9 +179,8 @@ class CameraConfig:
                 raise ValueError(f"{key}: {v} must be a finite number ≥ 0 (0 turns it off)")
         if self.model not in CAMERA_MODELS:
             raise ValueError(f"camera.model: unknown {self.model!r}; known: {', '.join(CAMERA_MODELS)}")
-        for key, v in (("camera.stereo.mixed_band_px", self.stereo.mixed_band_px), ("camera.colour.max_blur_taps", self.colour.max_blur_taps)):
-            if v < 0:
-                raise ValueError(f"{key}: {v} must be ≥ 0")
+        if self.stereo.mixed_band_px < 0:
+            raise ValueError(f"camera.stereo.mixed_band_px: {self.stereo.mixed_band_px} must be ≥ 0")
         # The core checks every sensor-model range and names the key (``camera.stereo.baseline_m``).
         from . import _native
 

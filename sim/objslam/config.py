@@ -355,6 +355,7 @@ def _read(path: Path) -> dict[str, Any]:
 
 RETIRED_KEYS: dict[str, str] = {
     "slam.orb.pattern_seed": "the BRIEF test pattern is a fixed table (OpenCV's learned pattern), not drawn from a seed",
+    "camera.colour.max_blur_taps": "the motion blur integrates each pixel's whole path (prefix sums), not a number of samples",
 }
 """Settings the code no longer has, with why. A run folder's ``config.toml`` written when they existed
 still loads: they are dropped from overlay files with a warning (given as ``--set`` they are errors)."""

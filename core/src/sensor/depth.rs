@@ -22,8 +22,9 @@
 //!    (`z_near + α (z_far − z_near)`, α uniform): the matching window straddles both surfaces.
 //! 5. **Disparity noise**: the disparity `d = f·B/z` gets an error of RMS
 //!    [`StereoDepthConfig::subpixel_rms_px`], spatially correlated as block matching makes it (a
-//!    unit-variance field interpolated bilinearly from independent values on a grid of
-//!    [`StereoDepthConfig::correlation_px`] depth pixels, normalised per pixel); to first order the
+//!    unit-variance field interpolated bilinearly from independent standard normals on a grid of
+//!    [`StereoDepthConfig::correlation_px`] depth pixels, normalised per pixel; the normals are
+//!    the normal quantiles of 12-bit uniforms, tails cut at ±3.5 σ); to first order the
 //!    depth RMS is `z² · s / (f · B)` (Intel's tuning white paper), 1.04 mm at 0.5 m with the
 //!    defaults. Then the unit's **depth-scale** error multiplies every value.
 //! 6. **Registration**: each depth pixel's two corners go through the depth intrinsic error and
@@ -31,6 +32,9 @@
 //!    the rectangle between them is filled, nearest surface kept (librealsense's align-to-colour).
 //!    Colour pixels no depth pixel reaches stay 0.
 //! 7. **Quantisation** to [`StereoDepthConfig::unit_m`] (the 16-bit depth unit, 1 mm by default).
+//!
+//! The random draws of steps 3 and 4 come from a stream per row of `(seed, frame index)`, so rows
+//! can be computed in any order, by any thread, with the same result.
 //!
 //! Not modelled: depth motion blur (the D435's depth imagers have a global shutter and short
 //! exposure), the invalid band at the depth image's left border (the depth field of view is wider
@@ -164,29 +168,16 @@ pub struct DepthStats {
     pub valid_out: usize,
 }
 
-/// Per pixel of a row, the minimum (`lo`) and maximum (`hi`) of the positive values of `z` within
-/// `r` pixels along the row; `(inf, 0)` where there are none. `pad` is scratch space.
-fn row_min_max(z: &[f32], r: usize, pad: &mut Vec<f32>, lo: &mut [f32], hi: &mut [f32]) {
-    let w = z.len();
-    pad.clear();
-    pad.resize(w + 2 * r, 0.0);
-    pad[r..r + w].copy_from_slice(z);
-    // Invalid values (0) never win a maximum; for the minimum they count as +inf.
-    hi.copy_from_slice(&pad[..w]);
-    for k in 1..=2 * r {
-        for (o, v) in hi.iter_mut().zip(&pad[k..k + w]) {
-            *o = o.max(*v);
-        }
-    }
-    for v in pad.iter_mut() {
-        if *v <= 0.0 {
-            *v = f32::INFINITY;
-        }
-    }
-    lo.copy_from_slice(&pad[..w]);
-    for k in 1..=2 * r {
-        for (o, v) in lo.iter_mut().zip(&pad[k..k + w]) {
-            *o = o.min(*v);
+impl DepthStats {
+    /// The counts of two parts of a frame together.
+    pub(crate) fn plus(&self, o: &Self) -> Self {
+        Self {
+            surface: self.surface + o.surface,
+            out_of_range: self.out_of_range + o.out_of_range,
+            shadow: self.shadow + o.shadow,
+            grazing: self.grazing + o.grazing,
+            mixed: self.mixed + o.mixed,
+            valid_out: self.valid_out + o.valid_out,
         }
     }
 }
@@ -198,8 +189,8 @@ const RANGE: u8 = 2;
 const SHADOW: u8 = 3;
 const GRAZING: u8 = 4;
 
-/// Sub-streams of a frame's depth draws (one per effect, so that the passes need not run in a
-/// fixed pixel order across effects).
+/// Sub-streams of a frame's depth draws: one per effect and, for the per-pixel draws, one per row
+/// (so that no pass depends on another's draw count).
 const SUB_GRAZING: u64 = 1;
 const SUB_MIXED: u64 = 2;
 const SUB_FIELD: u64 = 3;
@@ -213,179 +204,314 @@ pub fn stereo_depth(
     seed: u64,
     frame_index: u64,
 ) -> (Vec<f32>, DepthStats) {
-    let (w, h) = (frame.width, frame.height);
-    let n = w * h;
-    let mut stats = DepthStats::default();
-    let pts = frame.points_in_camera;
-    let nrm = frame.normals_in_camera;
-    let mut z = vec![0.0f32; n];
-    let mut state = vec![OK; n];
-    // 1-3. Range, the second imager's shadow (in the rendered grid, true colour focal length) and
-    // grazing incidence (squared cosines: a square root only where a dropout is possible), row by
-    // row.
-    let mut rng = SplitMix64::new(seed, &[TAG_DEPTH, frame_index, SUB_GRAZING]);
-    let fb = unit.colour_true.fx * cfg.baseline_m;
-    let (c0, c1) = (cfg.grazing_start_deg.to_radians().cos(), cfg.grazing_end_deg.to_radians().cos());
-    let c0_sq = (c0 * c0) as f32;
-    // Per pixel of a row: the right-image coordinate and the squared cosine of incidence where a
-    // grazing dropout is possible (NaN elsewhere).
-    let (mut right_x, mut cos_sq) = (vec![0.0f64; w], vec![0.0f32; w]);
-    for y in 0..h {
-        let zr = &mut z[y * w..(y + 1) * w];
-        let sr = &mut state[y * w..(y + 1) * w];
-        let pr = &pts[3 * y * w..3 * (y + 1) * w];
-        for ((zv, st), p) in zr.iter_mut().zip(sr.iter_mut()).zip(pr.chunks_exact(3)) {
+    let n = frame.width * frame.height;
+    let job = DepthFrame::new(cfg, unit, frame, seed, frame_index);
+    let (mut z, mut state) = (vec![0.0f32; n], vec![OK; n]);
+    let mut stats = job.surfaces(0, &mut z, &mut state);
+    let mut out = vec![f32::INFINITY; n];
+    stats.mixed = job.register(0..frame.height, &z, &state, &mut out);
+    stats.valid_out = job.finish(&mut out);
+    (out, stats)
+}
+
+/// The depth model of one frame in parts that can run on separate rows, in any order, with the
+/// same result: steps 1-3 on rows ([`Self::surfaces`]), then, once every row has them, steps 4-6
+/// on rows into a z-buffer ([`Self::register`]; z-buffers of separate rows merge by their
+/// minimum), then step 7 ([`Self::finish`]).
+pub(crate) struct DepthFrame<'a> {
+    cfg: &'a StereoDepthConfig,
+    unit: &'a SensorUnit,
+    frame: &'a RenderedFrame<'a>,
+    seed: u64,
+    frame_index: u64,
+    surfaces: Surfaces,
+    field: CorrelatedField,
+}
+
+impl<'a> DepthFrame<'a> {
+    pub(crate) fn new(
+        cfg: &'a StereoDepthConfig,
+        unit: &'a SensorUnit,
+        frame: &'a RenderedFrame<'a>,
+        seed: u64,
+        frame_index: u64,
+    ) -> Self {
+        let cell = (cfg.correlation_px * unit.colour_true.fx / cfg.focal_px).max(1.0);
+        let mut rng = SplitMix64::new(seed, &[TAG_DEPTH, frame_index, SUB_FIELD]);
+        Self {
+            cfg,
+            unit,
+            frame,
+            seed,
+            frame_index,
+            surfaces: Surfaces::new(cfg, unit, seed, frame_index),
+            field: CorrelatedField::new(frame.width, frame.height, cell, &mut rng),
+        }
+    }
+
+    /// Steps 1-3 on rows `y0..` (as many as `z` holds): the true depth (0 without a surface) and
+    /// each pixel's state; the counts.
+    pub(crate) fn surfaces(&self, y0: usize, z: &mut [f32], state: &mut [u8]) -> DepthStats {
+        let w = self.frame.width;
+        let mut stats = DepthStats::default();
+        let mut scratch = vec![0.0f32; w];
+        for (y, (zr, sr)) in (y0..).zip(z.chunks_exact_mut(w.max(1)).zip(state.chunks_exact_mut(w.max(1)))) {
+            let pr = &self.frame.points_in_camera[3 * y * w..3 * (y + 1) * w];
+            let nr = &self.frame.normals_in_camera[3 * y * w..3 * (y + 1) * w];
+            stats = stats.plus(&self.surfaces.row(y, pr, nr, zr, sr, &mut scratch));
+        }
+        stats
+    }
+
+    /// Steps 4-6 on `rows`, from every row's true depth `z` and `state`, into the z-buffer `zbuf`
+    /// (the whole image, +inf = nothing yet); returns the count of mixed depths.
+    pub(crate) fn register(&self, rows: std::ops::Range<usize>, z: &[f32], state: &[u8], zbuf: &mut [f32]) -> usize {
+        let (cfg, w) = (self.cfg, self.frame.width);
+        let mut silhouettes = Silhouettes::new(cfg, w);
+        let mut registration = Registration::new(self.unit, w, self.frame.height);
+        let (mut row, mut noise, mut between) = (vec![0.0f32; w], vec![0.0f32; w], vec![0.0f32; self.field.gw]);
+        let k_noise = (cfg.subpixel_rms_px / (cfg.focal_px * cfg.baseline_m)) as f32;
+        let scale = self.unit.depth_scale as f32;
+        let mut mixed = 0;
+        for y in rows {
+            let sr = &state[y * w..(y + 1) * w];
+            row.copy_from_slice(&z[y * w..(y + 1) * w]);
+            mixed += silhouettes.row(z, sr, y, &mut row, self.seed, self.frame_index);
+            // 5. z' = f·B / (f·B / z + s·e) · scale = z · scale / (1 + s·e·z / (f·B)).
+            self.field.row(y, &mut between, &mut noise);
+            for ((zv, &st), &e) in row.iter_mut().zip(sr).zip(&noise) {
+                let den = 1.0 + k_noise * e * *zv;
+                *zv = if st == OK && den > 0.0 { *zv * scale / den } else { 0.0 };
+            }
+            registration.row(y, &row, zbuf);
+        }
+        mixed
+    }
+
+    /// Step 7: the z-buffer as depth quantised to `unit_m` (0 = no return); returns the count
+    /// with a depth.
+    pub(crate) fn finish(&self, zbuf: &mut [f32]) -> usize {
+        // Adding this to an `f64` below 2^51 rounds it to an integer (halves to even).
+        const ROUND_F64: f64 = 6_755_399_441_055_744.0; // 1.5 · 2^52
+        let q = self.cfg.unit_m;
+        let inv_q = if q > 0.0 { 1.0 / q } else { 0.0 };
+        for v in zbuf.iter_mut() {
+            let m = *v as f64;
+            let quantised = if q > 0.0 { ((m * inv_q + ROUND_F64) - ROUND_F64) * q } else { m };
+            *v = if *v == f32::INFINITY { 0.0 } else { quantised as f32 };
+        }
+        zbuf.iter().filter(|v| **v > 0.0).count()
+    }
+}
+
+/// Steps 1-3 (range, the second imager's shadow, grazing incidence) on one row of the rendered
+/// grid: the true depth (0 without a surface) and each pixel's state.
+struct Surfaces {
+    min_z: f32,
+    max_z: f32,
+    shadow: bool,
+    /// f·B of the rendered grid (true colour focal length), pixels × metres.
+    fb: f32,
+    /// Cosines of incidence where dropouts start and where every return drops out.
+    cos_start: f64,
+    cos_end: f64,
+    seed: u64,
+    frame_index: u64,
+}
+
+impl Surfaces {
+    fn new(cfg: &StereoDepthConfig, unit: &SensorUnit, seed: u64, frame_index: u64) -> Self {
+        Self {
+            min_z: cfg.min_range_m as f32,
+            max_z: cfg.max_range_m as f32,
+            shadow: cfg.shadow,
+            fb: (unit.colour_true.fx * cfg.baseline_m) as f32,
+            cos_start: cfg.grazing_start_deg.to_radians().cos(),
+            cos_end: cfg.grazing_end_deg.to_radians().cos(),
+            seed,
+            frame_index,
+        }
+    }
+
+    /// Row `y`: `pts`, `nrm` its rendered points and normals; `scratch` (length of the row) is
+    /// overwritten.
+    fn row(
+        &self,
+        y: usize,
+        pts: &[f32],
+        nrm: &[f32],
+        z: &mut [f32],
+        state: &mut [u8],
+        scratch: &mut [f32],
+    ) -> DepthStats {
+        let mut stats = DepthStats::default();
+        let (mut surface, mut out) = (0u32, 0u32);
+        for ((zv, st), p) in z.iter_mut().zip(state.iter_mut()).zip(pts.chunks_exact(3)) {
             let v = p[2];
-            let surface = v.is_finite() && v > 0.0;
-            let zi = v as f64;
-            let out = surface && (zi < cfg.min_range_m || zi > cfg.max_range_m);
-            *zv = if surface { v } else { 0.0 };
-            *st = if !surface {
+            let is_surface = v > 0.0 && v < f32::INFINITY;
+            let is_out = is_surface && (v < self.min_z || v > self.max_z);
+            *zv = if is_surface { v } else { 0.0 };
+            *st = if !is_surface {
                 NONE
-            } else if out {
+            } else if is_out {
                 RANGE
             } else {
                 OK
             };
-            stats.surface += usize::from(surface);
-            stats.out_of_range += usize::from(out);
+            surface += u32::from(is_surface);
+            out += u32::from(is_out);
         }
-        if cfg.shadow {
-            for (x, (r, zv)) in right_x.iter_mut().zip(zr.iter()).enumerate() {
-                *r = x as f64 - fb / *zv as f64;
+        stats.surface = surface as usize;
+        stats.out_of_range = out as usize;
+        if self.shadow {
+            // Right-image coordinate u − f·B/z (the whole row first, so that it runs on several
+            // pixels at a time), scanned from the right: a pixel whose coordinate lies beyond the
+            // least one to its right is hidden from the right imager.
+            for (x, (r, &zv)) in scratch.iter_mut().zip(z.iter()).enumerate() {
+                *r = x as i32 as f32 - self.fb / zv;
             }
-            let mut m = f64::INFINITY;
-            for (st, &r) in sr.iter_mut().zip(&right_x).rev() {
+            let mut least = f32::INFINITY;
+            for (st, &r) in state.iter_mut().zip(scratch.iter()).rev() {
                 if *st == NONE {
                     continue;
                 }
-                if r > m + 1e-3 {
+                if r > least + 1e-3 {
                     if *st == OK {
                         *st = SHADOW;
                         stats.shadow += 1;
                     }
                 } else {
-                    m = r;
+                    least = r;
                 }
             }
         }
-        // Incidence of the whole row first (no branches), then the draws where it is grazing.
-        let nr = &nrm[3 * y * w..3 * (y + 1) * w];
-        for (((c, st), p), nv) in cos_sq.iter_mut().zip(sr.iter()).zip(pr.chunks_exact(3)).zip(nr.chunks_exact(3)) {
-            let (px, py, pz) = (p[0], p[1], p[2]);
-            let (nx, ny, nz) = (nv[0], nv[1], nv[2]);
-            let dot = px * nx + py * ny + pz * nz;
-            let denom = (px * px + py * py + pz * pz) * (nx * nx + ny * ny + nz * nz);
-            let usable = *st == OK && denom > 0.0 && denom.is_finite();
-            *c = if usable { dot * dot / denom } else { f32::NAN };
+        // Grazing: cos² = (p·n)² / (|p|² |n|²) below cos²(start) makes a pixel a candidate; the
+        // square root and the draw only there.
+        let c0_sq = (self.cos_start * self.cos_start) as f32;
+        let mut candidates = 0u32;
+        for ((c, &st), (p, n)) in scratch.iter_mut().zip(state.iter()).zip(pts.chunks_exact(3).zip(nrm.chunks_exact(3)))
+        {
+            let dot = p[0] * n[0] + p[1] * n[1] + p[2] * n[2];
+            let denom = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]) * (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+            let is = st == OK && denom > 0.0 && denom < f32::INFINITY && dot * dot < c0_sq * denom;
+            *c = if is { dot * dot / denom } else { -1.0 };
+            candidates += u32::from(is);
         }
-        for (st, &c) in sr.iter_mut().zip(&cos_sq) {
-            if c < c0_sq {
-                let cos = (c as f64).sqrt();
-                let p_drop = ((c0 - cos) / (c0 - c1)).clamp(0.0, 1.0);
+        if candidates == 0 {
+            return stats;
+        }
+        let mut rng = SplitMix64::new(self.seed, &[TAG_DEPTH, self.frame_index, SUB_GRAZING, y as u64]);
+        for (st, &c_sq) in state.iter_mut().zip(scratch.iter()) {
+            if c_sq >= 0.0 {
+                let p_drop =
+                    ((self.cos_start - (c_sq as f64).sqrt()) / (self.cos_start - self.cos_end)).clamp(0.0, 1.0);
                 if rng.uniform() < p_drop {
                     *st = GRAZING;
                     stats.grazing += 1;
                 }
             }
         }
+        stats
     }
-    // 4. Mixed depths at silhouettes, from the true depths of the neighbourhood (min / max over
-    // the (2 band + 1)² window, valid depths only: along rows, then across them per output row).
-    // The row minima and maxima live in a ring of 2 band + 1 rows, each computed before its row
-    // takes mixed depths.
-    let band = cfg.mixed_band_px;
-    if band > 0 && cfg.mixed_fraction > 0.0 && h > 0 {
-        let mut rng = SplitMix64::new(seed, &[TAG_DEPTH, frame_index, SUB_MIXED]);
-        let ring = 2 * band + 1;
-        let (mut ring_lo, mut ring_hi) = (vec![0.0f32; ring * w], vec![0.0f32; ring * w]);
-        let mut pad = Vec::with_capacity(w + 2 * band);
-        let mut row_extrema = |yy: usize, z: &[f32], ring_lo: &mut [f32], ring_hi: &mut [f32]| {
-            let r = (yy % ring) * w..(yy % ring + 1) * w;
-            row_min_max(&z[yy * w..(yy + 1) * w], band, &mut pad, &mut ring_lo[r.clone()], &mut ring_hi[r]);
-        };
-        for yy in 0..band.min(h) {
-            row_extrema(yy, &z, &mut ring_lo, &mut ring_hi);
-        }
-        let (mut lo, mut hi) = (vec![0.0f32; w], vec![0.0f32; w]);
-        let mut edge = vec![false; w];
-        let (jump_m, jump_rel) = (cfg.edge_jump_m, cfg.edge_jump_rel);
-        for y in 0..h {
-            if y + band < h {
-                row_extrema(y + band, &z, &mut ring_lo, &mut ring_hi);
-            }
-            let (y0, y1) = (y.saturating_sub(band), (y + band + 1).min(h));
-            let row = |yy: usize| (yy % ring) * w..(yy % ring + 1) * w;
-            lo.copy_from_slice(&ring_lo[row(y0)]);
-            hi.copy_from_slice(&ring_hi[row(y0)]);
-            for yy in y0 + 1..y1 {
-                for (o, v) in lo.iter_mut().zip(&ring_lo[row(yy)]) {
-                    *o = o.min(*v);
-                }
-                for (o, v) in hi.iter_mut().zip(&ring_hi[row(yy)]) {
-                    *o = o.max(*v);
-                }
-            }
-            // Silhouette pixels of the row first (no branches), then the draws at them, in order.
-            for (((e, st), &l), &u) in edge.iter_mut().zip(&state[y * w..(y + 1) * w]).zip(&lo).zip(&hi) {
-                *e = (*st == OK) & (((u - l) as f64) > jump_m + jump_rel * l as f64);
-            }
-            let zr = &mut z[y * w..(y + 1) * w];
-            for (((zv, &e), &l), &u) in zr.iter_mut().zip(&edge).zip(&lo).zip(&hi) {
-                if e && rng.uniform() < cfg.mixed_fraction {
-                    *zv = l + (rng.uniform() as f32) * (u - l);
-                    stats.mixed += 1;
-                }
-            }
-        }
-    }
-    // 5. Correlated disparity noise, then the unit's scale error:
-    // z' = f·B / (f·B / z + s·e) · scale = z · scale / (1 + s·e·z / (f·B)).
-    let cell = (cfg.correlation_px * unit.colour_true.fx / cfg.focal_px).max(1.0);
-    let mut rng = SplitMix64::new(seed, &[TAG_DEPTH, frame_index, SUB_FIELD]);
-    let mut field = CorrelatedField::new(w, h, cell, &mut rng);
-    let k_noise = (cfg.subpixel_rms_px / (cfg.focal_px * cfg.baseline_m)) as f32;
-    let scale = unit.depth_scale as f32;
-    let mut row = vec![0.0f32; w];
-    for y in 0..h {
-        field.row(y, &mut row);
-        let zr = &mut z[y * w..(y + 1) * w];
-        let sr = &state[y * w..(y + 1) * w];
-        for ((zv, st), e) in zr.iter_mut().zip(sr).zip(&row) {
-            if *st != OK {
-                *zv = 0.0;
-                continue;
-            }
-            let den = 1.0 + k_noise * *e * *zv;
-            *zv = if den > 0.0 { *zv * scale / den } else { 0.0 };
-        }
-    }
-    // 6. Registration to the colour image by the assumed calibration.
-    let (out, valid) = register(cfg, unit, &z, w, h);
-    stats.valid_out = valid;
-    (out, stats)
 }
 
-/// A unit-variance, spatially correlated field: independent normals on a grid of spacing
-/// `cell_px` pixels, interpolated bilinearly and divided by the interpolation's standard
+/// Step 4 (mixed depths at silhouettes) a row at a time, from the true depths of the
+/// neighbourhood: min / max of the valid depths over the (2 band + 1)² window, down the columns
+/// and then along the row.
+struct Silhouettes {
+    band: usize,
+    fraction: f64,
+    jump_m: f32,
+    jump_rel: f32,
+    /// Scratch: per column the extrema down the window, padded by `band` at both ends.
+    col_lo: Vec<f32>,
+    col_hi: Vec<f32>,
+    lo: Vec<f32>,
+    hi: Vec<f32>,
+}
+
+impl Silhouettes {
+    fn new(cfg: &StereoDepthConfig, w: usize) -> Self {
+        let band = if cfg.mixed_fraction > 0.0 { cfg.mixed_band_px } else { 0 };
+        Self {
+            band,
+            fraction: cfg.mixed_fraction,
+            jump_m: cfg.edge_jump_m as f32,
+            jump_rel: cfg.edge_jump_rel as f32,
+            col_lo: vec![f32::INFINITY; w + 2 * band],
+            col_hi: vec![0.0; w + 2 * band],
+            lo: vec![0.0; w],
+            hi: vec![0.0; w],
+        }
+    }
+
+    /// Mixes row `y` of `row` (a copy of row `y` of the true depths `z`); returns the count.
+    fn row(&mut self, z: &[f32], state: &[u8], y: usize, row: &mut [f32], seed: u64, frame_index: u64) -> usize {
+        let (band, w) = (self.band, row.len());
+        if band == 0 || w == 0 {
+            return 0;
+        }
+        let h = z.len() / w;
+        let (y0, y1) = (y.saturating_sub(band), (y + band + 1).min(h));
+        // Invalid depths (0) never win a maximum; for the minimum they count as +inf.
+        let (col_lo, col_hi) = (&mut self.col_lo[band..band + w], &mut self.col_hi[band..band + w]);
+        let first = &z[y0 * w..(y0 + 1) * w];
+        for ((lo, hi), &v) in col_lo.iter_mut().zip(col_hi.iter_mut()).zip(first) {
+            *lo = if v > 0.0 { v } else { f32::INFINITY };
+            *hi = v;
+        }
+        for yy in y0 + 1..y1 {
+            for ((lo, hi), &v) in col_lo.iter_mut().zip(col_hi.iter_mut()).zip(&z[yy * w..(yy + 1) * w]) {
+                *lo = min_f(if v > 0.0 { v } else { f32::INFINITY }, *lo);
+                *hi = max_f(v, *hi);
+            }
+        }
+        self.lo.copy_from_slice(&self.col_lo[..w]);
+        self.hi.copy_from_slice(&self.col_hi[..w]);
+        for k in 1..=2 * band {
+            for ((lo, hi), (&l, &u)) in
+                self.lo.iter_mut().zip(self.hi.iter_mut()).zip(self.col_lo[k..k + w].iter().zip(&self.col_hi[k..k + w]))
+            {
+                *lo = min_f(l, *lo);
+                *hi = max_f(u, *hi);
+            }
+        }
+        let (jump_m, jump_rel) = (self.jump_m, self.jump_rel);
+        let is_edge = |st: u8, l: f32, u: f32| st == OK && u - l > jump_m + jump_rel * l;
+        if !state.iter().zip(self.lo.iter().zip(&self.hi)).any(|(&st, (&l, &u))| is_edge(st, l, u)) {
+            return 0;
+        }
+        let mut rng = SplitMix64::new(seed, &[TAG_DEPTH, frame_index, SUB_MIXED, y as u64]);
+        let mut mixed = 0;
+        for ((zv, &st), (&l, &u)) in row.iter_mut().zip(state).zip(self.lo.iter().zip(&self.hi)) {
+            if is_edge(st, l, u) && rng.uniform() < self.fraction {
+                *zv = l + (rng.uniform() as f32) * (u - l);
+                mixed += 1;
+            }
+        }
+        mixed
+    }
+}
+
+/// A unit-variance, spatially correlated field: independent standard normals on a grid of
+/// spacing `cell_px` pixels, interpolated bilinearly and divided by the interpolation's standard
 /// deviation at each pixel (so every pixel has variance 1). Evaluated a row at a time.
 pub(crate) struct CorrelatedField {
     width: usize,
     gw: usize,
     grid: Vec<f32>,
-    /// Per column: grid column, interpolation weight, normalisation.
+    /// Per column: grid column, and the weights of it and the next one (normalisation included).
     xs: Vec<(usize, f32, f32)>,
     /// Per row: grid row, interpolation weight, normalisation.
     ys: Vec<(usize, f32, f32)>,
-    /// Scratch: the current row interpolated between its two grid rows.
-    between: Vec<f32>,
 }
 
 impl CorrelatedField {
     pub(crate) fn new(width: usize, height: usize, cell_px: f64, rng: &mut SplitMix64) -> Self {
         let gw = (width as f64 / cell_px).ceil() as usize + 2;
         let gh = (height as f64 / cell_px).ceil() as usize + 2;
-        let grid: Vec<f32> = (0..gw * gh).map(|_| rng.normal() as f32).collect();
+        let mut grid = vec![0.0f32; gw * gh];
+        rng.fill_normal(&mut grid);
         let axis = |n: usize| -> Vec<(usize, f32, f32)> {
             (0..n)
                 .map(|i| {
@@ -396,20 +522,22 @@ impl CorrelatedField {
                 })
                 .collect()
         };
-        Self { width, gw, grid, xs: axis(width), ys: axis(height), between: vec![0.0; gw] }
+        let xs = axis(width).into_iter().map(|(i, a, nx)| (i, (1.0 - a) * nx, a * nx)).collect();
+        Self { width, gw, grid, xs, ys: axis(height) }
     }
 
-    /// Row `y` of the field into `out` (length `width`).
-    pub(crate) fn row(&mut self, y: usize, out: &mut [f32]) {
+    /// Row `y` of the field into `out` (length `width`); `between` (length `gw`) is scratch for
+    /// the row interpolated between its two grid rows.
+    pub(crate) fn row(&self, y: usize, between: &mut [f32], out: &mut [f32]) {
         let (j, b, ny) = self.ys[y];
         let gw = self.gw;
         let (r0, r1) = (&self.grid[j * gw..(j + 1) * gw], &self.grid[(j + 1) * gw..(j + 2) * gw]);
-        let between = &mut self.between;
+        let (w0, w1) = ((1.0 - b) * ny, b * ny);
         for ((o, v0), v1) in between.iter_mut().zip(r0).zip(r1) {
-            *o = (v0 * (1.0 - b) + v1 * b) * ny;
+            *o = v0 * w0 + v1 * w1;
         }
-        for (o, &(i, a, nx)) in out[..self.width].iter_mut().zip(&self.xs) {
-            *o = (between[i] * (1.0 - a) + between[i + 1] * a) * nx;
+        for (o, &(i, wa, wb)) in out[..self.width].iter_mut().zip(&self.xs) {
+            *o = between[i] * wa + between[i + 1] * wb;
         }
     }
 }
@@ -417,124 +545,156 @@ impl CorrelatedField {
 /// The whole field as an image (tests).
 #[cfg(test)]
 pub(crate) fn correlated_field(width: usize, height: usize, cell_px: f64, rng: &mut SplitMix64) -> Vec<f32> {
-    let mut f = CorrelatedField::new(width, height, cell_px, rng);
+    let f = CorrelatedField::new(width, height, cell_px, rng);
+    let mut between = vec![0.0f32; f.gw];
     let mut out = vec![0.0f32; width * height];
     for (y, row) in out.chunks_exact_mut(width).enumerate() {
-        f.row(y, row);
+        f.row(y, &mut between, row);
     }
     out
 }
 
-/// The target pixels `[x0, x1) × [y0, y1)` a depth pixel covers, and its depth there.
-#[derive(Debug, Clone, Copy, Default)]
-struct Rect {
-    x0: usize,
-    x1: usize,
-    y0: usize,
-    y1: usize,
-    z: f32,
-}
-
-/// `v` rounded to the nearest integer (halves up), for a bound of a rectangle on an axis of `n`
-/// pixels: clamped to `[-2, n + 2]` first (rounding is monotonic, so no bound changes once it is
-/// clamped to `[0, n]`), then shifted by 2^20 so that a truncating cast rounds down (libm's
-/// `round` is not inlined on baseline x86-64).
-#[inline]
-fn round_index(v: f64, n: usize) -> i32 {
-    const OFF: f64 = (1u64 << 20) as f64;
-    ((v.clamp(-2.0, n as f64 + 2.0) + 0.5 + OFF) as i32) - (1 << 20)
-}
-
 /// Widening of each registered pixel's rectangle, pixels (no pinholes from rounding).
-const EPS: f64 = 0.02;
+const EPS: f32 = 0.02;
 
-/// Registration (step 6) and quantisation (step 7); also the count of pixels with a depth.
-fn register(cfg: &StereoDepthConfig, unit: &SensorUnit, z: &[f32], w: usize, h: usize) -> (Vec<f32>, usize) {
-    let e = &unit.registration_error;
-    let r = Matrix3::new(e[0][0], e[0][1], e[0][2], e[1][0], e[1][1], e[1][2], e[2][0], e[2][1], e[2][2]);
-    let k = unit.depth_focal_ratio;
-    let [ox, oy] = unit.depth_pp_offset;
-    // Depth intrinsic error (x' = k x + o z) then the extrinsic rotation, as one matrix.
-    let m = r * Matrix3::new(k, 0.0, ox, 0.0, k, oy, 0.0, 0.0, 1.0);
-    let t = Vector3::new(e[0][3], e[1][3], e[2][3]);
-    let (kt, ka) = (&unit.colour_true, &unit.colour_assumed);
-    // m · (ray direction of continuous image point (u, v)) = u' · col0 + v' · col1 + col2.
-    let (c0, c1, c2) = (m.column(0).into_owned(), m.column(1).into_owned(), m.column(2).into_owned());
-    // Per column and row of corners, the direction's components (columns apart, so that the
-    // corner pass runs on whole rows at a time).
-    let col_scale: Vec<f64> = (0..=w).map(|x| (x as f64 - kt.cx) / kt.fx).collect();
-    let col_x: Vec<f64> = col_scale.iter().map(|s| c0.x * s).collect();
-    let col_y: Vec<f64> = col_scale.iter().map(|s| c0.y * s).collect();
-    let col_z: Vec<f64> = col_scale.iter().map(|s| c0.z * s).collect();
-    let row_dir: Vec<Vector3<f64>> = (0..=h).map(|y| c1 * ((y as f64 - kt.cy) / kt.fy) + c2).collect();
-    let mut out = vec![f32::INFINITY; w * h];
-    // Per depth pixel of a row: the projected corners' extent (x and y, low and high), the depth,
-    // whether it lands in front of the colour camera, then the target rectangle [x0, x1) × [y0, y1).
-    let (mut lo_x, mut hi_x, mut lo_y, mut hi_y) = (vec![0.0f64; w], vec![0.0f64; w], vec![0.0f64; w], vec![0.0f64; w]);
-    let mut zq = vec![0.0f32; w];
-    let mut hit = vec![false; w];
-    let mut rects = vec![Rect::default(); w];
-    for y in 0..h {
-        let (ra, rb) = (row_dir[y], row_dir[y + 1]);
-        // The corners of the whole row first (no branches, so that the divisions pipeline).
+/// Smaller of two values; `b` if either is NaN (a compare and a select, which vectorises).
+#[inline]
+fn min_f(a: f32, b: f32) -> f32 {
+    if a < b {
+        a
+    } else {
+        b
+    }
+}
+
+/// Larger of two values; `b` if either is NaN.
+#[inline]
+fn max_f(a: f32, b: f32) -> f32 {
+    if a > b {
+        a
+    } else {
+        b
+    }
+}
+
+/// Adding this to an `f32` in `(−2^22, 2^22)` rounds it to an integer (halves to even), which
+/// then sits in the low bits of the sum's representation.
+const ROUND_F32: f32 = 12_582_912.0; // 1.5 · 2^23
+
+/// `v` clamped to `[0, n]` and rounded to the nearest integer, for a bound of a rectangle on an
+/// axis of `n` pixels (NaN gives 0); float and integer operations only, so that a row of them
+/// vectorises.
+#[inline]
+fn round_index(v: f32, n: f32) -> i32 {
+    let v = min_f(max_f(v, 0.0), n);
+    (v + ROUND_F32).to_bits() as i32 - ROUND_F32.to_bits() as i32
+}
+
+/// Steps 6 (registration) and 7 (quantisation): each depth pixel's two corners go through the
+/// depth intrinsic error and the colour ← depth extrinsic error, are projected with the assumed
+/// colour intrinsics, and the target rectangle between them keeps the nearest depth; the nearest
+/// depth is then quantised to `unit_m` (the same as keeping the nearest quantised depth).
+struct Registration {
+    w: usize,
+    h: usize,
+    /// Per corner column `x` (0..=w): the direction's components `m · (x − cx) / fx · e_x`.
+    col: [Vec<f32>; 3],
+    /// Per corner row `y` (0..=h): `m · ((y − cy) / fy · e_y + e_z)`.
+    row_dir: Vec<[f32; 3]>,
+    t: [f32; 3],
+    /// Assumed colour intrinsics fx, fy, cx, cy.
+    k: [f32; 4],
+    /// Scratch per depth pixel of a row: the projected corners' extent, the depth, then the
+    /// target rectangle `[x0, x1) × [y0, y1)`.
+    lo_x: Vec<f32>,
+    hi_x: Vec<f32>,
+    lo_y: Vec<f32>,
+    hi_y: Vec<f32>,
+    zq: Vec<f32>,
+    rect: Vec<[i32; 4]>,
+}
+
+impl Registration {
+    fn new(unit: &SensorUnit, w: usize, h: usize) -> Self {
+        let e = &unit.registration_error;
+        let r = Matrix3::new(e[0][0], e[0][1], e[0][2], e[1][0], e[1][1], e[1][2], e[2][0], e[2][1], e[2][2]);
+        let s = unit.depth_focal_ratio;
+        let [ox, oy] = unit.depth_pp_offset;
+        // Depth intrinsic error (x' = s x + o z) then the extrinsic rotation, as one matrix.
+        let m = r * Matrix3::new(s, 0.0, ox, 0.0, s, oy, 0.0, 0.0, 1.0);
+        let t = Vector3::new(e[0][3], e[1][3], e[2][3]);
+        let (kt, ka) = (&unit.colour_true, &unit.colour_assumed);
+        let col_scale: Vec<f64> = (0..=w).map(|x| (x as f64 - kt.cx) / kt.fx).collect();
+        let col = [0, 1, 2].map(|a| col_scale.iter().map(|s| (m[(a, 0)] * s) as f32).collect());
+        let row_dir = (0..=h)
+            .map(|y| {
+                let v = m.column(1) * ((y as f64 - kt.cy) / kt.fy) + m.column(2);
+                [v.x as f32, v.y as f32, v.z as f32]
+            })
+            .collect();
+        Self {
+            w,
+            h,
+            col,
+            row_dir,
+            t: [t.x as f32, t.y as f32, t.z as f32],
+            k: [ka.fx as f32, ka.fy as f32, ka.cx as f32, ka.cy as f32],
+            lo_x: vec![0.0; w],
+            hi_x: vec![0.0; w],
+            lo_y: vec![0.0; w],
+            hi_y: vec![0.0; w],
+            zq: vec![0.0; w],
+            rect: vec![[0; 4]; w],
+        }
+    }
+
+    /// Registers depth row `y` (metres, 0 = none) into the z-buffer `out`.
+    fn row(&mut self, y: usize, z: &[f32], out: &mut [f32]) {
+        let w = self.w;
+        let (ra, rb) = (self.row_dir[y], self.row_dir[y + 1]);
+        let [fx, fy, cx, cy] = self.k;
+        let [tx, ty, tz] = self.t;
+        let z = &z[..w];
+        let (ca_x, ca_y, ca_z) = (&self.col[0][..w], &self.col[1][..w], &self.col[2][..w]);
+        let (cb_x, cb_y, cb_z) = (&self.col[0][1..=w], &self.col[1][1..=w], &self.col[2][1..=w]);
+        let (lo_x, hi_x, lo_y, hi_y, zq) =
+            (&mut self.lo_x[..w], &mut self.hi_x[..w], &mut self.lo_y[..w], &mut self.hi_y[..w], &mut self.zq[..w]);
+        // The corners of the whole row first (no branches, so that it runs on several pixels at a
+        // time), then the rectangles, then the z-buffer.
         for x in 0..w {
-            let zv = z[y * w + x];
-            let skip = zv <= 0.0;
-            let zv = zv as f64;
+            let zv = z[x];
             // The pixel's two corners (x, y) and (x + 1, y + 1) at its depth, in the colour frame.
             let (qax, qay, qaz) =
-                ((col_x[x] + ra.x) * zv + t.x, (col_y[x] + ra.y) * zv + t.y, (col_z[x] + ra.z) * zv + t.z);
+                ((ca_x[x] + ra[0]) * zv + tx, (ca_y[x] + ra[1]) * zv + ty, (ca_z[x] + ra[2]) * zv + tz);
             let (qbx, qby, qbz) =
-                ((col_x[x + 1] + rb.x) * zv + t.x, (col_y[x + 1] + rb.y) * zv + t.y, (col_z[x + 1] + rb.z) * zv + t.z);
+                ((cb_x[x] + rb[0]) * zv + tx, (cb_y[x] + rb[1]) * zv + ty, (cb_z[x] + rb[2]) * zv + tz);
             let inv = 1.0 / (qaz * qbz);
             let (ia, ib) = (qbz * inv, qaz * inv);
-            let (ax, ay) = (ka.fx * qax * ia + ka.cx, ka.fy * qay * ia + ka.cy);
-            let (bx, by) = (ka.fx * qbx * ib + ka.cx, ka.fy * qby * ib + ka.cy);
-            // Pixel (x, y) spans [x, x + 1) in continuous coordinates; fill the target pixels whose
-            // centres the projected corners enclose, a hair wider than the corners so rounding
-            // leaves no pinholes between neighbours.
-            lo_x[x] = ax.min(bx) - EPS;
-            hi_x[x] = ax.max(bx) + EPS;
-            lo_y[x] = ay.min(by) - EPS;
-            hi_y[x] = ay.max(by) + EPS;
-            zq[x] = ((qaz + qbz) * 0.5) as f32;
-            hit[x] = !(skip || qaz <= 1e-6 || qbz <= 1e-6);
+            let (ax, ay) = (fx * qax * ia + cx, fy * qay * ia + cy);
+            let (bx, by) = (fx * qbx * ib + cx, fy * qby * ib + cy);
+            // Pixel (x, y) spans [x, x + 1) in continuous coordinates; the target pixels are those
+            // whose centres the projected corners enclose, a hair wider than the corners so that
+            // rounding leaves no pinholes between neighbours.
+            lo_x[x] = min_f(ax, bx) - EPS;
+            hi_x[x] = max_f(ax, bx) + EPS;
+            lo_y[x] = min_f(ay, by) - EPS;
+            hi_y[x] = max_f(ay, by) + EPS;
+            // No depth, or behind the colour camera: +inf never enters the z-buffer.
+            let hit = zv > 0.0 && qaz > 1e-6 && qbz > 1e-6;
+            zq[x] = if hit { (qaz + qbz) * 0.5 } else { f32::INFINITY };
         }
-        for (x, rect) in rects.iter_mut().enumerate() {
-            let x1 = round_index(hi_x[x], w).clamp(0, w as i32);
-            let x0 = round_index(lo_x[x], w).max(0).min(x1);
-            let y0 = round_index(lo_y[x], h).max(0);
-            let y1 = round_index(hi_y[x], h).clamp(0, h as i32);
-            *rect = if hit[x] {
-                Rect { x0: x0 as usize, x1: x1 as usize, y0: y0 as usize, y1: y1 as usize, z: zq[x] }
-            } else {
-                Rect::default()
-            };
+        let (wf, hf) = (w as f32, self.h as f32);
+        for (((r, &lx), &hx), (&ly, &hy)) in self.rect.iter_mut().zip(&*lo_x).zip(&*hi_x).zip(lo_y.iter().zip(&*hi_y)) {
+            *r = [round_index(min_f(lx, hx), wf), round_index(hx, wf), round_index(ly, hf), round_index(hy, hf)];
         }
-        for r in &rects {
-            for ty in r.y0..r.y1 {
-                for o in &mut out[ty * w + r.x0..ty * w + r.x1] {
-                    if r.z < *o {
-                        *o = r.z;
-                    }
+        for (&[x0, x1, y0, y1], &zv) in self.rect.iter().zip(&*zq) {
+            for ty in y0 as usize..y1 as usize {
+                for o in &mut out[ty * w + x0 as usize..ty * w + x1 as usize] {
+                    *o = min_f(zv, *o);
                 }
             }
         }
     }
-    let q = cfg.unit_m;
-    let inv_q = if q > 0.0 { 1.0 / q } else { 0.0 };
-    let mut valid = 0usize;
-    for v in out.iter_mut() {
-        if !v.is_finite() {
-            *v = 0.0;
-            continue;
-        }
-        if q > 0.0 {
-            *v = ((*v as f64 * inv_q + 0.5) as i64 as f64 * q) as f32;
-        }
-        valid += usize::from(*v > 0.0);
-    }
-    (out, valid)
 }
 
 #[cfg(test)]

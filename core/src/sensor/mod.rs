@@ -38,6 +38,7 @@ pub mod depth;
 
 use nalgebra::{Matrix3, Matrix4, Rotation3, Vector3};
 use serde::{Deserialize, Serialize};
+use std::sync::OnceLock;
 use thiserror::Error;
 
 pub use colour::{colour_image, ColourConfig};
@@ -222,6 +223,74 @@ impl SplitMix64 {
         let u2 = self.uniform();
         (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
     }
+
+    /// Fills `out` with standard normals for bulk draws: the normal quantile of a 12-bit uniform
+    /// ([`normal_table`]), five per 64-bit draw.
+    pub(crate) fn fill_normal(&mut self, out: &mut [f32]) {
+        let table = normal_table();
+        for chunk in out.chunks_mut(5) {
+            let r = self.next_u64();
+            for (k, v) in chunk.iter_mut().enumerate() {
+                *v = table[((r >> (12 * k)) & 0xFFF) as usize];
+            }
+        }
+    }
+}
+
+/// Standard normal quantiles of the `n` midpoints `(i + ½) / n`, rescaled to unit variance.
+pub(crate) fn normal_quantiles(n: usize) -> Vec<f32> {
+    let q: Vec<f64> = (0..n).map(|i| inverse_normal_cdf((i as f64 + 0.5) / n as f64)).collect();
+    let sd = (q.iter().map(|v| v * v).sum::<f64>() / n as f64).sqrt();
+    q.iter().map(|v| (v / sd) as f32).collect()
+}
+
+/// [`normal_quantiles`] of 4096 midpoints (tails cut at ±3.5 σ).
+pub(crate) fn normal_table() -> &'static [f32] {
+    static TABLE: OnceLock<Vec<f32>> = OnceLock::new();
+    TABLE.get_or_init(|| normal_quantiles(4096))
+}
+
+/// Acklam's rational approximation of the standard normal quantile (relative error < 1.2e-9).
+fn inverse_normal_cdf(p: f64) -> f64 {
+    const A: [f64; 6] = [
+        -39.696_830_286_653_76,
+        220.946_098_424_520_5,
+        -275.928_510_446_968_7,
+        138.357_751_867_269,
+        -30.664_798_066_147_16,
+        2.506_628_277_459_239,
+    ];
+    const B: [f64; 5] = [
+        -54.476_098_798_224_06,
+        161.585_836_858_040_9,
+        -155.698_979_859_886_6,
+        66.801_311_887_719_72,
+        -13.280_681_552_885_72,
+    ];
+    const C: [f64; 6] = [
+        -7.784_894_002_430_293e-3,
+        -0.322_396_458_041_136_5,
+        -2.400_758_277_161_838,
+        -2.549_732_539_343_734,
+        4.374_664_141_464_968,
+        2.938_163_982_698_783,
+    ];
+    const D: [f64; 4] =
+        [7.784_695_709_041_462e-3, 0.322_467_129_070_039_8, 2.445_134_137_142_996, 3.754_408_661_907_416];
+    let tail = |q: f64| {
+        (((((C[0] * q + C[1]) * q + C[2]) * q + C[3]) * q + C[4]) * q + C[5])
+            / ((((D[0] * q + D[1]) * q + D[2]) * q + D[3]) * q + 1.0)
+    };
+    if p < 0.024_25 {
+        tail((-2.0 * p.ln()).sqrt())
+    } else if p > 1.0 - 0.024_25 {
+        -tail((-2.0 * (1.0 - p).ln()).sqrt())
+    } else {
+        let q = p - 0.5;
+        let r = q * q;
+        (((((A[0] * r + A[1]) * r + A[2]) * r + A[3]) * r + A[4]) * r + A[5]) * q
+            / (((((B[0] * r + B[1]) * r + B[2]) * r + B[3]) * r + B[4]) * r + 1.0)
+    }
 }
 
 /// Stream tags of the per-episode and per-frame draws.
@@ -299,9 +368,10 @@ pub struct SensorFrame {
     pub stats: DepthStats,
 }
 
-/// The sensor model on one frame: depth then colour. `camera_end_from_start` is the camera's
-/// motion over the colour exposure (4 × 4; identity or `None` = at rest). Per-frame draws are
-/// seeded by `(seed, frame_index)`.
+/// The sensor model on one frame: depth and colour ([`stereo_depth`] and [`colour_image`], on
+/// two threads where the machine has two cores; the result does not depend on it).
+/// `camera_end_from_start` is the camera's motion over the colour exposure (4 × 4; identity or
+/// `None` = at rest). Per-frame draws are seeded by `(seed, frame_index)`.
 pub fn simulate_frame(
     config: &SensorConfig,
     unit: &SensorUnit,
@@ -322,13 +392,67 @@ pub fn simulate_frame(
     if !frame.rgb.is_empty() && frame.rgb.len() != 3 * n {
         return Err(SensorError::BufferLength { field: "rgb", expected: 3 * n, actual: frame.rgb.len() });
     }
-    let (depth_m, stats) = stereo_depth(&config.stereo, unit, frame, seed, frame_index);
-    let rgb = if frame.rgb.is_empty() {
-        Vec::new()
+    if !frame.rgb.is_empty() {
+        for (field, side) in [("width", frame.width), ("height", frame.height)] {
+            check(field, side as f64, side <= colour::MAX_SIDE_PX, "at most 65536 pixels for the colour model")?;
+        }
+    }
+    let (w, h) = (frame.width, frame.height);
+    let depth = depth::DepthFrame::new(&config.stereo, unit, frame, seed, frame_index);
+    let noise = colour::NoiseTable::new(&config.colour);
+    let with_colour = !frame.rgb.is_empty();
+    let colour_rows = || colour::ColourRows::new(unit, frame, camera_end_from_start, noise.as_ref(), seed, frame_index);
+    let mut rgb = vec![0u8; if with_colour { 3 * n } else { 0 }];
+    let (mut z, mut state) = (vec![0.0f32; n], vec![0u8; n]);
+    let mut depth_m = vec![f32::INFINITY; n];
+    let mut stats;
+    if worker_threads() < 2 || h < 2 {
+        stats = depth.surfaces(0, &mut z, &mut state);
+        stats.mixed = depth.register(0..h, &z, &state, &mut depth_m);
+        if with_colour {
+            colour_rows().run(0, &mut rgb);
+        }
     } else {
-        colour_image(&config.colour, unit, frame, camera_end_from_start, seed, frame_index)
-    };
+        // Two threads, each on half of the rows (every row's result is the same whichever thread
+        // computes it): steps 1-3 of the depth model, then the rest of it and the colour model,
+        // the second half's depth into its own z-buffer, merged by the nearest depth.
+        let half = h / 2;
+        let ((za, zb), (sa, sb)) = (z.split_at_mut(half * w), state.split_at_mut(half * w));
+        let (a, b) = std::thread::scope(|s| {
+            let second = s.spawn(|| depth.surfaces(half, zb, sb));
+            (depth.surfaces(0, za, sa), second.join())
+        });
+        stats = a.plus(&b.unwrap_or_else(|e| std::panic::resume_unwind(e)));
+        let mut depth_b = vec![f32::INFINITY; n];
+        let (rgb_a, rgb_b) = rgb.split_at_mut(if with_colour { 3 * half * w } else { 0 });
+        let (z, state) = (&z, &state);
+        let (a, b) = std::thread::scope(|s| {
+            let second = s.spawn(|| {
+                let mixed = depth.register(half..h, z, state, &mut depth_b);
+                if with_colour {
+                    colour_rows().run(half, rgb_b);
+                }
+                mixed
+            });
+            let mixed = depth.register(0..half, z, state, &mut depth_m);
+            if with_colour {
+                colour_rows().run(0, rgb_a);
+            }
+            (mixed, second.join())
+        });
+        stats.mixed = a + b.unwrap_or_else(|e| std::panic::resume_unwind(e));
+        for (v, u) in depth_m.iter_mut().zip(&depth_b) {
+            *v = if *u < *v { *u } else { *v };
+        }
+    }
+    stats.valid_out = depth.finish(&mut depth_m);
     Ok(SensorFrame { depth_m, rgb, stats })
+}
+
+/// Threads [`simulate_frame`] uses: two where the machine has two cores or more.
+fn worker_threads() -> usize {
+    static THREADS: OnceLock<usize> = OnceLock::new();
+    *THREADS.get_or_init(|| std::thread::available_parallelism().map_or(1, |n| n.get()).min(2))
 }
 
 /// One call of the sensor model as the Python API makes it (`sensor_model(request_json, ...)`).
@@ -395,6 +519,44 @@ mod tests {
         assert_eq!(frame.depth_m.len(), 4);
         assert_eq!(info.stats, Some(frame.stats));
         assert!(serde_json::from_str::<SensorRequest>(r#"{"seed": 1, "intrinsics": [], "bogus": 1}"#).is_err());
+    }
+
+    #[test]
+    fn a_frame_on_two_threads_equals_its_models_run_alone() {
+        // A tilted plane with a nearer box, textured, the camera moving over the exposure: every
+        // effect of both models is on (silhouettes, shadow, blur along both axes).
+        let (w, h) = (96usize, 64usize);
+        let k = Intrinsics { fx: 80.0, fy: 80.0, cx: 48.0, cy: 32.0 };
+        let (mut p, mut nrm, mut rgb) = (vec![0.0f32; 3 * w * h], vec![0.0f32; 3 * w * h], vec![0u8; 3 * w * h]);
+        for y in 0..h {
+            for x in 0..w {
+                let i = y * w + x;
+                let z = if (30..60).contains(&x) && (20..44).contains(&y) { 0.35 } else { 0.5 + 0.002 * y as f32 };
+                p[3 * i] = (x as f32 + 0.5 - 48.0) / 80.0 * z;
+                p[3 * i + 1] = (y as f32 + 0.5 - 32.0) / 80.0 * z;
+                p[3 * i + 2] = z;
+                nrm[3 * i + 2] = -1.0;
+                rgb[3 * i..3 * i + 3].copy_from_slice(&[
+                    (x * 7 % 256) as u8,
+                    (y * 11 % 256) as u8,
+                    ((x + y) % 200) as u8,
+                ]);
+            }
+        }
+        let cfg = SensorConfig::default();
+        let unit = SensorUnit::draw(&cfg, k, 5).unwrap();
+        let frame = RenderedFrame { width: w, height: h, points_in_camera: &p, normals_in_camera: &nrm, rgb: &rgb };
+        for motion in [Rotation3::new(Vector3::new(0.01, 0.003, 0.0)), Rotation3::new(Vector3::new(0.0, 0.004, 0.02))] {
+            let mut m = Matrix4::identity();
+            m.fixed_view_mut::<3, 3>(0, 0).copy_from(motion.matrix());
+            m[(0, 3)] = 0.003;
+            let both = simulate_frame(&cfg, &unit, &frame, Some(&m), 9, 4).unwrap();
+            let (depth, stats) = stereo_depth(&cfg.stereo, &unit, &frame, 9, 4);
+            assert_eq!(both.depth_m, depth);
+            assert_eq!(both.stats, stats);
+            assert!(stats.mixed > 0 && stats.shadow > 0);
+            assert_eq!(both.rgb, colour_image(&cfg.colour, &unit, &frame, Some(&m), 9, 4));
+        }
     }
 
     #[test]
