@@ -591,20 +591,15 @@ fn fast_lanes(img: &[u8], start: usize, offsets: &[isize; 16], t: u8) -> [u8; LA
     if any_bright | any_dark == 0 {
         return [0u8; LANES];
     }
-    // Excess of each circle pixel over (bright) and under (dark) the centre, the circle walked
-    // 24 steps so that every 9-arc is contiguous.
-    let mut bright = [[0u8; LANES]; 24];
-    let mut dark = [[0u8; LANES]; 24];
+    // Excess of each circle pixel over (bright) and under (dark) the centre.
+    let mut bright = [[0u8; LANES]; 16];
+    let mut dark = [[0u8; LANES]; 16];
     for (k, &o) in offsets.iter().enumerate() {
         let p = load(o);
         for j in 0..LANES {
             bright[k][j] = p[j].saturating_sub(c[j]);
             dark[k][j] = c[j].saturating_sub(p[j]);
         }
-    }
-    for k in 16..24 {
-        bright[k] = bright[k - 16];
-        dark[k] = dark[k - 16];
     }
     let sb = if any_bright != 0 { best_arc(&bright) } else { [0u8; LANES] };
     let sd = if any_dark != 0 { best_arc(&dark) } else { [0u8; LANES] };
@@ -616,21 +611,21 @@ fn fast_lanes(img: &[u8], start: usize, offsets: &[isize; 16], t: u8) -> [u8; LA
     out
 }
 
-/// Per lane, the largest over the 16 arcs of 9 contiguous entries of `v` of the arc's smallest
-/// entry (a min tree: pairs, fours, eights, nines).
+/// Per lane, the largest over the 16 arcs of 9 contiguous entries of the circle `v` of the arc's
+/// smallest entry (a min tree: pairs, fours, eights, nines).
 #[inline]
-fn best_arc(v: &[[u8; LANES]; 24]) -> [u8; LANES] {
-    let mut m2 = [[0u8; LANES]; 22];
-    for k in 0..22 {
-        m2[k] = min_lanes(v[k], v[k + 1]);
+fn best_arc(v: &[[u8; LANES]; 16]) -> [u8; LANES] {
+    let mut m2 = [[0u8; LANES]; 16];
+    for k in 0..16 {
+        m2[k] = min_lanes(v[k], v[(k + 1) & 15]);
     }
-    let mut m4 = [[0u8; LANES]; 20];
-    for k in 0..20 {
-        m4[k] = min_lanes(m2[k], m2[k + 2]);
+    let mut m4 = [[0u8; LANES]; 16];
+    for k in 0..16 {
+        m4[k] = min_lanes(m2[k], m2[(k + 2) & 15]);
     }
     let mut best = [0u8; LANES];
     for k in 0..16 {
-        let m9 = min_lanes(min_lanes(m4[k], m4[k + 4]), v[k + 8]);
+        let m9 = min_lanes(min_lanes(m4[k], m4[(k + 4) & 15]), v[(k + 8) & 15]);
         for j in 0..LANES {
             best[j] = best[j].max(m9[j]);
         }
