@@ -739,6 +739,9 @@ fn resize_bilinear(src: &Level, dst: &mut Level) {
         })
         .collect();
     let mut tmp = vec![0u16; sw];
+    // Each column's vertical blend and its right neighbour's in one word (low, high 16 bits), so
+    // that the horizontal pass reads one word per output pixel.
+    let mut pairs = vec![0u32; sw];
     for y in 0..dh {
         let fy = ((y as f32 + 0.5) * ry - 0.5).clamp(0.0, (sh - 1) as f32);
         let y0 = (fy as usize).min(sh.saturating_sub(2));
@@ -749,13 +752,16 @@ fn resize_bilinear(src: &Level, dst: &mut Level) {
         for ((t, &a), &b) in tmp.iter_mut().zip(r0).zip(r1) {
             *t = u16::from(a) * (256 - wy) + u16::from(b) * wy;
         }
+        let n = sw - 1;
+        let (lo, hi, pr) = (&tmp[..n], &tmp[1..], &mut pairs[..n]);
+        for i in 0..n {
+            pr[i] = u32::from(lo[i]) | (u32::from(hi[i]) << 16);
+        }
+        pairs[n] = u32::from(tmp[n]);
         let out = &mut dst.image[y * dw..y * dw + dw];
         for (o, &(x0, wx)) in out.iter_mut().zip(&cols) {
-            if let Some(&[a, b]) = tmp.get(x0..x0 + 2) {
-                *o = ((u32::from(a) * (256 - wx) + u32::from(b) * wx + 32768) >> 16) as u8;
-            } else if let Some(&a) = tmp.get(x0) {
-                *o = ((u32::from(a) * (256 - wx) + 32768) >> 16) as u8;
-            }
+            let p = pairs.get(x0).copied().unwrap_or(0);
+            *o = (((p & 0xFFFF) * (256 - wx) + (p >> 16) * wx + 32768) >> 16) as u8;
         }
     }
 }
