@@ -987,4 +987,3 @@ mod tests {
         assert!(OrbExtractor::new(OrbConfig { n_levels: 0, ..OrbConfig::default() }).is_err());
     }
 }
-
