@@ -12,7 +12,8 @@ use crate::geometry::{PinholeCamera, Se3};
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct BundleConfig {
-    /// LM iterations (ORB-SLAM2 local BA: 5 + 10).
+    /// Largest number of LM iterations (ORB-SLAM2 local BA: 5 + 10); it stops earlier once a step
+    /// lowers the cost by less than 0.01 %.
     pub iterations: usize,
     /// Initial LM damping (added to the Hessian diagonal).
     pub initial_lambda: f64,
@@ -116,31 +117,26 @@ impl BundleProblem {
         let mut lambda = config.initial_lambda;
         let mut cost = self.cost(camera, config);
         let mut accepted = 0;
+        let n_points = self.points.len();
+        let n_obs = self.observations.len();
+        let mut hcc = vec![Matrix6::<f64>::zeros(); n_var];
+        let mut bc = vec![Vector6::<f64>::zeros(); n_var];
+        let mut hpp = vec![Matrix3::<f64>::zeros(); n_points];
+        let mut bp = vec![Vector3::<f64>::zeros(); n_points];
+        let mut hcp = vec![Matrix6x3::<f64>::zeros(); n_obs];
+        // The linearisation holds until a step is accepted (a rejected step only raises the damping).
+        let mut linearised = false;
         for _ in 0..config.iterations {
-            // Linearise.
-            let mut hcc = vec![Matrix6::<f64>::zeros(); n_var];
-            let mut bc = vec![Vector6::<f64>::zeros(); n_var];
-            let mut hpp = vec![Matrix3::<f64>::zeros(); self.points.len()];
-            let mut bp = vec![Vector3::<f64>::zeros(); self.points.len()];
-            let mut hcp = vec![Matrix6x3::<f64>::zeros(); self.observations.len()];
-            for (oi, o) in self.observations.iter().enumerate() {
-                let (Some(pose), Some(p)) = (self.camera_from_world.get(o.pose), self.points.get(o.point)) else {
-                    continue;
-                };
-                let x = pose * p;
-                let Some((e, j, d)) = residual(camera, bf, &x.coords, o.pixel, o.depth_m, o.sigma_px) else {
-                    continue;
-                };
-                let w = huber_weight(e.norm_squared(), chi2_threshold(d));
-                let jp: Matrix3<f64> = j * pose.rotation.to_rotation_matrix().matrix();
-                hpp[o.point] += jp.transpose() * jp * w;
-                bp[o.point] -= jp.transpose() * e * w;
-                if let Some(Some(v)) = var_index.get(o.pose) {
-                    let jc: Matrix3x6<f64> = j * point_jacobian(&x.coords);
-                    hcc[*v] += jc.transpose() * jc * w;
-                    bc[*v] -= jc.transpose() * e * w;
-                    hcp[oi] = jc.transpose() * jp * w;
-                }
+            if !linearised {
+                hcc.iter_mut().for_each(|m| *m = Matrix6::zeros());
+                bc.iter_mut().for_each(|m| *m = Vector6::zeros());
+                hpp.iter_mut().for_each(|m| *m = Matrix3::zeros());
+                bp.iter_mut().for_each(|m| *m = Vector3::zeros());
+                hcp.iter_mut().for_each(|m| *m = Matrix6x3::zeros());
+                let rotations: Vec<Matrix3<f64>> =
+                    self.camera_from_world.iter().map(|p| *p.rotation.to_rotation_matrix().matrix()).collect();
+                self.linearise(camera, bf, &var_index, &rotations, (&mut hcc, &mut bc, &mut hpp, &mut bp, &mut hcp));
+                linearised = true;
             }
             // Damped Schur complement.
             let mut s = DMatrix::<f64>::zeros(6 * n_var, 6 * n_var);
@@ -214,9 +210,14 @@ impl BundleProblem {
             }
             let new_cost = self.cost(camera, config);
             if new_cost.is_finite() && new_cost < cost {
+                let converged = cost - new_cost <= CONVERGED_RELATIVE_DECREASE * cost;
                 cost = new_cost;
                 lambda = (lambda / 3.0).max(1e-9);
                 accepted += 1;
+                linearised = false;
+                if converged {
+                    break;
+                }
             } else {
                 self.camera_from_world = old_poses;
                 self.points = old_points;
@@ -225,7 +226,59 @@ impl BundleProblem {
         }
         accepted
     }
+
+    /// Gauss-Newton blocks at the current estimate, added into the zeroed `blocks` (camera
+    /// Hessians and gradients by variable pose, point Hessians and gradients, camera-point blocks
+    /// by observation); `rotations[i]` is pose `i`'s rotation matrix.
+    fn linearise(
+        &self,
+        camera: &PinholeCamera,
+        bf: f64,
+        var_index: &[Option<usize>],
+        rotations: &[Matrix3<f64>],
+        blocks: LinearBlocks<'_>,
+    ) {
+        let (hcc, bc, hpp, bp, hcp) = blocks;
+        for (oi, o) in self.observations.iter().enumerate() {
+            let (Some(pose), Some(rot), Some(p)) =
+                (self.camera_from_world.get(o.pose), rotations.get(o.pose), self.points.get(o.point))
+            else {
+                continue;
+            };
+            let x = pose * p;
+            let Some((e, j, d)) = residual(camera, bf, &x.coords, o.pixel, o.depth_m, o.sigma_px) else {
+                continue;
+            };
+            let w = huber_weight(e.norm_squared(), chi2_threshold(d));
+            let jp: Matrix3<f64> = j * rot;
+            if let (Some(h), Some(b)) = (hpp.get_mut(o.point), bp.get_mut(o.point)) {
+                *h += jp.transpose() * jp * w;
+                *b -= jp.transpose() * e * w;
+            }
+            if let Some(&Some(v)) = var_index.get(o.pose) {
+                let jc: Matrix3x6<f64> = j * point_jacobian(&x.coords);
+                if let (Some(h), Some(b), Some(c)) = (hcc.get_mut(v), bc.get_mut(v), hcp.get_mut(oi)) {
+                    *h += jc.transpose() * jc * w;
+                    *b -= jc.transpose() * e * w;
+                    *c = jc.transpose() * jp * w;
+                }
+            }
+        }
+    }
 }
+
+/// The blocks [`BundleProblem::linearise`] fills: camera Hessians, camera gradients, point
+/// Hessians, point gradients, camera-point blocks.
+type LinearBlocks<'a> = (
+    &'a mut [Matrix6<f64>],
+    &'a mut [Vector6<f64>],
+    &'a mut [Matrix3<f64>],
+    &'a mut [Vector3<f64>],
+    &'a mut [Matrix6x3<f64>],
+);
+
+/// LM stops once an accepted step lowers the robust cost by less than this fraction of it.
+const CONVERGED_RELATIVE_DECREASE: f64 = 1e-4;
 
 fn huber_cost(chi2: f64, delta2: f64) -> f64 {
     if chi2 <= delta2 {

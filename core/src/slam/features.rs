@@ -28,6 +28,20 @@ pub const BLUR_RADIUS_PX: usize = 3;
 /// Largest distance of a rotated pattern point from the keypoint along x or y, pixels
 /// (|(−13, −13)| = 18.4 rounded).
 const PATTERN_REACH_PX: usize = 18;
+/// Row stride of the descriptor patch (a copy of the smoothed level's square of side
+/// 2 [`PATTERN_REACH_PX`] + 1 around the keypoint), pixels; a power of two.
+const PATCH_STRIDE: usize = 64;
+/// Length of the descriptor patch buffer (a power of two, so that indices masked by
+/// `PATCH_LEN − 1` need no bounds check).
+const PATCH_LEN: usize = PATCH_STRIDE * PATCH_STRIDE;
+
+/// Index in the descriptor patch of the pixel at offset `(dx, dy)` from the keypoint.
+fn patch_index(d: [i8; 2]) -> u16 {
+    let r = PATTERN_REACH_PX as isize;
+    let (x, y) = ((isize::from(d[0]) + r).clamp(0, 2 * r), (isize::from(d[1]) + r).clamp(0, 2 * r));
+    (y as usize * PATCH_STRIDE + x as usize) as u16
+}
+
 /// Column offsets −15..=15 of the orientation patch.
 const U_WEIGHTS: [i16; 2 * HALF_PATCH_PX + 1] = {
     let mut u = [0i16; 2 * HALF_PATCH_PX + 1];
@@ -196,12 +210,15 @@ const CIRCLE: [(isize, isize); 16] = [
 pub struct OrbExtractor {
     config: OrbConfig,
     levels: Vec<Level>,
-    /// The pattern rotated to each of `ANGLE_BINS` angles, rounded to pixels.
-    rotated: Vec<[i8; 4]>,
+    /// The pattern rotated to each of `ANGLE_BINS` angles, rounded to pixels, as indices of the
+    /// test's two pixels in a descriptor patch (see [`patch_index`]).
+    rotated: Vec<[u16; 2]>,
     umax: [usize; HALF_PATCH_PX + 1],
     score_buf: Vec<u16>,
     corners: Vec<Corner>,
     blur_rows: Vec<u16>,
+    /// Non-maximum suppression verdict per corner of the level being detected.
+    keep: Vec<bool>,
     features_per_level: Vec<usize>,
 }
 
@@ -261,7 +278,7 @@ impl OrbExtractor {
                     [round_i(x * c - y * s) as i8, round_i(x * s + y * c) as i8]
                 };
                 let (a, b) = (r(p[0], p[1]), r(p[2], p[3]));
-                rotated.push([a[0], a[1], b[0], b[1]]);
+                rotated.push([patch_index(a), patch_index(b)]);
             }
         }
         Ok(Self {
@@ -272,6 +289,7 @@ impl OrbExtractor {
             score_buf: Vec::new(),
             corners: Vec::new(),
             blur_rows: Vec::new(),
+            keep: Vec::new(),
             features_per_level,
         })
     }
@@ -368,7 +386,9 @@ impl OrbExtractor {
         }
         // 3x3 non-maximum suppression (ties: the first in raster order wins).
         let buf = &self.score_buf;
-        self.corners.retain(|c| {
+        let mut keep = std::mem::take(&mut self.keep);
+        keep.clear();
+        keep.extend(self.corners.iter().map(|c| {
             let i = c.y as usize * w + c.x as usize;
             let s = c.score;
             match (buf.get(i - w - 1..i - w + 2), buf.get(i - 1..i + 2), buf.get(i + w - 1..i + w + 2)) {
@@ -379,13 +399,16 @@ impl OrbExtractor {
                 }
                 _ => false,
             }
-        });
+        }));
         // Clear the score map for the next level.
-        for y in EDGE_PX..h - EDGE_PX {
-            for v in &mut self.score_buf[y * w + EDGE_PX..y * w + w - EDGE_PX] {
-                *v = 0;
+        for c in &self.corners {
+            if let Some(s) = self.score_buf.get_mut(c.y as usize * w + c.x as usize) {
+                *s = 0;
             }
         }
+        let mut flags = keep.iter();
+        self.corners.retain(|_| flags.next().copied().unwrap_or(false));
+        self.keep = keep;
         let spread = (self.config.spread_share * want as f64).round() as usize;
         if self.config.ranking == Ranking::Harris {
             // Preselect by FAST score (spread over the grid as well), then rank by Harris.
@@ -406,6 +429,7 @@ impl OrbExtractor {
             return;
         };
         let w = level.width;
+        let mut patch = [0u8; PATCH_LEN];
         for c in &self.corners {
             let (x, y) = (c.x as usize, c.y as usize);
             // Intensity centroid over the radius-15 disc, a row pair (±v) at a time on 31-wide
@@ -443,22 +467,23 @@ impl OrbExtractor {
             // Steered pattern from the table of ANGLE_BINS rotations.
             let bin =
                 (round_i(angle / std::f32::consts::TAU * ANGLE_BINS as f32).rem_euclid(ANGLE_BINS as isize)) as usize;
-            let blur = &level.blurred;
-            let wi = w as isize;
-            let mut desc = [0u64; 4];
-            // The rotated pattern (radius ≤ PATTERN_REACH_PX ≤ EDGE_PX) lies inside the level.
+            // The rotated pattern (radius ≤ PATTERN_REACH_PX ≤ EDGE_PX) lies inside the level:
+            // copy its square of the smoothed level into the patch, then read the tests' pixels
+            // at precomputed indices.
             let r = PATTERN_REACH_PX;
-            let (p0, p1) = (center - r * w - r, center + r * w + r + 1);
-            if let (Some(rot), Some(patch)) =
-                (self.rotated.get(bin * DESCRIPTOR_BITS..(bin + 1) * DESCRIPTOR_BITS), blur.get(p0..p1))
-            {
-                let base = (r * w + r) as isize;
+            for (k, dst) in patch.chunks_exact_mut(PATCH_STRIDE).take(2 * r + 1).enumerate() {
+                let s = (y + k - r) * w + x - r;
+                if let (Some(src), Some(dst)) = (level.blurred.get(s..=s + 2 * r), dst.get_mut(..=2 * r)) {
+                    dst.copy_from_slice(src);
+                }
+            }
+            let mut desc = [0u64; 4];
+            if let Some(rot) = self.rotated.get(bin * DESCRIPTOR_BITS..(bin + 1) * DESCRIPTOR_BITS) {
                 for (word, tests) in desc.iter_mut().zip(rot.chunks_exact(64)) {
                     let mut bits = 0u64;
                     for (b, p) in tests.iter().enumerate() {
-                        let i1 = (base + isize::from(p[1]) * wi + isize::from(p[0])) as usize;
-                        let i2 = (base + isize::from(p[3]) * wi + isize::from(p[2])) as usize;
-                        let (a, c) = (patch.get(i1).copied().unwrap_or(0), patch.get(i2).copied().unwrap_or(0));
+                        let a = patch[usize::from(p[0]) & (PATCH_LEN - 1)];
+                        let c = patch[usize::from(p[1]) & (PATCH_LEN - 1)];
                         bits |= u64::from(a < c) << b;
                     }
                     *word = bits;
@@ -487,11 +512,10 @@ struct ScanArea {
 }
 
 /// FAST-9 corners at threshold `t` in columns `xs.0..xs.1` and rows `ys.0..ys.1` (inside the level
-/// by [`EDGE_PX`]), appended to `out` with their cell as `key`.
+/// by [`EDGE_PX`]), appended to `out` with their FAST score and cell.
 fn scan_fast(img: &[u8], area: &ScanArea, xs: (usize, usize), ys: (usize, usize), t: u8, out: &mut Vec<Corner>) {
     let w = area.width;
     let offsets: [isize; 16] = CIRCLE.map(|(dx, dy)| dy * w as isize + dx);
-    let offsets25: [isize; 25] = std::array::from_fn(|k| offsets[k % 16]);
     let (x_from, x_to) = xs;
     if x_to <= x_from {
         return;
@@ -499,40 +523,29 @@ fn scan_fast(img: &[u8], area: &ScanArea, xs: (usize, usize), ys: (usize, usize)
     let n = x_to - x_from;
     for y in ys.0..ys.1 {
         let row = y * w;
-        // Segment test on 16 pixels at once (OpenCV's SIMD FAST): walk the circle 25 times
-        // (16 + 9 to wrap), counting consecutive brighter / darker pixels per lane. The last
-        // chunk overlaps the previous one (back from the row end) rather than leave the row.
+        let cell_row = ((y - EDGE_PX) / area.cell) * area.ncx;
+        // `LANES` pixels at a time (OpenCV's SIMD FAST); the last chunk overlaps the previous one
+        // (back from the row end) rather than leave the row.
         let mut x0 = x_from;
         let mut done_to = x_from;
         while done_to < x_to {
             if x0 + LANES > x_to {
                 x0 = x_to.saturating_sub(LANES).max(EDGE_PX);
             }
-            let flags = segment_test_lanes(img, row + x0, &offsets25, t);
-            if u128::from_le_bytes(flags) != 0 {
-                for (j, &f) in flags.iter().enumerate() {
+            let scores = fast_lanes(img, row + x0, &offsets, t);
+            if u128::from_le_bytes(scores) != 0 {
+                for (j, &s) in scores.iter().enumerate() {
                     let x = x0 + j;
-                    if f == 0 || x < done_to || x >= x_to {
+                    if s == 0 || x < done_to || x >= x_to {
                         continue;
                     }
-                    let i = (row + x) as isize;
-                    let c = i16::from(img[row + x]);
-                    let mut diff = [0i16; 16];
-                    for (k, o) in offsets.iter().enumerate() {
-                        diff[k] = i16::from(img[(i + o) as usize]) - c;
-                    }
-                    // Flag bit 0: bright arc, bit 1: dark arc (never both for 9 of 16).
-                    let score = if f & 1 != 0 { arc_score(&diff) } else { arc_score(&diff.map(|v| -v)) };
-                    if score < i16::from(t) {
-                        continue;
-                    }
-                    let cid = ((y - EDGE_PX) / area.cell) * area.ncx + (x - EDGE_PX) / area.cell;
+                    let score = u16::from(s - 1);
                     out.push(Corner {
                         x: x as u32,
                         y: y as u32,
-                        score: score as u16,
-                        strength: u32::from(score as u16),
-                        cell: cid as u32,
+                        score,
+                        strength: u32::from(score),
+                        cell: (cell_row + (x - EDGE_PX) / area.cell) as u32,
                         round: 0,
                     });
                 }
@@ -546,25 +559,16 @@ fn scan_fast(img: &[u8], area: &ScanArea, xs: (usize, usize), ys: (usize, usize)
     }
 }
 
-/// Pixels processed together by [`segment_test_lanes`].
+/// Pixels processed together by [`fast_lanes`].
 const LANES: usize = 16;
 
-/// FAST-9 segment test for the `LANES` pixels starting at `start` at threshold `t` (flag bit 0:
-/// brighter arc, bit 1: darker arc, 0: no corner). Written on fixed-size u8 arrays so that it compiles to SIMD.
+/// FAST-9 at threshold `t` for the `LANES` pixels starting at `start`: per pixel 0 (no corner) or
+/// its FAST score + 1 (the largest over the 16 arcs of 9 contiguous circle pixels of the arc's
+/// smallest excess over the centre, brighter or darker side; a corner when it exceeds `t`).
+/// Written on fixed-size u8 arrays (saturating differences, lane-wise min and max) so that it
+/// compiles to SIMD.
 #[inline]
-fn segment_test_lanes(img: &[u8], start: usize, offsets25: &[isize; 25], t: u8) -> [u8; LANES] {
-    let mut c = [0u8; LANES];
-    if let Some(src) = img.get(start..start + LANES) {
-        c.copy_from_slice(src);
-    }
-    let mut hi = [0u8; LANES];
-    let mut lo = [0u8; LANES];
-    for j in 0..LANES {
-        hi[j] = c[j].saturating_add(t);
-        lo[j] = c[j].saturating_sub(t);
-    }
-    // Quick reject of the whole chunk: a 9-arc holds two adjacent compass pixels (circle
-    // indices 0/4, 4/8, 8/12, 12/0) on the same side.
+fn fast_lanes(img: &[u8], start: usize, offsets: &[isize; 16], t: u8) -> [u8; LANES] {
     let load = |o: isize| {
         let s = (start as isize + o) as usize;
         let mut p = [0u8; LANES];
@@ -573,65 +577,75 @@ fn segment_test_lanes(img: &[u8], start: usize, offsets25: &[isize; 25], t: u8) 
         }
         p
     };
-    let compass = [load(offsets25[0]), load(offsets25[4]), load(offsets25[8]), load(offsets25[12])];
-    let mut any = 0u8;
+    let c = load(0);
+    // Quick reject of the whole chunk: a 9-arc holds two adjacent compass pixels (circle
+    // indices 0/4, 4/8, 8/12, 12/0) beyond the threshold on the same side.
+    let compass = [load(offsets[0]), load(offsets[4]), load(offsets[8]), load(offsets[12])];
+    let (mut any_bright, mut any_dark) = (0u8, 0u8);
     for j in 0..LANES {
-        let b: [u8; 4] = std::array::from_fn(|k| u8::from(compass[k][j].saturating_sub(hi[j]) != 0));
-        let d: [u8; 4] = std::array::from_fn(|k| u8::from(lo[j].saturating_sub(compass[k][j]) != 0));
-        any |= (b[0] & b[1]) | (b[1] & b[2]) | (b[2] & b[3]) | (b[3] & b[0]);
-        any |= (d[0] & d[1]) | (d[1] & d[2]) | (d[2] & d[3]) | (d[3] & d[0]);
+        let b: [u8; 4] = std::array::from_fn(|k| u8::from(compass[k][j].saturating_sub(c[j]) > t));
+        let d: [u8; 4] = std::array::from_fn(|k| u8::from(c[j].saturating_sub(compass[k][j]) > t));
+        any_bright |= (b[0] & b[1]) | (b[1] & b[2]) | (b[2] & b[3]) | (b[3] & b[0]);
+        any_dark |= (d[0] & d[1]) | (d[1] & d[2]) | (d[2] & d[3]) | (d[3] & d[0]);
     }
-    if any == 0 {
+    if any_bright | any_dark == 0 {
         return [0u8; LANES];
     }
-    let (mut cb, mut cd, mut mb, mut md) = ([0u8; LANES], [0u8; LANES], [0u8; LANES], [0u8; LANES]);
-    for &o in &offsets25[..24] {
-        let s = (start as isize + o) as usize;
-        let mut p = [0u8; LANES];
-        if let Some(src) = img.get(s..s + LANES) {
-            p.copy_from_slice(src);
-        }
+    // Excess of each circle pixel over (bright) and under (dark) the centre.
+    let mut bright = [[0u8; LANES]; 16];
+    let mut dark = [[0u8; LANES]; 16];
+    for (k, &o) in offsets.iter().enumerate() {
+        let p = load(o);
         for j in 0..LANES {
-            // p > hi  <=>  p - hi (saturating) != 0; same for p < lo.
-            let bright = 0u8.wrapping_sub(u8::from(p[j].saturating_sub(hi[j]) != 0));
-            let dark = 0u8.wrapping_sub(u8::from(lo[j].saturating_sub(p[j]) != 0));
-            cb[j] = cb[j].wrapping_add(1) & bright;
-            cd[j] = cd[j].wrapping_add(1) & dark;
-            mb[j] = mb[j].max(cb[j]);
-            md[j] = md[j].max(cd[j]);
+            bright[k][j] = p[j].saturating_sub(c[j]);
+            dark[k][j] = c[j].saturating_sub(p[j]);
         }
     }
+    let sb = if any_bright != 0 { best_arc(&bright) } else { [0u8; LANES] };
+    let sd = if any_dark != 0 { best_arc(&dark) } else { [0u8; LANES] };
     let mut out = [0u8; LANES];
     for j in 0..LANES {
-        out[j] = u8::from(mb[j] >= 9) | (u8::from(md[j] >= 9) << 1);
+        let s = sb[j].max(sd[j]);
+        out[j] = if s > t { s } else { 0 };
     }
     out
+}
+
+/// Per lane, the largest over the 16 arcs of 9 contiguous entries of the circle `v` of the arc's
+/// smallest entry (a min tree: pairs, fours, eights, nines).
+#[inline]
+fn best_arc(v: &[[u8; LANES]; 16]) -> [u8; LANES] {
+    let mut m2 = [[0u8; LANES]; 16];
+    for k in 0..16 {
+        m2[k] = min_lanes(v[k], v[(k + 1) & 15]);
+    }
+    let mut m4 = [[0u8; LANES]; 16];
+    for k in 0..16 {
+        m4[k] = min_lanes(m2[k], m2[(k + 2) & 15]);
+    }
+    let mut best = [0u8; LANES];
+    for k in 0..16 {
+        let m9 = min_lanes(min_lanes(m4[k], m4[(k + 4) & 15]), v[(k + 8) & 15]);
+        for j in 0..LANES {
+            best[j] = best[j].max(m9[j]);
+        }
+    }
+    best
+}
+
+/// Lane-wise minimum.
+#[inline(always)]
+fn min_lanes(mut a: [u8; LANES], b: [u8; LANES]) -> [u8; LANES] {
+    for j in 0..LANES {
+        a[j] = a[j].min(b[j]);
+    }
+    a
 }
 
 /// Round half away from zero without a libm call.
 #[inline]
 fn round_i(v: f32) -> isize {
     (v + 0.5f32.copysign(v)) as isize
-}
-
-/// Largest threshold at which `diff` (circle minus centre) has 9 contiguous values above it,
-/// minus one (i.e. the FAST score for the "brighter" arc; negate `diff` for the darker one).
-#[inline]
-fn arc_score(diff: &[i16; 16]) -> i16 {
-    let mut m2 = [0i16; 16];
-    for k in 0..16 {
-        m2[k] = diff[k].min(diff[(k + 1) & 15]);
-    }
-    let mut m4 = [0i16; 16];
-    for k in 0..16 {
-        m4[k] = m2[k].min(m2[(k + 2) & 15]);
-    }
-    let mut best = i16::MIN;
-    for k in 0..16 {
-        let m8 = m4[k].min(m4[(k + 4) & 15]);
-        best = best.max(m8.min(diff[(k + 8) & 15]));
-    }
-    best - 1
 }
 
 /// Keep `want` of `corners`: the `want − spread` strongest, then `spread` more taken round-robin
@@ -725,6 +739,9 @@ fn resize_bilinear(src: &Level, dst: &mut Level) {
         })
         .collect();
     let mut tmp = vec![0u16; sw];
+    // Each column's vertical blend and its right neighbour's in one word (low, high 16 bits), so
+    // that the horizontal pass reads one word per output pixel.
+    let mut pairs = vec![0u32; sw];
     for y in 0..dh {
         let fy = ((y as f32 + 0.5) * ry - 0.5).clamp(0.0, (sh - 1) as f32);
         let y0 = (fy as usize).min(sh.saturating_sub(2));
@@ -735,10 +752,16 @@ fn resize_bilinear(src: &Level, dst: &mut Level) {
         for ((t, &a), &b) in tmp.iter_mut().zip(r0).zip(r1) {
             *t = u16::from(a) * (256 - wy) + u16::from(b) * wy;
         }
+        let n = sw - 1;
+        let (lo, hi, pr) = (&tmp[..n], &tmp[1..], &mut pairs[..n]);
+        for i in 0..n {
+            pr[i] = u32::from(lo[i]) | (u32::from(hi[i]) << 16);
+        }
+        pairs[n] = u32::from(tmp[n]);
         let out = &mut dst.image[y * dw..y * dw + dw];
         for (o, &(x0, wx)) in out.iter_mut().zip(&cols) {
-            let (a, b) = (tmp.get(x0).copied().unwrap_or(0), tmp.get(x0 + 1).copied().unwrap_or(0));
-            *o = ((u32::from(a) * (256 - wx) + u32::from(b) * wx + 32768) >> 16) as u8;
+            let p = pairs.get(x0).copied().unwrap_or(0);
+            *o = (((p & 0xFFFF) * (256 - wx) + (p >> 16) * wx + 32768) >> 16) as u8;
         }
     }
 }
@@ -748,7 +771,7 @@ const GAUSS_7: [u16; 2 * BLUR_RADIUS_PX + 1] = [18, 33, 49, 56, 49, 33, 18];
 
 /// Separable Gaussian smoothing ([`GAUSS_7`]) of a level into its `blurred` buffer (fixed point;
 /// the `BLUR_RADIUS_PX` rows and columns along the border copied unsmoothed). `rows` holds the
-/// horizontal pass of every row.
+/// horizontal pass of the last `2 BLUR_RADIUS_PX + 1` rows (a ring).
 fn gaussian_blur(level: &mut Level, rows: &mut Vec<u16>) {
     const R: usize = BLUR_RADIUS_PX;
     const N: usize = 2 * R + 1;
@@ -757,33 +780,44 @@ fn gaussian_blur(level: &mut Level, rows: &mut Vec<u16>) {
     if w < N || h < N {
         return;
     }
-    rows.resize(w * h, 0);
-    let img = &level.image;
+    rows.resize(N * w, 0);
     let m = w - 2 * R;
-    // Horizontal pass: u16 sums (≤ 255 × 256).
-    for (src, dst) in img.chunks_exact(w).zip(rows.chunks_exact_mut(w)) {
-        let out = &mut dst[R..R + m];
-        out.iter_mut().for_each(|o| *o = 0);
-        for (k, &g) in GAUSS_7.iter().enumerate() {
-            for (o, &v) in out.iter_mut().zip(&src[k..k + m]) {
-                *o += u16::from(v) * g;
-            }
+    let [g0, g1, g2, g3, ..] = GAUSS_7;
+    // Vertical weights scaled for a multiply-high: (h g 256) >> 16.
+    let gv = GAUSS_7.map(|g| u32::from(g) << 8);
+    for (y, src) in level.image.chunks_exact(w).enumerate() {
+        // Horizontal pass (symmetric taps) in u16: sums ≤ 255 × 256.
+        let slot = &mut rows[(y % N) * w..(y % N) * w + m];
+        let tap = |k: usize| &src[k..k + m];
+        let (s0, s1, s2, s3, s4, s5, s6) = (tap(0), tap(1), tap(2), tap(3), tap(4), tap(5), tap(6));
+        for i in 0..m {
+            slot[i] = g0 * (u16::from(s0[i]) + u16::from(s6[i]))
+                + g1 * (u16::from(s1[i]) + u16::from(s5[i]))
+                + g2 * (u16::from(s2[i]) + u16::from(s4[i]))
+                + g3 * u16::from(s3[i]);
         }
-    }
-    // Vertical pass in u16: each term (h g 256) >> 16 (a multiply-high), their sum ≤ 255 × 256,
-    // rounded back to 8 bits.
-    let mut acc = vec![0u16; m];
-    for y in R..h - R {
-        acc.iter_mut().for_each(|a| *a = 0);
-        for (k, &g) in GAUSS_7.iter().enumerate() {
-            let g = g << 8;
-            let row = &rows[(y - R + k) * w + R..(y - R + k) * w + R + m];
-            for (a, &v) in acc.iter_mut().zip(row) {
-                *a += ((u32::from(v) * u32::from(g)) >> 16) as u16;
-            }
+        if y + 1 < N {
+            continue;
         }
-        for (o, &a) in level.blurred[y * w + R..y * w + R + m].iter_mut().zip(&acc) {
-            *o = ((u32::from(a) + 128) >> 8) as u8;
+        // Vertical pass for the row R above: each term (h g 256) >> 16, their sum ≤ 255 × 256,
+        // rounded back to 8 bits.
+        let yc = y - R;
+        let ring = |k: usize| {
+            let q = (yc + k - R) % N;
+            &rows[q * w..q * w + m]
+        };
+        let (r0, r1, r2, r3, r4, r5, r6) = (ring(0), ring(1), ring(2), ring(3), ring(4), ring(5), ring(6));
+        let out = &mut level.blurred[yc * w + R..yc * w + R + m];
+        let mh = |v: u16, g: u32| ((u32::from(v) * g) >> 16) as u16;
+        for i in 0..m {
+            let acc = mh(r0[i], gv[0])
+                + mh(r1[i], gv[1])
+                + mh(r2[i], gv[2])
+                + mh(r3[i], gv[3])
+                + mh(r4[i], gv[4])
+                + mh(r5[i], gv[5])
+                + mh(r6[i], gv[6]);
+            out[i] = ((u32::from(acc) + 128) >> 8) as u8;
         }
     }
 }
@@ -912,26 +946,30 @@ mod tests {
 
     #[test]
     fn fast_score_is_the_largest_passing_threshold() {
-        // Nine contiguous values of 50 above the centre, the rest at 0: score 49.
-        let mut d = [0i16; 16];
-        for v in d.iter_mut().skip(3).take(9) {
-            *v = 50;
-        }
-        d[7] = 30; // the weakest arc member limits the score
-        assert_eq!(arc_score(&d), 29);
-        // Lane test: a 9-arc at threshold 20 is a corner, an 8-arc is not.
+        // A 9-arc 50 grey levels above the centre whose weakest member is 30 above: score 29 (a
+        // corner at threshold 29, not at 30); the lane holds score + 1.
         let w = 40;
         let mut img = vec![100u8; w * 9];
         let centre = 4 * w + 10;
         let offsets: [isize; 16] = CIRCLE.map(|(dx, dy)| dy * w as isize + dx);
-        let offsets25: [isize; 25] = std::array::from_fn(|k| offsets[k % 16]);
-        for o in &offsets[0..9] {
-            img[(centre as isize + o) as usize] = 150;
+        let at = |o: isize| (centre as isize + o) as usize;
+        for &o in &offsets[3..12] {
+            img[at(o)] = 150;
         }
-        let flags = segment_test_lanes(&img, centre, &offsets25, 20);
-        assert_eq!(flags[0], 1);
-        img[(centre as isize + offsets[8]) as usize] = 100;
-        assert_eq!(segment_test_lanes(&img, centre, &offsets25, 20)[0], 0);
+        img[at(offsets[7])] = 130;
+        assert_eq!(fast_lanes(&img, centre, &offsets, 20)[0], 30);
+        assert_eq!(fast_lanes(&img, centre, &offsets, 29)[0], 30);
+        assert_eq!(fast_lanes(&img, centre, &offsets, 30)[0], 0);
+        // The darker side likewise, wrapping past index 15.
+        let mut dark = vec![100u8; w * 9];
+        for k in 12..21 {
+            dark[at(offsets[k % 16])] = 40;
+        }
+        dark[at(offsets[2])] = 75;
+        assert_eq!(fast_lanes(&dark, centre, &offsets, 20)[0], 25);
+        // An 8-arc is no corner.
+        img[at(offsets[11])] = 100;
+        assert_eq!(fast_lanes(&img, centre, &offsets, 20)[0], 0);
     }
 
     #[test]

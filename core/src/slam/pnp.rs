@@ -285,11 +285,24 @@ pub fn solve_pnp_ransac(
     let bf = camera.fx * refine.depth_baseline_m;
     let prior = prior_world_from_camera.inverse();
     let count = |pose: &Se3| chi2_all(corr, camera, bf, pose).iter().filter(|(c, d)| *c <= chi2_threshold(*d)).count();
+    let n = corr.len();
+    // Hypotheses needed for `confidence` that one was drawn from inliers only, at the inlier
+    // share of the best pose so far (the prior counts as the first hypothesis).
+    let needed_for = |k: usize| {
+        let w = k as f64 / n as f64;
+        let p_good = w * w * w;
+        if p_good >= 1.0 - 1e-12 {
+            0
+        } else if p_good <= 0.0 {
+            ransac.max_iterations
+        } else {
+            ((1.0 - ransac.confidence).ln() / (1.0 - p_good).ln()).ceil().max(1.0) as usize
+        }
+    };
     let mut best_pose = prior;
     let mut best_count = count(&prior);
     let mut rng = ChaCha8Rng::seed_from_u64(ransac.seed);
-    let n = corr.len();
-    let mut needed = ransac.max_iterations;
+    let mut needed = needed_for(best_count);
     let mut it = 0;
     while it < needed.min(ransac.max_iterations) {
         it += 1;
@@ -310,13 +323,7 @@ pub fn solve_pnp_ransac(
         if k > best_count {
             best_count = k;
             best_pose = pose;
-            let w = k as f64 / n as f64;
-            let p_good = w * w * w;
-            needed = if p_good >= 1.0 - 1e-12 {
-                0
-            } else {
-                ((1.0 - ransac.confidence).ln() / (1.0 - p_good).ln()).ceil().max(1.0) as usize
-            };
+            needed = needed_for(k);
         }
     }
     if best_count < ransac.min_inliers.max(3) {
