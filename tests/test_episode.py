@@ -128,15 +128,16 @@ def missed(m: dict) -> int:
 
 
 def test_discovery_finds_the_object_the_paper_rule_leaves_unmapped(tmp_path, ci_overlay) -> None:
-    """Against the scene file: with a 35° camera the Init views of scene03 (seed 7) miss an object;
+    """Against the scene file: with a 35° camera the Init views of scene06 (seed 7) miss objects;
     the paper's stopping rule (object-driven-discovery with its discovery settings off) ends once the
-    mapped objects are explored and never maps it, looking at the unseen table before stopping (explore.discovery_before_stop, with the budget reserve of
-    the run defaults) finds it. The scenario holds with a cylinder's top at its highest point (with
-    the top-face median the paper's run does not converge within the budget), so the test keeps
-    that estimator to test the stopping rule, not the estimator."""
+    mapped objects are explored and never maps them, while looking at the unseen table before
+    stopping (explore.discovery_before_stop, with the budget reserve of the run defaults) finds
+    them. The scenario is common: it holds on 6 of 10 scene / seed pairs tried (scenes 02 and 04-07,
+    seeds 0 and 7). It was found with a cylinder's top at its highest point, which the test keeps,
+    to test the stopping rule rather than the estimator."""
     common = {
         "preset": '"ideal"',  # the scenario was found in the ideal world
-        "scene": '"scenes/scene03.toml"',
+        "scene": '"scenes/scene06.toml"',
         "camera.fovy_deg": 35.0,
         "seed": 7,
         "map.param.cylinder.top_from_face": "false",
