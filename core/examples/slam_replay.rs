@@ -15,8 +15,8 @@
 use std::path::Path;
 
 use anyhow::{anyhow, Context, Result};
-use nalgebra::{Matrix3, Matrix4, Vector3};
-use objslam_core::geometry::{se3_from_matrix, Se3};
+use nalgebra::{Matrix3, Vector3};
+use objslam_core::geometry::Se3;
 use objslam_core::slam::{ate_rmse_m, rpe, PoseSource, TrackInput, Tracker, TrackerConfig};
 use objslam_core::system::capture::{Capture, CaptureEvent};
 
@@ -72,7 +72,7 @@ fn main() -> Result<()> {
     for event in &capture.events {
         let CaptureEvent::Frame(f) = event else { continue };
         let (frame, grey) = capture.load_frame(f)?;
-        let gt = se3_from_matrix(&Matrix4::from_row_slice(&f.world_from_camera_gt), "gt")?;
+        let gt = f.true_pose()?;
         let out = tracker.track(&TrackInput {
             grey: &grey,
             depth: &frame.depth,

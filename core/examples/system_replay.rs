@@ -13,9 +13,7 @@ use std::path::Path;
 use std::time::Instant;
 
 use anyhow::{anyhow, Result};
-use nalgebra::Matrix4;
 use objslam_core::eval::{estimates_from_map, evaluate, EvalConfig};
-use objslam_core::geometry::se3_from_matrix;
 use objslam_core::system::capture::{Capture, CaptureEvent};
 use objslam_core::system::FrameInput;
 
@@ -45,7 +43,7 @@ fn main() -> Result<()> {
             match event {
                 CaptureEvent::Frame(f) => {
                     let (frame, grey) = capture.load_frame(f)?;
-                    let gt = se3_from_matrix(&Matrix4::from_row_slice(&f.world_from_camera_gt), "gt")?;
+                    let gt = f.true_pose()?;
                     let t = Instant::now();
                     system.process_frame(FrameInput {
                         frame,

@@ -23,7 +23,10 @@
 //! Not modelled: rolling shutter (the D435's colour imager has one), exposure and white-balance
 //! changes, lens distortion and vignetting.
 
-use super::{check, normal_quantiles, RenderedFrame, SensorError, SensorUnit, SplitMix64, TAG_COLOUR};
+use super::{
+    check, max_f, min_f, normal_quantiles, to_i32, RenderedFrame, SensorError, SensorUnit, SplitMix64, ROUND_F32,
+    TAG_COLOUR,
+};
 use nalgebra::Matrix4;
 use serde::{Deserialize, Serialize};
 
@@ -150,37 +153,6 @@ impl<'a> ColourRows<'a> {
             }
         }
     }
-}
-
-/// Smaller of two values; `b` if either is NaN (a compare and a select, which vectorises).
-#[inline]
-fn min_f(a: f32, b: f32) -> f32 {
-    if a < b {
-        a
-    } else {
-        b
-    }
-}
-
-/// Larger of two values; `b` if either is NaN.
-#[inline]
-fn max_f(a: f32, b: f32) -> f32 {
-    if a > b {
-        a
-    } else {
-        b
-    }
-}
-
-/// Adding this to an `f32` in `(−2^22, 2^22)` rounds it to an integer (halves to even), which
-/// then sits in the low bits of the sum's representation.
-const ROUND_F32: f32 = 12_582_912.0; // 1.5 · 2^23
-
-/// An integer-valued `f32` in `(−2^22, 2^22)` as an `i32`, by float and integer operations only
-/// (so that a row of them vectorises).
-#[inline]
-fn to_i32(v: f32) -> i32 {
-    (v + ROUND_F32).to_bits() as i32 - ROUND_F32.to_bits() as i32
 }
 
 /// `v` rounded to the nearest integer (halves to even), as a float.

@@ -41,7 +41,7 @@
 //! than the colour's and the band falls outside the registered image), temporal noise
 //! correlation, multipath and specular surfaces.
 
-use super::{check, RenderedFrame, SensorError, SensorUnit, SplitMix64, TAG_DEPTH};
+use super::{check, max_f, min_f, to_i32, RenderedFrame, SensorError, SensorUnit, SplitMix64, TAG_DEPTH};
 use nalgebra::{Matrix3, Vector3};
 use serde::{Deserialize, Serialize};
 
@@ -557,37 +557,12 @@ pub(crate) fn correlated_field(width: usize, height: usize, cell_px: f64, rng: &
 /// Widening of each registered pixel's rectangle, pixels (no pinholes from rounding).
 const EPS: f32 = 0.02;
 
-/// Smaller of two values; `b` if either is NaN (a compare and a select, which vectorises).
-#[inline]
-fn min_f(a: f32, b: f32) -> f32 {
-    if a < b {
-        a
-    } else {
-        b
-    }
-}
-
-/// Larger of two values; `b` if either is NaN.
-#[inline]
-fn max_f(a: f32, b: f32) -> f32 {
-    if a > b {
-        a
-    } else {
-        b
-    }
-}
-
-/// Adding this to an `f32` in `(−2^22, 2^22)` rounds it to an integer (halves to even), which
-/// then sits in the low bits of the sum's representation.
-const ROUND_F32: f32 = 12_582_912.0; // 1.5 · 2^23
-
 /// `v` clamped to `[0, n]` and rounded to the nearest integer, for a bound of a rectangle on an
 /// axis of `n` pixels (NaN gives 0); float and integer operations only, so that a row of them
 /// vectorises.
 #[inline]
 fn round_index(v: f32, n: f32) -> i32 {
-    let v = min_f(max_f(v, 0.0), n);
-    (v + ROUND_F32).to_bits() as i32 - ROUND_F32.to_bits() as i32
+    to_i32(min_f(max_f(v, 0.0), n))
 }
 
 /// Steps 6 (registration) and 7 (quantisation): each depth pixel's two corners go through the

@@ -293,6 +293,36 @@ fn inverse_normal_cdf(p: f64) -> f64 {
     }
 }
 
+/// Smaller of two values; `b` if either is NaN (a compare and a select, which vectorises).
+#[inline]
+pub(crate) fn min_f(a: f32, b: f32) -> f32 {
+    if a < b {
+        a
+    } else {
+        b
+    }
+}
+
+/// Larger of two values; `b` if either is NaN.
+#[inline]
+pub(crate) fn max_f(a: f32, b: f32) -> f32 {
+    if a > b {
+        a
+    } else {
+        b
+    }
+}
+
+/// Adding this to an `f32` in `(−2^22, 2^22)` rounds it to an integer (halves to even), which
+/// then sits in the low bits of the sum's representation.
+pub(crate) const ROUND_F32: f32 = 12_582_912.0; // 1.5 · 2^23
+/// An integer-valued `f32` in `(−2^22, 2^22)` as an `i32`, by float and integer operations only
+/// (so that a row of them vectorises).
+#[inline]
+pub(crate) fn to_i32(v: f32) -> i32 {
+    (v + ROUND_F32).to_bits() as i32 - ROUND_F32.to_bits() as i32
+}
+
 /// Stream tags of the per-episode and per-frame draws.
 pub(crate) const TAG_UNIT: u64 = 1;
 pub(crate) const TAG_DEPTH: u64 = 2;

@@ -24,7 +24,7 @@ use crate::active::ActiveConfig;
 use crate::eval::GtObject;
 use crate::explore::TableRect;
 use crate::frame::{DepthImage, Detection, Frame, GreyImage};
-use crate::geometry::{se3_from_matrix, Box2, PinholeCamera};
+use crate::geometry::{se3_from_matrix, Box2, PinholeCamera, Se3};
 use crate::map::Label;
 use crate::pipeline::PipelineConfig;
 use crate::slam::TrackerConfig;
@@ -130,6 +130,17 @@ fn read_gz(path: &Path) -> Result<Vec<u8>, CaptureError> {
     Ok(out)
 }
 
+impl CapturedFrame {
+    /// The camera's true pose (`world_from_camera_gt`): for judging, and for the ground-truth
+    /// pose-source ablation only.
+    pub fn true_pose(&self) -> Result<Se3, CaptureError> {
+        se3_from_matrix(&Matrix4::from_row_slice(&self.world_from_camera_gt), "gt").map_err(|e| CaptureError::Invalid {
+            field: format!("frame {}: world_from_camera_gt", self.index),
+            reason: e.to_string(),
+        })
+    }
+}
+
 impl Capture {
     /// Read `system.json` and `events.jsonl` of `dir` (images are read per frame).
     pub fn open(dir: &Path) -> Result<Self, CaptureError> {
@@ -163,7 +174,7 @@ impl Capture {
         )?)
     }
 
-    /// A frame's grey image, depth and core frame.
+    /// A frame's grey image, depth and core frame (its true pose: [`CapturedFrame::true_pose`]).
     pub fn load_frame(&self, f: &CapturedFrame) -> Result<(Frame, GreyImage), CaptureError> {
         let invalid = |field: &str, reason: String| CaptureError::Invalid {
             field: format!("frame {}: {field}", f.index),
@@ -202,12 +213,7 @@ impl Capture {
             match event {
                 CaptureEvent::Frame(f) => {
                     let (frame, grey) = self.load_frame(f)?;
-                    let gt = se3_from_matrix(&Matrix4::from_row_slice(&f.world_from_camera_gt), "gt").map_err(|e| {
-                        CaptureError::Invalid {
-                            field: format!("frame {}: world_from_camera_gt", f.index),
-                            reason: e.to_string(),
-                        }
-                    })?;
+                    let gt = f.true_pose()?;
                     system.process_frame(FrameInput {
                         frame,
                         grey: Some(&grey),
