@@ -11,6 +11,7 @@ one line says where it is).
 from __future__ import annotations
 
 import argparse
+import faulthandler
 import signal
 import sys
 
@@ -21,7 +22,9 @@ from objslam.scene import SceneFileError
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run, and turn a signal into one line and the shell's exit status (no traceback)."""
+    """Run, and turn a signal into one line and the shell's exit status (no traceback). A crash in
+    native code (renderer, core) prints every thread's Python stack before the process dies."""
+    faulthandler.enable()
     try:
         return _main(argv)
     except RunStopped as e:
