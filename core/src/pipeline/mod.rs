@@ -26,7 +26,7 @@ use crate::frame::{Frame, FrameError, GreyImage};
 use crate::geometry::{se3_from_yaw, ObjectGeometry, RadiusGrid, Se3};
 use crate::map::{EstimateStage, MapObject, ObjectMap};
 use crate::naive::{NaiveConfig, NaiveMapper};
-use crate::objects::lsd::{detect_segments, segments_in_box, LsdConfig};
+use crate::objects::lsd::{detect_segments, segments_in_box, LineSegment, LsdConfig};
 use crate::objects::yaw::LineFrame;
 use crate::objects::{ObjectEstimate, ObjectEstimator, ParamConfig};
 
@@ -424,16 +424,52 @@ impl ObjectPipeline {
         map_points: Option<&[MapPointObservation]>,
     ) -> Result<PipelineUpdate, PipelineError> {
         frame.validate()?;
-        if let Some(g) = grey {
-            if g.width != frame.camera.width || g.height != frame.camera.height {
-                return Err(PipelineError::GreySize {
-                    width: frame.camera.width,
-                    height: frame.camera.height,
-                    actual_width: g.width,
-                    actual_height: g.height,
-                });
-            }
+        let segments = match grey {
+            Some(g) => self.frame_segments(frame, g)?,
+            None => None,
+        };
+        self.update_valid(frame, segments.as_deref(), map_points)
+    }
+
+    /// The line segments the parameterization takes from a frame's grey image: None without
+    /// parameterization, without detections (no object would take them) or when LSD refuses the
+    /// image; an error when the image is not the frame's size. It reads only the config, so a
+    /// caller may run it beside other work (the system runs it beside tracking) and pass the
+    /// result to [`Self::update_with_segments`].
+    pub fn frame_segments(&self, frame: &Frame, grey: &GreyImage) -> Result<Option<Vec<LineSegment>>, PipelineError> {
+        if grey.width != frame.camera.width || grey.height != frame.camera.height {
+            return Err(PipelineError::GreySize {
+                width: frame.camera.width,
+                height: frame.camera.height,
+                actual_width: grey.width,
+                actual_height: grey.height,
+            });
         }
+        if !self.config.parameterize || frame.detections.is_empty() {
+            return Ok(None);
+        }
+        Ok(detect_segments(grey, &self.config.lsd).ok())
+    }
+
+    /// [`Self::update_with_map_points`] with the frame's line segments already detected
+    /// ([`Self::frame_segments`] on its grey image; None: the estimates get no line frame).
+    pub fn update_with_segments(
+        &mut self,
+        frame: &Frame,
+        segments: Option<&[LineSegment]>,
+        map_points: Option<&[MapPointObservation]>,
+    ) -> Result<PipelineUpdate, PipelineError> {
+        frame.validate()?;
+        self.update_valid(frame, segments, map_points)
+    }
+
+    /// The update of a validated frame.
+    fn update_valid(
+        &mut self,
+        frame: &Frame,
+        segments: Option<&[LineSegment]>,
+        map_points: Option<&[MapPointObservation]>,
+    ) -> Result<PipelineUpdate, PipelineError> {
         let mut out = PipelineUpdate::default();
         match &mut self.mapper {
             Mapper::Naive(m) => {
@@ -477,14 +513,13 @@ impl ObjectPipeline {
             out.observed.entry(self.resolve_id(id)).or_default().extend(pts);
         }
         if self.config.parameterize {
-            let segments = grey.and_then(|g| detect_segments(g, &self.config.lsd).ok());
             let map = self.raw_map_with(false);
             for (di, id) in out.assigned.iter().enumerate() {
                 let (Some(id), Some(det)) = (id, frame.detections.get(di)) else { continue };
                 let Some(obj) = map.get(*id) else { continue };
                 let shape = obj.label.shape();
                 let est = self.estimators.entry(*id).or_insert_with(|| ObjectEstimator::new(shape, self.config.param));
-                if let Some(segs) = &segments {
+                if let Some(segs) = segments {
                     est.add_frame(LineFrame {
                         frame: frame.index,
                         camera: frame.camera,

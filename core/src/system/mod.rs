@@ -17,7 +17,8 @@
 //! One frame (`process_frame`):
 //! 1. With a tracker, the frame's camera pose is tracked from the grey image and depth, starting
 //!    from the kinematic prior the frame carries (used as given: its error is the robot's); the
-//!    tracked pose replaces it.
+//!    tracked pose replaces it. On two cores the frame's line segments (LSD, for the
+//!    parameterization) are found on a second thread meanwhile; they depend on the image alone.
 //! 2. When the tracker's world ← map gauge moved since the last frame and
 //!    `PipelineConfig::follow_slam_gauge` is set, the object map is moved with it (a change of
 //!    world frame, not of the objects).
@@ -36,6 +37,7 @@ pub use config::{ConfigError, SystemConfig};
 pub use query::{Answer, Decision, Query, ScoredView, StepContext, TargetedView};
 
 use std::collections::BTreeMap;
+use std::sync::OnceLock;
 
 use nalgebra::Point3;
 use serde::Serialize;
@@ -49,6 +51,12 @@ use crate::geometry::{PinholeCamera, Se3};
 use crate::map::ObjectMap;
 use crate::pipeline::{MapPointObservation, ObjectPipeline, PipelineConfig, PipelineError};
 use crate::slam::{ate_rmse_m, rpe, PoseSource, SlamError, TrackInput, Tracker, TrackerConfig};
+
+/// Threads a frame's work may use: two where the machine has two cores or more.
+fn worker_threads() -> usize {
+    static THREADS: OnceLock<usize> = OnceLock::new();
+    *THREADS.get_or_init(|| std::thread::available_parallelism().map_or(1, |n| n.get()).min(2))
+}
 
 /// Errors of the system loop, by the subsystem that raised them.
 #[derive(Debug, Error)]
@@ -193,22 +201,44 @@ impl System {
     /// Returns each detection's map object id (None: not assigned).
     pub fn process_frame(&mut self, input: FrameInput<'_>) -> Result<Vec<Option<u32>>, SystemError> {
         let FrameInput { mut frame, grey, view_index, world_from_camera_gt } = input;
+        let pipeline = &self.pipeline;
+        let frame_ref = &frame;
+        let lsd = || grey.map(|g| pipeline.frame_segments(frame_ref, g)).transpose();
+        let (tracked, segments) = match self.tracker.as_mut() {
+            None => (None, lsd()?.flatten()),
+            Some(tracker) => {
+                let g = grey.ok_or(SystemError::MissingGrey)?;
+                // The true pose reaches the tracker only as the oracle of the `ground_truth` ablation.
+                let oracle = world_from_camera_gt.filter(|_| tracker.config().pose_source == PoseSource::GroundTruth);
+                let input = TrackInput {
+                    grey: g,
+                    depth: &frame.depth,
+                    camera: &frame.camera,
+                    world_from_camera_prior: frame.world_from_camera,
+                    view_index,
+                    world_from_camera_oracle: oracle,
+                };
+                // The line segments need only the grey image: on two cores they are found while
+                // the frame is tracked (the result does not depend on it).
+                let (out, segments) = if worker_threads() < 2 {
+                    (tracker.track(&input), lsd())
+                } else {
+                    std::thread::scope(|s| {
+                        let second = s.spawn(lsd);
+                        let out = tracker.track(&input);
+                        (out, second.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
+                    })
+                };
+                let out = out?;
+                let segments = segments?.flatten();
+                let world_from_map = tracker.world_from_map();
+                (Some((out, world_from_map)), segments)
+            }
+        };
         let mut map_points: Option<Vec<MapPointObservation>> = None;
-        if let Some(tracker) = self.tracker.as_mut() {
-            let g = grey.ok_or(SystemError::MissingGrey)?;
-            // The true pose reaches the tracker only as the oracle of the `ground_truth` ablation.
-            let oracle = world_from_camera_gt.filter(|_| tracker.config().pose_source == PoseSource::GroundTruth);
-            let out = tracker.track(&TrackInput {
-                grey: g,
-                depth: &frame.depth,
-                camera: &frame.camera,
-                world_from_camera_prior: frame.world_from_camera,
-                view_index,
-                world_from_camera_oracle: oracle,
-            })?;
+        if let Some((out, now)) = tracked {
             frame.world_from_camera = out.world_from_camera;
             if self.pipeline.config().follow_slam_gauge {
-                let now = tracker.world_from_map();
                 if let Some(before) = self.gauge {
                     let delta = now * before.inverse();
                     if delta.translation.vector.norm() > 1e-9 || delta.rotation.angle() > 1e-9 {
@@ -226,7 +256,7 @@ impl System {
             self.poses_used.push(frame.world_from_camera);
             self.poses_true.push(g);
         }
-        let summary = self.pipeline.update_with_map_points(&frame, grey, map_points.as_deref())?;
+        let summary = self.pipeline.update_with_segments(&frame, segments.as_deref(), map_points.as_deref())?;
         let map = self.pipeline.map();
         let observed: Vec<ObservedPoints> = summary
             .observed
