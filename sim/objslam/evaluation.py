@@ -12,7 +12,6 @@ shape from where the SLAM gauge put it; they are labelled ``oracle_aligned`` eve
 
 from __future__ import annotations
 
-import copy
 import json
 from typing import Any
 
@@ -44,10 +43,20 @@ def offset_removed(
     if not offsets:
         return {"iou3d_oracle_aligned": None, "cde_oracle_aligned_cm": None, "map_offset_mm": None}
     off = np.median(np.array(offsets), axis=0)
-    moved = copy.deepcopy(map_dict)
-    for o in moved["objects"]:
-        t = o["world_from_object"]["translation"]
-        o["world_from_object"]["translation"] = [float(t[i] + off[i]) for i in range(3)]
+    # A new map with new poses; the rest (clouds, observations) is shared with ``map_dict``.
+    moved = {
+        **map_dict,
+        "objects": [
+            {
+                **o,
+                "world_from_object": {
+                    **o["world_from_object"],
+                    "translation": [float(o["world_from_object"]["translation"][i] + off[i]) for i in range(3)],
+                },
+            }
+            for o in map_dict["objects"]
+        ],
+    }
     ev = json.loads(_native.evaluate_map(json.dumps(gt), json.dumps(moved)))
     return {
         "iou3d_oracle_aligned": ev["mean"]["iou3d"],
