@@ -308,9 +308,11 @@ impl Recorder {
         if self.options.jpeg_quality == 0 {
             return self.log(ENTITY, &rerun::Image::from_rgb24(rgb.to_vec(), [width, height]));
         }
+        let too_large = || RecordError::Encode { field: "rgb", reason: format!("{width} x {height} exceeds JPEG's 65535") };
+        let (w, h) = (u16::try_from(width).map_err(|_| too_large())?, u16::try_from(height).map_err(|_| too_large())?);
         let mut jpeg = Vec::with_capacity(expected / 10);
-        image::codecs::jpeg::JpegEncoder::new_with_quality(&mut jpeg, self.options.jpeg_quality)
-            .encode(rgb, width, height, image::ExtendedColorType::Rgb8)
+        jpeg_encoder::Encoder::new(&mut jpeg, self.options.jpeg_quality)
+            .encode(rgb, w, h, jpeg_encoder::ColorType::Rgb)
             .map_err(|e| RecordError::Encode { field: "rgb", reason: e.to_string() })?;
         self.log(ENTITY, &rerun::EncodedImage::from_file_contents(jpeg).with_media_type(rerun::MediaType::jpeg()))
     }
