@@ -97,6 +97,13 @@ impl PipelineConfig {
         check_range("consolidate_cloud_radius_m", self.consolidate_cloud_radius_m, 0.0, 1.0)?;
         check_range("relabel_co_observed_share", self.relabel_co_observed_share, 0.0, 1.0)?;
         check_range("consolidate_covered_share", self.consolidate_covered_share, 0.0, f64::MAX)?;
+        check_range("consolidate_overlap_iou", self.consolidate_overlap_iou, 0.0, f64::MAX)?;
+        check_range(
+            "consolidate_overlap_co_observed_share",
+            self.consolidate_overlap_co_observed_share,
+            0.0,
+            f64::MAX,
+        )?;
         check_range("segment_box_margin_px", self.segment_box_margin_px, 0.0, 1e4)?;
         let f = &self.param.iforest;
         check_count("param.iforest.passes", f.passes, 1, 100)?;
@@ -186,6 +193,19 @@ pub struct PipelineConfig {
     /// folds then; `relabel_vote_ratio` = 0 disables both). Default 0 (off): at 0.25 on the hard
     /// suite (studies/mesh_oversplit) it removed duplicates but also folded neighbours.
     pub relabel_co_observed_share: f64,
+    /// Two solid objects cannot share their volume: two objects whose estimates (the
+    /// parameterized boxes or cylinders of the last refresh) overlap by at least this 3D IoU are
+    /// one, whatever their labels and however often the detector boxed them together (a wrong
+    /// association puts a neighbour's boxes into an object, and the co-observation guard then
+    /// keeps its duplicate apart). The less observed one is folded into the other (label =
+    /// majority vote). Neighbours, however close, overlap little: two cans 2 mm apart have IoU 0.
+    /// Above 1 disables. Default 2 (off).
+    pub consolidate_overlap_iou: f64,
+    /// The overlap fold needs the two boxed together in fewer than this share of the less
+    /// observed one's frames: a wrong association adds a few common frames, while neighbours whose
+    /// estimates swell into each other (flat boxes side by side, seen from afar) are boxed together
+    /// in most frames that see either. Fraction; above 1 lets any pair fold. Default 0.5.
+    pub consolidate_overlap_co_observed_share: f64,
     /// Phantoms on another object's surface: an object (nothing folded into it) with at most
     /// 1/`relabel_vote_ratio` of the observations of another, boxed only in frames where the other
     /// was boxed too, whose raw box intersects the other's, and at least this share of whose cloud
@@ -232,6 +252,8 @@ impl Default for PipelineConfig {
             consolidate_co_observed_frames: 1,
             consolidate_cloud_radius_m: 0.01,
             relabel_co_observed_share: 0.0,
+            consolidate_overlap_iou: 2.0,
+            consolidate_overlap_co_observed_share: 0.5,
             consolidate_covered_share: 2.0,
             min_observations: 3,
             follow_slam_gauge: true,
@@ -589,6 +611,10 @@ impl ObjectPipeline {
                         fold = Some((minor, major, a.label != b.label));
                         break 'pairs;
                     }
+                    if let Some((minor, major)) = self.overlapping(a, b, common) {
+                        fold = Some((minor, major, a.label != b.label));
+                        break 'pairs;
+                    }
                     let (ga, gb) = (a.geometry(), b.geometry());
                     if a.label != b.label {
                         if let Some((minor, major)) = self.label_confusion(a, b, &ga, &gb, common) {
@@ -620,6 +646,26 @@ impl ObjectPipeline {
             self.dirty.remove(&young);
             self.dirty.insert(old);
         }
+    }
+
+    /// The overlap fold of `consolidate_overlap_iou`: `(less observed id, other id)` when the
+    /// estimates of `a` and `b` overlap by at least that 3D IoU and they were boxed together in
+    /// `common` frames, fewer than `consolidate_overlap_co_observed_share` of the less observed
+    /// one's.
+    fn overlapping(&self, a: &MapObject, b: &MapObject, common: usize) -> Option<(u32, u32)> {
+        let need = self.config.consolidate_overlap_iou;
+        if need > 1.0 {
+            return None;
+        }
+        let (ea, eb) = (self.estimates.get(&a.id)?, self.estimates.get(&b.id)?);
+        if crate::geometry::iou3d(&ea.geometry, &eb.geometry) < need {
+            return None;
+        }
+        let (na, nb) = (a.observations.len(), b.observations.len());
+        if common as f64 >= self.config.consolidate_overlap_co_observed_share * na.min(nb) as f64 {
+            return None;
+        }
+        Some(if na < nb || (na == nb && a.id > b.id) { (a.id, b.id) } else { (b.id, a.id) })
     }
 
     /// Whether two objects boxed separately in `common` frames are apart by
@@ -1037,5 +1083,68 @@ mod tests {
         let grey = GreyImage::new(10, 10, vec![0; 100]).unwrap();
         assert!(matches!(p.update(&frame(0, 0.0), Some(&grey)), Err(PipelineError::GreySize { .. })));
         assert_eq!(p.map().len(), 0);
+    }
+
+    /// A can standing at `x` (radius 3.3 cm, 11 cm tall) as an estimate.
+    fn can_estimate(x: f64) -> ObjectEstimate {
+        let geometry = ObjectGeometry {
+            shape: crate::geometry::Shape::Cylinder,
+            center: Vector3::new(x, 0.0, 0.055),
+            yaw_rad: 0.0,
+            half_extents: Vector3::new(0.033, 0.033, 0.055),
+        };
+        ObjectEstimate {
+            geometry,
+            stage: EstimateStage::Refined,
+            confidence: crate::objects::Confidence::Normal,
+            stages: crate::objects::StageEstimates::default(),
+            inliers: 100,
+        }
+    }
+
+    /// A map object boxed in frames `frames` (its geometry is not read by the overlap fold).
+    fn boxed_in(id: u32, frames: std::ops::Range<u32>) -> MapObject {
+        let observations = frames
+            .map(|frame| crate::map::Observation {
+                frame,
+                bbox: Box2::new(0.0, 0.0, 10.0, 10.0),
+                score: 0.9,
+                centroid_in_world: Vector3::zeros(),
+            })
+            .collect();
+        MapObject {
+            id,
+            label: Label::Can,
+            world_from_object: Se3::identity(),
+            half_extents: Vector3::new(0.033, 0.033, 0.055),
+            observations,
+            points_in_world: Vec::new(),
+            stage: EstimateStage::Refined,
+        }
+    }
+
+    #[test]
+    fn overlapping_estimates_fold_unless_boxed_together_in_most_frames() {
+        let config = PipelineConfig { consolidate_overlap_iou: 0.35, ..PipelineConfig::default() };
+        let mut p = ObjectPipeline::new(config).unwrap();
+        // A duplicate 5 mm off (IoU about 0.86), and a neighbour 3 mm apart (IoU 0).
+        p.estimates.insert(1, can_estimate(0.5));
+        p.estimates.insert(2, can_estimate(0.505));
+        p.estimates.insert(3, can_estimate(0.569));
+        let (a, dup, next) = (boxed_in(1, 0..30), boxed_in(2, 40..50), boxed_in(3, 0..30));
+        // Boxed together in 3 of the duplicate's 10 frames (a wrong association): folded into
+        // the more observed one, whichever order they come in.
+        assert_eq!(p.overlapping(&a, &dup, 3), Some((2, 1)));
+        assert_eq!(p.overlapping(&dup, &a, 3), Some((2, 1)));
+        // In 5 of 10 (the share, 0.5): two objects.
+        assert_eq!(p.overlapping(&a, &dup, 5), None);
+        // Neighbours never fold, even never boxed together.
+        assert_eq!(p.overlapping(&a, &next, 0), None);
+        // Without an estimate there is nothing to compare.
+        assert_eq!(p.overlapping(&a, &boxed_in(4, 0..3), 0), None);
+        // Off by default.
+        let mut off = ObjectPipeline::new(PipelineConfig::default()).unwrap();
+        off.estimates = p.estimates.clone();
+        assert_eq!(off.overlapping(&a, &dup, 0), None);
     }
 }

@@ -308,7 +308,8 @@ impl Recorder {
         if self.options.jpeg_quality == 0 {
             return self.log(ENTITY, &rerun::Image::from_rgb24(rgb.to_vec(), [width, height]));
         }
-        let too_large = || RecordError::Encode { field: "rgb", reason: format!("{width} x {height} exceeds JPEG's 65535") };
+        let too_large =
+            || RecordError::Encode { field: "rgb", reason: format!("{width} x {height} exceeds JPEG's 65535") };
         let (w, h) = (u16::try_from(width).map_err(|_| too_large())?, u16::try_from(height).map_err(|_| too_large())?);
         let mut jpeg = Vec::with_capacity(expected / 10);
         jpeg_encoder::Encoder::new(&mut jpeg, self.options.jpeg_quality)
