@@ -10,7 +10,7 @@
 //! guard: 4 objects); two 5 cm blocks 2 mm apart give 2 objects, one at each block. Counter-tests: one can seen from views all around (each view shows another side) and
 //! a single block seen in several partial views (parts hidden by the image border) stay one map
 //! object. Label errors: a can called a cup from 6 of 16 views around it stays one object (with
-//! `relabel_co_observed_share` = 0.25; two without), and a false-positive box over a bottle in 3
+//! `relabel_co_observed_share` = 0.25, or with the default overlap fold; two with neither), and a false-positive box over a bottle in 3
 //! views leaves no second object (with `consolidate_covered_share` = 0.9; one more without). Both
 //! folds are off by default (studies/mesh_oversplit).
 
@@ -327,13 +327,19 @@ fn a_can_labelled_cup_from_a_range_of_directions_is_one_object() {
     let split = map_with(
         &scene,
         &views,
-        PipelineConfig { relabel_co_observed_share: 0.0, ..PipelineConfig::default() },
+        PipelineConfig { relabel_co_observed_share: 0.0, consolidate_overlap_iou: 2.0, ..PipelineConfig::default() },
         confuse,
     );
-    report("same, co-observation share off", &scene, &split);
+    report("same, co-observation share and overlap fold off", &scene, &split);
+    // The overlap fold alone (the default) also sees one object: the two labels' estimates
+    // occupy the same volume.
+    let overlap = map_with(&scene, &views, PipelineConfig::default(), confuse);
+    let overlap_ious = report("same, defaults (overlap fold)", &scene, &overlap);
     assert_eq!(split.len(), 2);
     assert_eq!(map.len(), 1);
+    assert_eq!(overlap.len(), 1);
     assert!(ious[0] >= 0.7, "{ious:?}");
+    assert!(overlap_ious[0] >= 0.7, "{overlap_ious:?}");
 }
 
 #[test]

@@ -199,7 +199,8 @@ pub struct PipelineConfig {
     /// association puts a neighbour's boxes into an object, and the co-observation guard then
     /// keeps its duplicate apart). The less observed one is folded into the other (label =
     /// majority vote). Neighbours, however close, overlap little: two cans 2 mm apart have IoU 0.
-    /// Above 1 disables. Default 2 (off).
+    /// Above 1 disables. Default 0.35 (studies/overlap_fold: counts within one of the truth on 7
+    /// of 7 hard scenes instead of 3, and on 4 of 7 test scenes instead of 3, recall unchanged).
     pub consolidate_overlap_iou: f64,
     /// The overlap fold needs the two boxed together in fewer than this share of the less
     /// observed one's frames: a wrong association adds a few common frames, while neighbours whose
@@ -252,7 +253,7 @@ impl Default for PipelineConfig {
             consolidate_co_observed_frames: 1,
             consolidate_cloud_radius_m: 0.01,
             relabel_co_observed_share: 0.0,
-            consolidate_overlap_iou: 2.0,
+            consolidate_overlap_iou: 0.35,
             consolidate_overlap_co_observed_share: 0.5,
             consolidate_covered_share: 2.0,
             min_observations: 3,
@@ -1142,8 +1143,9 @@ mod tests {
         assert_eq!(p.overlapping(&a, &next, 0), None);
         // Without an estimate there is nothing to compare.
         assert_eq!(p.overlapping(&a, &boxed_in(4, 0..3), 0), None);
-        // Off by default.
-        let mut off = ObjectPipeline::new(PipelineConfig::default()).unwrap();
+        // Above 1: off.
+        let mut off =
+            ObjectPipeline::new(PipelineConfig { consolidate_overlap_iou: 2.0, ..PipelineConfig::default() }).unwrap();
         off.estimates = p.estimates.clone();
         assert_eq!(off.overlapping(&a, &dup, 0), None);
     }
