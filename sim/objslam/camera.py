@@ -215,7 +215,8 @@ class RgbdSensor:
         self._native = _native
         self.config = config
         self.seed = int(seed)
-        _, _, info = _native.sensor_model(json.dumps(config.sensor_request(seed=self.seed)))
+        self._request = config.sensor_request(seed=self.seed)
+        _, _, info = _native.sensor_model(json.dumps(self._request))
         self.unit = json.loads(info)["unit"]
         """The unit's calibration state (true vs assumed intrinsics, scale and registration error)."""
         self.last_stats: dict[str, int] = {}
@@ -239,9 +240,8 @@ class RgbdSensor:
         """``(rgb, depth_m)`` the sensor delivers from rendered (H, W, 3) camera-frame points
         (OpenCV axes, z ≤ 0 = no surface), normals and colour; ``camera_end_from_start`` is the
         camera's motion over the exposure (4x4, None = at rest)."""
-        req = self.config.sensor_request(
-            seed=self.seed, frame_index=frame_index, camera_end_from_start=camera_end_from_start
-        )
+        motion = None if camera_end_from_start is None else np.asarray(camera_end_from_start).tolist()
+        req = dict(self._request, frame_index=int(frame_index), camera_end_from_start=motion)
         depth, colour, info = self._native.sensor_model(
             json.dumps(req),
             np.ascontiguousarray(points_in_camera, dtype=np.float32),

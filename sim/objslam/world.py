@@ -529,7 +529,11 @@ class SimWorld:
         seg = self.camera.get_picture("Segmentation")[..., 1].astype(np.uint32)
         normals_gl = self.camera.get_picture("Normal") if self.sensor is not None else None
         t1 = time.perf_counter()
-        rgb = (np.clip(rgba[..., :3], 0, 1) * 255 + 0.5).astype(np.uint8)
+        # [0, 1] to 8 bits, rounded: one float copy, scaled, clipped and offset in place.
+        scaled = rgba[..., :3] * np.float32(255.0)
+        np.clip(scaled, 0.0, 255.0, out=scaled)
+        scaled += np.float32(0.5)
+        rgb = scaled.astype(np.uint8)
         robot = np.isin(seg, list(self.robot_actor_ids)) if self.camera_config.mask_robot_depth else None
         q = self.qpos_delayed()
         if self.sensor is None or normals_gl is None:

@@ -76,7 +76,9 @@ pub fn colour_image(
 ) -> Vec<u8> {
     let mut out = vec![0u8; 3 * frame.width * frame.height];
     let table = NoiseTable::new(cfg);
-    ColourRows::new(unit, frame, camera_end_from_start, table.as_ref(), seed, frame_index).run(0, &mut out);
+    let mut scratch = BlurScratch::default();
+    ColourRows::new(unit, frame, camera_end_from_start, table.as_ref(), seed, frame_index, &mut scratch)
+        .run(0, &mut out);
     out
 }
 
@@ -104,10 +106,16 @@ impl NoiseTable {
     fn apply(&self, row: &mut [u8], seed: u64, frame_index: u64, y: usize) {
         // Eight 8-bit uniforms per 64-bit draw.
         let mut rng = SplitMix64::new(seed, &[TAG_COLOUR, frame_index, y as u64]);
-        for chunk in row.chunks_mut(8) {
-            let r = rng.next_u64();
-            for (k, v) in chunk.iter_mut().enumerate() {
-                *v = self.0[(*v as usize) << 8 | ((r >> (8 * k)) & 0xFF) as usize];
+        let mut chunks = row.chunks_exact_mut(8);
+        for chunk in &mut chunks {
+            for (v, u) in chunk.iter_mut().zip(rng.next_u64().to_le_bytes()) {
+                *v = self.0[(*v as usize) << 8 | u as usize];
+            }
+        }
+        let rest = chunks.into_remainder();
+        if !rest.is_empty() {
+            for (v, u) in rest.iter_mut().zip(rng.next_u64().to_le_bytes()) {
+                *v = self.0[(*v as usize) << 8 | u as usize];
             }
         }
     }
@@ -132,9 +140,10 @@ impl<'a> ColourRows<'a> {
         noise: Option<&'a NoiseTable>,
         seed: u64,
         frame_index: u64,
+        scratch: &'a mut BlurScratch,
     ) -> Self {
         let blur = match camera_end_from_start {
-            Some(m) if (m - Matrix4::identity()).abs().max() > 1e-9 => Some(MotionBlur::new(unit, frame, m)),
+            Some(m) if (m - Matrix4::identity()).abs().max() > 1e-9 => Some(MotionBlur::new(unit, frame, m, scratch)),
             _ => None,
         };
         Self { w: frame.width, src: frame.rgb, blur, noise, seed, frame_index }
@@ -210,6 +219,7 @@ fn fma4(a: Px, f: f32, b: Px) -> Px {
 /// Prefix sums of the image along one axis (exact in `f32`: sums of at most 2^16 values of 8
 /// bits), computed as rows need them: the sum over the first `k` pixels of line `l` sits at
 /// `l · line_stride + k · pos_stride`, `k` in `0..=len`.
+#[derive(Default)]
 struct Prefix {
     sums: Vec<Px>,
     /// Along the rows: which rows are computed. Down the columns (`steep`): rows of sums are
@@ -220,14 +230,21 @@ struct Prefix {
 }
 
 impl Prefix {
-    /// Along the rows: `(w + 1)` sums per row.
-    fn rows(w: usize, h: usize) -> Self {
-        Self { sums: vec![[0.0; 4]; (w + 1) * h], row_done: vec![false; h], done: 0, steep: false }
+    /// Ready for a frame along the rows: `(w + 1)` sums per row, none computed (the buffer is
+    /// kept when its size fits; every sum is written before it is read).
+    fn reset_rows(&mut self, w: usize, h: usize) {
+        self.sums.resize((w + 1) * h, [0.0; 4]);
+        self.row_done.clear();
+        self.row_done.resize(h, false);
+        (self.done, self.steep) = (0, false);
     }
 
-    /// Down the columns: `h + 1` rows of `w` sums.
-    fn cols(w: usize, h: usize) -> Self {
-        Self { sums: vec![[0.0; 4]; w * (h + 1)], row_done: Vec::new(), done: 1, steep: true }
+    /// Ready for a frame down the columns: `h + 1` rows of `w` sums, the first (zeros) computed.
+    fn reset_cols(&mut self, w: usize, h: usize) {
+        self.sums.resize(w * (h + 1), [0.0; 4]);
+        self.sums[..w].fill([0.0; 4]);
+        self.row_done.clear();
+        (self.done, self.steep) = (1, true);
     }
 
     /// Computes the rows of sums `lo..=hi` (down the columns: every row up to `hi`).
@@ -269,15 +286,24 @@ const ROWS: u8 = 0;
 const COLS: u8 = 1;
 const MIXED: u8 = 2;
 
+/// The prefix sums of one part of a frame's rows, kept from frame to frame (a frame of the same
+/// size reuses them without allocating).
+#[derive(Default)]
+pub(crate) struct BlurScratch {
+    rows: Prefix,
+    cols: Prefix,
+}
+
 /// The motion blur of one frame (module docs), a row at a time.
 struct MotionBlur<'a> {
     w: usize,
     h: usize,
     src: &'a [u8],
     pts: &'a [f32],
-    rows: Prefix,
-    /// Created the first time a pixel's motion is steeper than 45°.
-    cols: Option<Prefix>,
+    rows: &'a mut Prefix,
+    cols: &'a mut Prefix,
+    /// Whether `cols` is in use: from the first time a pixel's motion is steeper than 45°.
+    cols_ready: bool,
     /// Rotation (rows) and translation of the camera's motion.
     r: [[f32; 3]; 3],
     t: [f32; 3],
@@ -305,17 +331,19 @@ struct MotionBlur<'a> {
 }
 
 impl<'a> MotionBlur<'a> {
-    fn new(unit: &SensorUnit, frame: &RenderedFrame<'a>, m: &Matrix4<f64>) -> Self {
+    fn new(unit: &SensorUnit, frame: &RenderedFrame<'a>, m: &Matrix4<f64>, scratch: &'a mut BlurScratch) -> Self {
         let (w, h) = (frame.width, frame.height);
         let k = &unit.colour_true;
         let (f, i) = (vec![0.0f32; w], vec![0u32; w]);
+        scratch.rows.reset_rows(w, h);
         Self {
             w,
             h,
             src: frame.rgb,
             pts: frame.points_in_camera,
-            rows: Prefix::rows(w, h),
-            cols: None,
+            rows: &mut scratch.rows,
+            cols: &mut scratch.cols,
+            cols_ready: false,
             r: [0, 1, 2].map(|i| [0, 1, 2].map(|j| m[(i, j)] as f32)),
             t: [0, 1, 2].map(|i| m[(i, 3)] as f32),
             k: [k.fx as f32, k.fy as f32, k.cx as f32, k.cy as f32],
@@ -358,7 +386,11 @@ impl<'a> MotionBlur<'a> {
             self.rows.ensure(self.src, w, lo as usize / (w + 1), hi as usize / (w + 1));
         }
         if mode != ROWS {
-            self.cols.get_or_insert_with(|| Prefix::cols(w, h)).ensure(self.src, w, 0, (hi as usize / w + 1).min(h));
+            if !self.cols_ready {
+                self.cols.reset_cols(w, h);
+                self.cols_ready = true;
+            }
+            self.cols.ensure(self.src, w, 0, (hi as usize / w + 1).min(h));
         }
         match mode {
             ROWS => self.sums::<ROWS>(y),
@@ -467,7 +499,7 @@ impl<'a> MotionBlur<'a> {
         let w = self.w;
         let mut tots = std::mem::take(&mut self.tot);
         let rows = &self.rows.sums;
-        let cols = self.cols.as_ref().map_or(rows, |c| &c.sums);
+        let cols = if self.cols_ready { &self.cols.sums } else { rows };
         let ends = self.i0[..w].iter().zip(&self.i1[..w]).zip(self.f0[..w].iter().zip(&self.f1[..w]));
         let rest = self.inv_len[..w].iter().zip(&self.multi[..w]).zip(&self.steep[..w]);
         for (x, ((tot, ((&ia, &ib), (&fa, &fb))), ((&inv_len, &multi), &steep))) in
@@ -496,10 +528,8 @@ impl<'a> MotionBlur<'a> {
     fn line_changes(&self, x: usize, y: usize) -> Px {
         let w = self.w;
         let steep = self.steep[x] != 0;
-        let (pre, line_stride, ps) = match (&self.cols, steep) {
-            (Some(c), true) => (&c.sums, 1, w),
-            _ => (&self.rows.sums, w + 1, 1),
-        };
+        let (pre, line_stride, ps) =
+            if steep && self.cols_ready { (&self.cols.sums, 1, w) } else { (&self.rows.sums, w + 1, 1) };
         let (ia, ib) = (self.i0[x] as usize, self.i1[x] as usize);
         let ((la, ka), (lb, kb)) = if steep {
             ((ia % w, ia / w), (ib % w, ib / w))

@@ -209,15 +209,15 @@ pub fn stereo_depth(
     let (mut z, mut state) = (vec![0.0f32; n], vec![OK; n]);
     let mut stats = job.surfaces(0, &mut z, &mut state);
     let mut out = vec![f32::INFINITY; n];
-    stats.mixed = job.register(0..frame.height, &z, &state, &mut out);
+    (stats.mixed, _) = job.register(0..frame.height, &z, &state, &mut out);
     stats.valid_out = job.finish(&mut out);
     (out, stats)
 }
 
 /// The depth model of one frame in parts that can run on separate rows, in any order, with the
-/// same result: steps 1-3 on rows ([`Self::surfaces`]), then, once every row has them, steps 4-6
-/// on rows into a z-buffer ([`Self::register`]; z-buffers of separate rows merge by their
-/// minimum), then step 7 ([`Self::finish`]).
+/// same result: steps 1-3 on rows ([`Self::surfaces`]), then, once the rows a row reads have
+/// them, steps 4-7 on rows into a z-buffer ([`Self::register`]; z-buffers of separate rows merge
+/// by their minimum), then the depth image ([`Self::finish`]).
 pub(crate) struct DepthFrame<'a> {
     cfg: &'a StereoDepthConfig,
     unit: &'a SensorUnit,
@@ -263,12 +263,20 @@ impl<'a> DepthFrame<'a> {
         stats
     }
 
-    /// Steps 4-6 on `rows`, from every row's true depth `z` and `state`, into the z-buffer `zbuf`
-    /// (the whole image, +inf = nothing yet); returns the count of mixed depths.
-    pub(crate) fn register(&self, rows: std::ops::Range<usize>, z: &[f32], state: &[u8], zbuf: &mut [f32]) -> usize {
+    /// Steps 4-6 on `rows`, from the true depth `z` and `state` (whole images; `z` read on `rows`
+    /// and the mixed band's rows around them, `state` on `rows`), into the z-buffer `zbuf` (the
+    /// whole image, +inf = nothing yet); returns the count of mixed depths and the rows of `zbuf`
+    /// written.
+    pub(crate) fn register(
+        &self,
+        rows: std::ops::Range<usize>,
+        z: &[f32],
+        state: &[u8],
+        zbuf: &mut [f32],
+    ) -> (usize, std::ops::Range<usize>) {
         let (cfg, w) = (self.cfg, self.frame.width);
         let mut silhouettes = Silhouettes::new(cfg, w);
-        let mut registration = Registration::new(self.unit, w, self.frame.height);
+        let mut registration = Registration::new(self.unit, cfg.unit_m, w, self.frame.height);
         let (mut row, mut noise, mut between) = (vec![0.0f32; w], vec![0.0f32; w], vec![0.0f32; self.field.gw]);
         let k_noise = (cfg.subpixel_rms_px / (cfg.focal_px * cfg.baseline_m)) as f32;
         let scale = self.unit.depth_scale as f32;
@@ -285,22 +293,19 @@ impl<'a> DepthFrame<'a> {
             }
             registration.row(y, &row, zbuf);
         }
-        mixed
+        (mixed, registration.touched.clone())
     }
 
-    /// Step 7: the z-buffer as depth quantised to `unit_m` (0 = no return); returns the count
-    /// with a depth.
+    /// The z-buffer (of quantised depths, step 7 done in [`Self::register`]) as the depth image
+    /// (0 = no return); returns the count with a depth.
     pub(crate) fn finish(&self, zbuf: &mut [f32]) -> usize {
-        // Adding this to an `f64` below 2^51 rounds it to an integer (halves to even).
-        const ROUND_F64: f64 = 6_755_399_441_055_744.0; // 1.5 · 2^52
-        let q = self.cfg.unit_m;
-        let inv_q = if q > 0.0 { 1.0 / q } else { 0.0 };
+        let mut valid = 0u32;
         for v in zbuf.iter_mut() {
-            let m = *v as f64;
-            let quantised = if q > 0.0 { ((m * inv_q + ROUND_F64) - ROUND_F64) * q } else { m };
-            *v = if *v == f32::INFINITY { 0.0 } else { quantised as f32 };
+            let d = if *v < f32::INFINITY { *v } else { 0.0 };
+            valid += u32::from(d > 0.0);
+            *v = d;
         }
-        zbuf.iter().filter(|v| **v > 0.0).count()
+        valid as usize
     }
 }
 
@@ -346,18 +351,16 @@ impl Surfaces {
     ) -> DepthStats {
         let mut stats = DepthStats::default();
         let (mut surface, mut out) = (0u32, 0u32);
-        for ((zv, st), p) in z.iter_mut().zip(state.iter_mut()).zip(pts.chunks_exact(3)) {
-            let v = p[2];
-            let is_surface = v > 0.0 && v < f32::INFINITY;
-            let is_out = is_surface && (v < self.min_z || v > self.max_z);
+        // The depths contiguous first, then the states without branches (several pixels at a time).
+        for (zv, p) in z.iter_mut().zip(pts.chunks_exact(3)) {
+            *zv = p[2];
+        }
+        for (zv, st) in z.iter_mut().zip(state.iter_mut()) {
+            let v = *zv;
+            let is_surface = (v > 0.0) & (v < f32::INFINITY);
+            let is_out = is_surface & ((v < self.min_z) | (v > self.max_z));
             *zv = if is_surface { v } else { 0.0 };
-            *st = if !is_surface {
-                NONE
-            } else if is_out {
-                RANGE
-            } else {
-                OK
-            };
+            *st = u8::from(!is_surface) * NONE + u8::from(is_out) * RANGE;
             surface += u32::from(is_surface);
             out += u32::from(is_out);
         }
@@ -370,20 +373,16 @@ impl Surfaces {
             for (x, (r, &zv)) in scratch.iter_mut().zip(z.iter()).enumerate() {
                 *r = x as i32 as f32 - self.fb / zv;
             }
-            let mut least = f32::INFINITY;
+            let (mut least, mut shadow) = (f32::INFINITY, 0u32);
             for (st, &r) in state.iter_mut().zip(scratch.iter()).rev() {
-                if *st == NONE {
-                    continue;
-                }
-                if r > least + 1e-3 {
-                    if *st == OK {
-                        *st = SHADOW;
-                        stats.shadow += 1;
-                    }
-                } else {
-                    least = r;
-                }
+                let seen = *st != NONE;
+                let hidden = seen & (r > least + 1e-3);
+                least = if seen & !hidden { r } else { least };
+                let shadowed = hidden & (*st == OK);
+                *st = if shadowed { SHADOW } else { *st };
+                shadow += u32::from(shadowed);
             }
+            stats.shadow = shadow as usize;
         }
         // Grazing: cos² = (p·n)² / (|p|² |n|²) below cos²(start) makes a pixel a candidate; the
         // square root and the draw only there.
@@ -554,6 +553,9 @@ pub(crate) fn correlated_field(width: usize, height: usize, cell_px: f64, rng: &
     out
 }
 
+/// Adding this to an `f64` below 2^51 rounds it to an integer (halves to even).
+const ROUND_F64: f64 = 6_755_399_441_055_744.0; // 1.5 · 2^52
+
 /// Widening of each registered pixel's rectangle, pixels (no pinholes from rounding).
 const EPS: f32 = 0.02;
 
@@ -567,8 +569,8 @@ fn round_index(v: f32, n: f32) -> i32 {
 
 /// Steps 6 (registration) and 7 (quantisation): each depth pixel's two corners go through the
 /// depth intrinsic error and the colour ← depth extrinsic error, are projected with the assumed
-/// colour intrinsics, and the target rectangle between them keeps the nearest depth; the nearest
-/// depth is then quantised to `unit_m` (the same as keeping the nearest quantised depth).
+/// colour intrinsics, and the target rectangle between them keeps the nearest depth, quantised to
+/// `unit_m` first (the same as quantising the nearest depth).
 struct Registration {
     w: usize,
     h: usize,
@@ -579,6 +581,9 @@ struct Registration {
     t: [f32; 3],
     /// Assumed colour intrinsics fx, fy, cx, cy.
     k: [f32; 4],
+    /// Depth unit, metres, and its inverse (0 = no quantisation).
+    unit_m: f64,
+    inv_unit: f64,
     /// Scratch per depth pixel of a row: the projected corners' extent, the depth, then the
     /// target rectangle `[x0, x1) × [y0, y1)`.
     lo_x: Vec<f32>,
@@ -587,10 +592,12 @@ struct Registration {
     hi_y: Vec<f32>,
     zq: Vec<f32>,
     rect: Vec<[i32; 4]>,
+    /// The target rows written so far (empty: none).
+    touched: std::ops::Range<usize>,
 }
 
 impl Registration {
-    fn new(unit: &SensorUnit, w: usize, h: usize) -> Self {
+    fn new(unit: &SensorUnit, unit_m: f64, w: usize, h: usize) -> Self {
         let e = &unit.registration_error;
         let r = Matrix3::new(e[0][0], e[0][1], e[0][2], e[1][0], e[1][1], e[1][2], e[2][0], e[2][1], e[2][2]);
         let s = unit.depth_focal_ratio;
@@ -614,12 +621,15 @@ impl Registration {
             row_dir,
             t: [t.x as f32, t.y as f32, t.z as f32],
             k: [ka.fx as f32, ka.fy as f32, ka.cx as f32, ka.cy as f32],
+            unit_m,
+            inv_unit: if unit_m > 0.0 { 1.0 / unit_m } else { 0.0 },
             lo_x: vec![0.0; w],
             hi_x: vec![0.0; w],
             lo_y: vec![0.0; w],
             hi_y: vec![0.0; w],
             zq: vec![0.0; w],
             rect: vec![[0; 4]; w],
+            touched: 0..0,
         }
     }
 
@@ -629,6 +639,7 @@ impl Registration {
         let (ra, rb) = (self.row_dir[y], self.row_dir[y + 1]);
         let [fx, fy, cx, cy] = self.k;
         let [tx, ty, tz] = self.t;
+        let (q, inv_q) = (self.unit_m, self.inv_unit);
         let z = &z[..w];
         let (ca_x, ca_y, ca_z) = (&self.col[0][..w], &self.col[1][..w], &self.col[2][..w]);
         let (cb_x, cb_y, cb_z) = (&self.col[0][1..=w], &self.col[1][1..=w], &self.col[2][1..=w]);
@@ -655,19 +666,45 @@ impl Registration {
             lo_y[x] = min_f(ay, by) - EPS;
             hi_y[x] = max_f(ay, by) + EPS;
             // No depth, or behind the colour camera: +inf never enters the z-buffer.
-            let hit = zv > 0.0 && qaz > 1e-6 && qbz > 1e-6;
-            zq[x] = if hit { (qaz + qbz) * 0.5 } else { f32::INFINITY };
+            let hit = (zv > 0.0) & (qaz > 1e-6) & (qbz > 1e-6);
+            // Step 7 here: the nearest quantised depth is the nearest depth quantised.
+            let m = ((qaz + qbz) * 0.5) as f64;
+            let quantised = if q > 0.0 { (((m * inv_q + ROUND_F64) - ROUND_F64) * q) as f32 } else { m as f32 };
+            zq[x] = if hit { quantised } else { f32::INFINITY };
         }
         let (wf, hf) = (w as f32, self.h as f32);
         for (((r, &lx), &hx), (&ly, &hy)) in self.rect.iter_mut().zip(&*lo_x).zip(&*hi_x).zip(lo_y.iter().zip(&*hi_y)) {
             *r = [round_index(min_f(lx, hx), wf), round_index(hx, wf), round_index(ly, hf), round_index(hy, hf)];
         }
+        let (mut lo, mut hi) = (i32::MAX, 0);
+        let last = out.len().saturating_sub(1);
         for (&[x0, x1, y0, y1], &zv) in self.rect.iter().zip(&*zq) {
+            if x1 > x0 && zv < f32::INFINITY {
+                (lo, hi) = (lo.min(y0), hi.max(y1));
+            }
+            let (nx, ny) = (x1 - x0, y1 - y0);
+            if nx <= 2 && ny <= 2 {
+                // At most 2 × 2 target pixels (nearly every pixel: the depth and colour grids have
+                // nearly the same scale): the four written without branches, +inf outside the
+                // rectangle (an index past the image is held at its last pixel).
+                let base = y0 as usize * w + x0 as usize;
+                for (dy, dx) in [(0, 0), (0, 1), (1, 0), (1, 1)] {
+                    let v = if dx < nx && dy < ny { zv } else { f32::INFINITY };
+                    let o = &mut out[(base + dy as usize * w + dx as usize).min(last)];
+                    *o = min_f(v, *o);
+                }
+                continue;
+            }
             for ty in y0 as usize..y1 as usize {
                 for o in &mut out[ty * w + x0 as usize..ty * w + x1 as usize] {
                     *o = min_f(zv, *o);
                 }
             }
+        }
+        if lo < hi {
+            let (lo, hi) = (lo as usize, hi as usize);
+            self.touched =
+                if self.touched.is_empty() { lo..hi } else { self.touched.start.min(lo)..self.touched.end.max(hi) };
         }
     }
 }

@@ -38,7 +38,7 @@ pub mod depth;
 
 use nalgebra::{Matrix3, Matrix4, Rotation3, Vector3};
 use serde::{Deserialize, Serialize};
-use std::sync::OnceLock;
+use std::sync::{Mutex, OnceLock};
 use thiserror::Error;
 
 pub use colour::{colour_image, ColourConfig};
@@ -431,52 +431,105 @@ pub fn simulate_frame(
     let depth = depth::DepthFrame::new(&config.stereo, unit, frame, seed, frame_index);
     let noise = colour::NoiseTable::new(&config.colour);
     let with_colour = !frame.rgb.is_empty();
-    let colour_rows = || colour::ColourRows::new(unit, frame, camera_end_from_start, noise.as_ref(), seed, frame_index);
     let mut rgb = vec![0u8; if with_colour { 3 * n } else { 0 }];
-    let (mut z, mut state) = (vec![0.0f32; n], vec![0u8; n]);
     let mut depth_m = vec![f32::INFINITY; n];
+    let part = |rows: std::ops::Range<usize>, scratch: &mut PartScratch, zbuf: Option<&mut [f32]>, rgb: &mut [u8]| {
+        // Steps 1-3 on the part's rows and, uncounted, on the mixed band's rows around them
+        // (step 4 reads them); every row's result is the same whichever part computes it.
+        let band = config.stereo.mixed_band_px;
+        let (lo, hi) = (rows.start.saturating_sub(band), (rows.end + band).min(h));
+        let (z, state) = (&mut scratch.z[..n], &mut scratch.state[..n]);
+        let mut stats =
+            depth.surfaces(rows.start, &mut z[rows.start * w..rows.end * w], &mut state[rows.start * w..rows.end * w]);
+        depth.surfaces(lo, &mut z[lo * w..rows.start * w], &mut state[lo * w..rows.start * w]);
+        depth.surfaces(rows.end, &mut z[rows.end * w..hi * w], &mut state[rows.end * w..hi * w]);
+        let zbuf = match zbuf {
+            Some(b) => b,
+            None => &mut scratch.zbuf[..n],
+        };
+        let touched;
+        (stats.mixed, touched) = depth.register(rows.clone(), &scratch.z, &scratch.state, zbuf);
+        if with_colour {
+            colour::ColourRows::new(
+                unit,
+                frame,
+                camera_end_from_start,
+                noise.as_ref(),
+                seed,
+                frame_index,
+                &mut scratch.blur,
+            )
+            .run(rows.start, rgb);
+        }
+        (stats, touched)
+    };
+    let mut scratch = PartScratch::take(n);
     let mut stats;
     if worker_threads() < 2 || h < 2 {
-        stats = depth.surfaces(0, &mut z, &mut state);
-        stats.mixed = depth.register(0..h, &z, &state, &mut depth_m);
-        if with_colour {
-            colour_rows().run(0, &mut rgb);
-        }
+        (stats, _) = part(0..h, &mut scratch, Some(&mut depth_m), &mut rgb);
     } else {
-        // Two threads, each on half of the rows (every row's result is the same whichever thread
-        // computes it): steps 1-3 of the depth model, then the rest of it and the colour model,
-        // the second half's depth into its own z-buffer, merged by the nearest depth.
+        // Two threads, each on half of the rows: the first registers into the output, the second
+        // into its own z-buffer, merged by the nearest depth.
+        let mut second = PartScratch::take(n);
         let half = h / 2;
-        let ((za, zb), (sa, sb)) = (z.split_at_mut(half * w), state.split_at_mut(half * w));
-        let (a, b) = std::thread::scope(|s| {
-            let second = s.spawn(|| depth.surfaces(half, zb, sb));
-            (depth.surfaces(0, za, sa), second.join())
-        });
-        stats = a.plus(&b.unwrap_or_else(|e| std::panic::resume_unwind(e)));
-        let mut depth_b = vec![f32::INFINITY; n];
         let (rgb_a, rgb_b) = rgb.split_at_mut(if with_colour { 3 * half * w } else { 0 });
-        let (z, state) = (&z, &state);
         let (a, b) = std::thread::scope(|s| {
-            let second = s.spawn(|| {
-                let mixed = depth.register(half..h, z, state, &mut depth_b);
-                if with_colour {
-                    colour_rows().run(half, rgb_b);
-                }
-                mixed
-            });
-            let mixed = depth.register(0..half, z, state, &mut depth_m);
-            if with_colour {
-                colour_rows().run(0, rgb_a);
-            }
-            (mixed, second.join())
+            let b = s.spawn(|| part(half..h, &mut second, None, rgb_b));
+            (part(0..half, &mut scratch, Some(&mut depth_m), rgb_a), b.join())
         });
-        stats.mixed = a + b.unwrap_or_else(|e| std::panic::resume_unwind(e));
-        for (v, u) in depth_m.iter_mut().zip(&depth_b) {
-            *v = if *u < *v { *u } else { *v };
+        let (b, touched) = b.unwrap_or_else(|e| std::panic::resume_unwind(e));
+        stats = a.0.plus(&b);
+        // Merged, and the second z-buffer back to +inf for the next frame.
+        let rows = touched.start * w..touched.end * w;
+        for (v, u) in depth_m[rows.clone()].iter_mut().zip(&mut second.zbuf[rows]) {
+            *v = min_f(*u, *v);
+            *u = f32::INFINITY;
         }
+        second.give_back();
     }
+    scratch.give_back();
     stats.valid_out = depth.finish(&mut depth_m);
     Ok(SensorFrame { depth_m, rgb, stats })
+}
+
+/// The large buffers of one part of a frame (per-thread scratch), kept in a pool between frames
+/// so that frames of the same size allocate none of them.
+struct PartScratch {
+    /// True depth and state of every pixel (the part's rows and the band around them written).
+    z: Vec<f32>,
+    state: Vec<u8>,
+    /// A z-buffer of the whole image, +inf everywhere between frames.
+    zbuf: Vec<f32>,
+    /// The motion blur's prefix sums.
+    blur: colour::BlurScratch,
+}
+
+/// Scratch of finished frames, for the next ones.
+static SCRATCH: Mutex<Vec<PartScratch>> = Mutex::new(Vec::new());
+
+impl PartScratch {
+    /// Scratch for a frame of `n` pixels: from the pool, or new.
+    fn take(n: usize) -> Self {
+        let pooled = SCRATCH.lock().unwrap_or_else(|e| e.into_inner()).pop();
+        let mut s = pooled.unwrap_or_else(|| Self {
+            z: Vec::new(),
+            state: Vec::new(),
+            zbuf: Vec::new(),
+            blur: colour::BlurScratch::default(),
+        });
+        if s.zbuf.len() != n {
+            (s.z, s.state, s.zbuf) = (vec![0.0; n], vec![0; n], vec![f32::INFINITY; n]);
+        }
+        s
+    }
+
+    /// Back into the pool (at most two kept: one per thread).
+    fn give_back(self) {
+        let mut pool = SCRATCH.lock().unwrap_or_else(|e| e.into_inner());
+        if pool.len() < 2 {
+            pool.push(self);
+        }
+    }
 }
 
 /// Threads [`simulate_frame`] uses: two where the machine has two cores or more.
