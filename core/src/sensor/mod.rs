@@ -465,7 +465,7 @@ pub fn simulate_frame(
     };
     let mut scratch = PartScratch::take(n);
     let mut stats;
-    if worker_threads() < 2 || h < 2 {
+    if crate::worker_threads() < 2 || h < 2 {
         (stats, _) = part(0..h, &mut scratch, Some(&mut depth_m), &mut rgb);
     } else {
         // Two threads, each on half of the rows: the first registers into the output, the second
@@ -530,12 +530,6 @@ impl PartScratch {
             pool.push(self);
         }
     }
-}
-
-/// Threads [`simulate_frame`] uses: two where the machine has two cores or more.
-fn worker_threads() -> usize {
-    static THREADS: OnceLock<usize> = OnceLock::new();
-    *THREADS.get_or_init(|| std::thread::available_parallelism().map_or(1, |n| n.get()).min(2))
 }
 
 /// One call of the sensor model as the Python API makes it (`sensor_model(request_json, ...)`).

@@ -37,7 +37,6 @@ pub use config::{ConfigError, SystemConfig};
 pub use query::{Answer, Decision, Query, ScoredView, StepContext, TargetedView};
 
 use std::collections::BTreeMap;
-use std::sync::OnceLock;
 
 use nalgebra::Point3;
 use serde::Serialize;
@@ -51,12 +50,6 @@ use crate::geometry::{PinholeCamera, Se3};
 use crate::map::ObjectMap;
 use crate::pipeline::{MapPointObservation, ObjectPipeline, PipelineConfig, PipelineError};
 use crate::slam::{ate_rmse_m, rpe, PoseSource, SlamError, TrackInput, Tracker, TrackerConfig};
-
-/// Threads a frame's work may use: two where the machine has two cores or more.
-fn worker_threads() -> usize {
-    static THREADS: OnceLock<usize> = OnceLock::new();
-    *THREADS.get_or_init(|| std::thread::available_parallelism().map_or(1, |n| n.get()).min(2))
-}
 
 /// Errors of the system loop, by the subsystem that raised them.
 #[derive(Debug, Error)]
@@ -220,7 +213,7 @@ impl System {
                 };
                 // The line segments need only the grey image: on two cores they are found while
                 // the frame is tracked (the result does not depend on it).
-                let (out, segments) = if worker_threads() < 2 {
+                let (out, segments) = if crate::worker_threads() < 2 {
                     (tracker.track(&input), lsd())
                 } else {
                     std::thread::scope(|s| {
