@@ -400,8 +400,8 @@ impl ObjectGeometry {
     }
 }
 
-/// Area of the intersection of two top-view footprints.
-fn footprint_intersection(a: &ObjectGeometry, b: &ObjectGeometry) -> f64 {
+/// Area of the intersection of two top-view footprints, square metres.
+pub fn footprint_intersection(a: &ObjectGeometry, b: &ObjectGeometry) -> f64 {
     if a.shape == Shape::Cylinder && b.shape == Shape::Cylinder {
         let d = ((a.center.x - b.center.x).powi(2) + (a.center.y - b.center.y).powi(2)).sqrt();
         return circle_intersection_area(a.radius(), b.radius(), d);

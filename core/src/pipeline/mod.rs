@@ -28,7 +28,7 @@ use crate::map::{EstimateStage, MapObject, ObjectMap};
 use crate::naive::{NaiveConfig, NaiveMapper};
 use crate::objects::lsd::{detect_segments, segments_in_box, LineSegment, LsdConfig};
 use crate::objects::yaw::LineFrame;
-use crate::objects::{ObjectEstimate, ObjectEstimator, ParamConfig};
+use crate::objects::{snap_to_support, ObjectEstimate, ObjectEstimator, ParamConfig};
 
 /// Errors of the pipeline.
 #[derive(Debug, thiserror::Error)]
@@ -98,6 +98,7 @@ impl PipelineConfig {
         check_range("relabel_co_observed_share", self.relabel_co_observed_share, 0.0, 1.0)?;
         check_range("consolidate_covered_share", self.consolidate_covered_share, 0.0, f64::MAX)?;
         check_range("consolidate_overlap_iou", self.consolidate_overlap_iou, 0.0, f64::MAX)?;
+        check_range("support_snap_free_m", self.support_snap_free_m, 0.0, 1.0)?;
         check_range(
             "consolidate_overlap_co_observed_share",
             self.consolidate_overlap_co_observed_share,
@@ -119,6 +120,12 @@ impl PipelineConfig {
         Ok(())
     }
 }
+
+/// An estimate counts as under another (`PipelineConfig::support_snap_free_m`) when its top is at
+/// most this far above the other's bottom, metres.
+const UNDER_TOLERANCE_M: f64 = 0.01;
+/// ... and its top-view footprint overlaps this share of the smaller of the two footprints.
+const UNDER_FOOTPRINT_SHARE: f64 = 0.2;
 
 /// Configuration of the pipeline.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -193,6 +200,15 @@ pub struct PipelineConfig {
     /// folds then; `relabel_vote_ratio` = 0 disables both). Default 0 (off): at 0.25 on the hard
     /// suite (studies/mesh_oversplit) it removed duplicates but also folded neighbours.
     pub relabel_co_observed_share: f64,
+    /// Beyond the paper: an estimate whose bottom is above the support surface
+    /// (`param.support_z_m`) by more than `param.support_snap_m` but at most this, with no other
+    /// estimate under it (one whose top is at most 1 cm above its bottom and whose top-view
+    /// footprint covers a fifth of the smaller of the two), is extended down to the surface, its
+    /// top kept: an object does not float. A flat box seen only from above or from afar is
+    /// otherwise kept as a slab of its top face (a 3.7 cm book as a 1 cm slab 2.7 cm up); an
+    /// object resting on another keeps its points' bottom. Metres; at most `param.support_snap_m`
+    /// disables. Default 0.04 (studies/overlap_fold).
+    pub support_snap_free_m: f64,
     /// Two solid objects cannot share their volume: two objects whose estimates (the
     /// parameterized boxes or cylinders of the last refresh) overlap by at least this 3D IoU are
     /// one, whatever their labels and however often the detector boxed them together (a wrong
@@ -254,6 +270,7 @@ impl Default for PipelineConfig {
             consolidate_cloud_radius_m: 0.01,
             relabel_co_observed_share: 0.0,
             consolidate_overlap_iou: 0.35,
+            support_snap_free_m: 0.04,
             consolidate_overlap_co_observed_share: 0.5,
             consolidate_covered_share: 2.0,
             min_observations: 3,
@@ -590,6 +607,42 @@ impl ObjectPipeline {
             let Some(est) = self.estimators.get_mut(&id) else { continue };
             if let Ok(e) = est.estimate(&obj.points_in_world) {
                 self.estimates.insert(id, e);
+            }
+        }
+        self.snap_unsupported();
+    }
+
+    /// `support_snap_free_m`: close the gap between the support surface and the bottom of every
+    /// estimate with nothing of the map under it.
+    fn snap_unsupported(&mut self) {
+        let (free, snap) = (self.config.support_snap_free_m, self.config.param.support_snap_m);
+        let Some(z0) = self.config.param.support_z_m else { return };
+        if free <= snap {
+            return;
+        }
+        let [sa, sb] = self.config.param.support_slope;
+        let geometries: Vec<(u32, ObjectGeometry)> = self.estimates.iter().map(|(id, e)| (*id, e.geometry)).collect();
+        for (id, g) in &geometries {
+            let z = z0 + sa * g.center.x + sb * g.center.y;
+            let bottom = g.center.z - g.half_extents.z;
+            if bottom - z <= snap || bottom - z > free {
+                continue;
+            }
+            let area = g.footprint_area();
+            let under = geometries.iter().any(|(other, h)| {
+                other != id
+                    && h.center.z + h.half_extents.z <= bottom + UNDER_TOLERANCE_M
+                    && crate::geometry::footprint_intersection(g, h)
+                        >= UNDER_FOOTPRINT_SHARE * area.min(h.footprint_area())
+            });
+            if under {
+                continue;
+            }
+            if let Some(e) = self.estimates.get_mut(id) {
+                snap_to_support(&mut e.geometry, z, free);
+                for s in [&mut e.stages.iforest, &mut e.stages.lines, &mut e.stages.refined].into_iter().flatten() {
+                    snap_to_support(s, z, free);
+                }
             }
         }
     }
@@ -1148,5 +1201,45 @@ mod tests {
             ObjectPipeline::new(PipelineConfig { consolidate_overlap_iou: 2.0, ..PipelineConfig::default() }).unwrap();
         off.estimates = p.estimates.clone();
         assert_eq!(off.overlapping(&a, &dup, 0), None);
+    }
+
+    /// A level box estimate: footprint `side` x `side` centred at (`x`, 0), from `bottom` to `top`.
+    fn slab(x: f64, side: f64, bottom: f64, top: f64) -> ObjectEstimate {
+        let geometry = ObjectGeometry {
+            shape: crate::geometry::Shape::Cuboid,
+            center: Vector3::new(x, 0.0, (bottom + top) / 2.0),
+            yaw_rad: 0.0,
+            half_extents: Vector3::new(side / 2.0, side / 2.0, (top - bottom) / 2.0),
+        };
+        ObjectEstimate { geometry, ..can_estimate(x) }
+    }
+
+    #[test]
+    fn a_floating_estimate_reaches_the_table_unless_something_is_under_it() {
+        let mut config = PipelineConfig::default();
+        config.param.support_z_m = Some(0.0);
+        let mut p = ObjectPipeline::new(config.clone()).unwrap();
+        // A book seen from above: a 1 cm slab of its top face, 2.7 cm over the table.
+        p.estimates.insert(1, slab(0.5, 0.1, 0.027, 0.037));
+        // A can resting on a 3 cm box: its bottom 3 cm up, the box under it.
+        p.estimates.insert(2, slab(0.8, 0.06, 0.03, 0.14));
+        p.estimates.insert(3, slab(0.8, 0.12, 0.0, 0.03));
+        // Too far up to be a slab of a resting object (6 cm): left where its points are.
+        p.estimates.insert(4, slab(1.1, 0.1, 0.06, 0.08));
+        p.snap_unsupported();
+        let g = |id: u32| p.estimates[&id].geometry;
+        let bottom = |g: ObjectGeometry| (g.center.z - g.half_extents.z, g.center.z + g.half_extents.z);
+        let (b1, t1) = bottom(g(1));
+        assert!(b1.abs() < 1e-12 && (t1 - 0.037).abs() < 1e-12, "{b1} {t1}");
+        let (b2, _) = bottom(g(2));
+        assert!((b2 - 0.03).abs() < 1e-12, "{b2}");
+        let (b4, _) = bottom(g(4));
+        assert!((b4 - 0.06).abs() < 1e-12, "{b4}");
+        // Off (at most param.support_snap_m): the slab stays.
+        config.support_snap_free_m = config.param.support_snap_m;
+        let mut off = ObjectPipeline::new(config).unwrap();
+        off.estimates.insert(1, slab(0.5, 0.1, 0.027, 0.037));
+        off.snap_unsupported();
+        assert!((off.estimates[&1].geometry.center.z - 0.032).abs() < 1e-12);
     }
 }
