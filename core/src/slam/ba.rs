@@ -139,8 +139,8 @@ impl BundleProblem {
             // Damped Schur complement.
             let mut s = DMatrix::<f64>::zeros(6 * n_var, 6 * n_var);
             let mut rhs = DVector::<f64>::zeros(6 * n_var);
-            for v in 0..n_var {
-                let (mut block, bc) = hcc[v].system();
+            for (v, normal) in hcc.iter().enumerate() {
+                let (mut block, bc) = normal.system();
                 for k in 0..6 {
                     block[(k, k)] += lambda * (1.0 + block[(k, k)]);
                 }

@@ -204,10 +204,10 @@ impl NormalEquations6 {
     pub(crate) fn add(&mut self, rows: &[[f64; 6]; 3], e: &Vector3<f64>, w: f64, n_rows: usize) {
         for (r, &er) in rows.iter().zip(e.iter()).take(n_rows) {
             let wr: [f64; 6] = std::array::from_fn(|k| w * r[k]);
-            for i in 0..6 {
-                self.b[i] -= wr[i] * er;
-                for k in i..6 {
-                    self.h[i * 6 + k] += wr[i] * r[k];
+            for (i, (&wi, b)) in wr.iter().zip(self.b.iter_mut()).enumerate() {
+                *b -= wi * er;
+                for (h, &rk) in self.h[i * 6 + i..i * 6 + 6].iter_mut().zip(&r[i..]) {
+                    *h += wi * rk;
                 }
             }
         }
