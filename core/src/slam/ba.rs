@@ -2,10 +2,10 @@
 //! points eliminated by the Schur complement (dense reduced camera system; fine for the ~5–10
 //! keyframes of a local window). Same residuals and Huber widths as [`super::pnp`].
 
-use nalgebra::{DMatrix, DVector, Matrix3, Matrix3x6, Matrix6, Matrix6x3, Point3, Vector3, Vector6};
+use nalgebra::{DMatrix, DVector, Matrix3, Matrix6x3, Point3, Vector3, Vector6};
 use serde::{Deserialize, Serialize};
 
-use super::pnp::{apply_increment, chi2_threshold, huber_weight, point_jacobian, residual};
+use super::pnp::{apply_increment, chi2_threshold, huber_weight, pose_jacobian_rows, residual, NormalEquations6};
 use crate::geometry::{PinholeCamera, Se3};
 
 /// Configuration of local bundle adjustment.
@@ -119,8 +119,7 @@ impl BundleProblem {
         let mut accepted = 0;
         let n_points = self.points.len();
         let n_obs = self.observations.len();
-        let mut hcc = vec![Matrix6::<f64>::zeros(); n_var];
-        let mut bc = vec![Vector6::<f64>::zeros(); n_var];
+        let mut hcc = vec![NormalEquations6::new(); n_var];
         let mut hpp = vec![Matrix3::<f64>::zeros(); n_points];
         let mut bp = vec![Vector3::<f64>::zeros(); n_points];
         let mut hcp = vec![Matrix6x3::<f64>::zeros(); n_obs];
@@ -128,26 +127,25 @@ impl BundleProblem {
         let mut linearised = false;
         for _ in 0..config.iterations {
             if !linearised {
-                hcc.iter_mut().for_each(|m| *m = Matrix6::zeros());
-                bc.iter_mut().for_each(|m| *m = Vector6::zeros());
+                hcc.iter_mut().for_each(|m| *m = NormalEquations6::new());
                 hpp.iter_mut().for_each(|m| *m = Matrix3::zeros());
                 bp.iter_mut().for_each(|m| *m = Vector3::zeros());
                 hcp.iter_mut().for_each(|m| *m = Matrix6x3::zeros());
                 let rotations: Vec<Matrix3<f64>> =
                     self.camera_from_world.iter().map(|p| *p.rotation.to_rotation_matrix().matrix()).collect();
-                self.linearise(camera, bf, &var_index, &rotations, (&mut hcc, &mut bc, &mut hpp, &mut bp, &mut hcp));
+                self.linearise(camera, bf, &var_index, &rotations, (&mut hcc, &mut hpp, &mut bp, &mut hcp));
                 linearised = true;
             }
             // Damped Schur complement.
             let mut s = DMatrix::<f64>::zeros(6 * n_var, 6 * n_var);
             let mut rhs = DVector::<f64>::zeros(6 * n_var);
-            for v in 0..n_var {
-                let mut block = hcc[v];
+            for (v, normal) in hcc.iter().enumerate() {
+                let (mut block, bc) = normal.system();
                 for k in 0..6 {
                     block[(k, k)] += lambda * (1.0 + block[(k, k)]);
                 }
                 s.fixed_view_mut::<6, 6>(6 * v, 6 * v).copy_from(&block);
-                rhs.fixed_rows_mut::<6>(6 * v).copy_from(&bc[v]);
+                rhs.fixed_rows_mut::<6>(6 * v).copy_from(&bc);
             }
             let mut hpp_inv = vec![Matrix3::<f64>::zeros(); self.points.len()];
             for (pi, list) in obs_by_point.iter().enumerate() {
@@ -157,7 +155,8 @@ impl BundleProblem {
                 }
                 let Some(inv) = h.try_inverse() else { continue };
                 hpp_inv[pi] = inv;
-                for &oa in list {
+                // The symmetric reduced system: each pair of the point's observations once.
+                for (a, &oa) in list.iter().enumerate() {
                     let Some(Some(va)) = self.observations.get(oa).and_then(|o| var_index.get(o.pose)) else {
                         continue;
                     };
@@ -165,13 +164,17 @@ impl BundleProblem {
                     let r = wa * bp[pi];
                     let mut seg = rhs.fixed_rows_mut::<6>(6 * va);
                     seg -= r;
-                    for &ob in list {
+                    for (b, &ob) in list.iter().enumerate().skip(a) {
                         let Some(Some(vb)) = self.observations.get(ob).and_then(|o| var_index.get(o.pose)) else {
                             continue;
                         };
                         let blk = wa * hcp[ob].transpose();
                         let mut view = s.fixed_view_mut::<6, 6>(6 * va, 6 * *vb);
                         view -= blk;
+                        if b != a {
+                            let mut mirror = s.fixed_view_mut::<6, 6>(6 * *vb, 6 * va);
+                            mirror -= blk.transpose();
+                        }
                     }
                 }
             }
@@ -238,15 +241,15 @@ impl BundleProblem {
         rotations: &[Matrix3<f64>],
         blocks: LinearBlocks<'_>,
     ) {
-        let (hcc, bc, hpp, bp, hcp) = blocks;
+        let (hcc, hpp, bp, hcp) = blocks;
         for (oi, o) in self.observations.iter().enumerate() {
             let (Some(pose), Some(rot), Some(p)) =
                 (self.camera_from_world.get(o.pose), rotations.get(o.pose), self.points.get(o.point))
             else {
                 continue;
             };
-            let x = pose * p;
-            let Some((e, j, d)) = residual(camera, bf, &x.coords, o.pixel, o.depth_m, o.sigma_px) else {
+            let x = rot * p.coords + pose.translation.vector;
+            let Some((e, j, d)) = residual(camera, bf, &x, o.pixel, o.depth_m, o.sigma_px) else {
                 continue;
             };
             let w = huber_weight(e.norm_squared(), chi2_threshold(d));
@@ -256,26 +259,21 @@ impl BundleProblem {
                 *b -= jp.transpose() * e * w;
             }
             if let Some(&Some(v)) = var_index.get(o.pose) {
-                let jc: Matrix3x6<f64> = j * point_jacobian(&x.coords);
-                if let (Some(h), Some(b), Some(c)) = (hcc.get_mut(v), bc.get_mut(v), hcp.get_mut(oi)) {
-                    *h += jc.transpose() * jc * w;
-                    *b -= jc.transpose() * e * w;
-                    *c = jc.transpose() * jp * w;
+                let rows = pose_jacobian_rows(&j, &x);
+                let n_rows = if d { 3 } else { 2 };
+                if let (Some(n), Some(c)) = (hcc.get_mut(v), hcp.get_mut(oi)) {
+                    n.add(&rows, &e, w, n_rows);
+                    *c = Matrix6x3::from_fn(|i, k| (0..n_rows).map(|r| rows[r][i] * jp[(r, k)]).sum::<f64>() * w);
                 }
             }
         }
     }
 }
 
-/// The blocks [`BundleProblem::linearise`] fills: camera Hessians, camera gradients, point
-/// Hessians, point gradients, camera-point blocks.
-type LinearBlocks<'a> = (
-    &'a mut [Matrix6<f64>],
-    &'a mut [Vector6<f64>],
-    &'a mut [Matrix3<f64>],
-    &'a mut [Vector3<f64>],
-    &'a mut [Matrix6x3<f64>],
-);
+/// The blocks [`BundleProblem::linearise`] fills: camera normal equations, point Hessians,
+/// point gradients, camera-point blocks.
+type LinearBlocks<'a> =
+    (&'a mut [NormalEquations6], &'a mut [Matrix3<f64>], &'a mut [Vector3<f64>], &'a mut [Matrix6x3<f64>]);
 
 /// LM stops once an accepted step lowers the robust cost by less than this fraction of it.
 const CONVERGED_RELATIVE_DECREASE: f64 = 1e-4;

@@ -14,7 +14,22 @@ pub type Descriptor = [u64; 4];
 /// Hamming distance between two descriptors (0..=256).
 #[inline]
 pub fn hamming(a: &Descriptor, b: &Descriptor) -> u32 {
-    (a[0] ^ b[0]).count_ones() + (a[1] ^ b[1]).count_ones() + (a[2] ^ b[2]).count_ones() + (a[3] ^ b[3]).count_ones()
+    // Bit counts per byte of each word (SWAR), summed over the four words (≤ 32 per byte), then
+    // over pairs of bytes (≤ 64 per 16 bits) and over those by one multiply (≤ 256 in the top 16
+    // bits): the baseline x86-64 target has no popcount instruction.
+    const M1: u64 = 0x5555_5555_5555_5555;
+    const M2: u64 = 0x3333_3333_3333_3333;
+    const M4: u64 = 0x0F0F_0F0F_0F0F_0F0F;
+    const M8: u64 = 0x00FF_00FF_00FF_00FF;
+    const H16: u64 = 0x0001_0001_0001_0001;
+    let bytes = |x: u64| {
+        let x = x - ((x >> 1) & M1);
+        let x = (x & M2) + ((x >> 2) & M2);
+        (x + (x >> 4)) & M4
+    };
+    let sum = bytes(a[0] ^ b[0]) + bytes(a[1] ^ b[1]) + bytes(a[2] ^ b[2]) + bytes(a[3] ^ b[3]);
+    let pairs = (sum & M8) + ((sum >> 8) & M8);
+    (pairs.wrapping_mul(H16) >> 48) as u32
 }
 
 /// Radius of the orientation patch (intensity centroid), pixels of the level (ORB: 15).
@@ -214,11 +229,10 @@ pub struct OrbExtractor {
     /// test's two pixels in a descriptor patch (see [`patch_index`]).
     rotated: Vec<[u16; 2]>,
     umax: [usize; HALF_PATCH_PX + 1],
-    score_buf: Vec<u16>,
+    /// FAST scores of the level being detected (row stride: the level's width; 0: no corner).
+    score_buf: Vec<u8>,
     corners: Vec<Corner>,
     blur_rows: Vec<u16>,
-    /// Non-maximum suppression verdict per corner of the level being detected.
-    keep: Vec<bool>,
     features_per_level: Vec<usize>,
 }
 
@@ -289,7 +303,6 @@ impl OrbExtractor {
             score_buf: Vec::new(),
             corners: Vec::new(),
             blur_rows: Vec::new(),
-            keep: Vec::new(),
             features_per_level,
         })
     }
@@ -361,54 +374,90 @@ impl OrbExtractor {
         let (ncx, ncy) = (nx.div_ceil(cell), ny.div_ceil(cell));
         let strong = self.config.fast_threshold;
         let weak = self.config.fast_min_threshold;
-        // Strong corners over the level; weak ones (score below the FAST threshold) only in the
-        // cells without a strong one.
-        let geometry = ScanArea { width: w, cell, ncx };
-        scan_fast(&level.image, &geometry, (EDGE_PX, EDGE_PX + nx), (EDGE_PX, EDGE_PX + ny), strong, &mut self.corners);
+        // FAST scores into the level's score map (0: no corner): strong corners over the level,
+        // weak ones (score below the FAST threshold) only in the cells without a strong one. The
+        // one-pixel ring around the scanned area is cleared so that the suppression below reads
+        // zeros there.
+        let area = ScanArea { width: w, xs: (EDGE_PX, EDGE_PX + nx), ys: (EDGE_PX, EDGE_PX + ny) };
+        let map = &mut self.score_buf;
+        let ring_rows = [(EDGE_PX - 1) * w, (EDGE_PX + ny) * w];
+        for r in ring_rows {
+            if let Some(row) = map.get_mut(r + EDGE_PX - 1..=r + EDGE_PX + nx) {
+                row.fill(0);
+            }
+        }
+        for y in EDGE_PX..EDGE_PX + ny {
+            for x in [EDGE_PX - 1, EDGE_PX + nx] {
+                if let Some(v) = map.get_mut(y * w + x) {
+                    *v = 0;
+                }
+            }
+        }
+        scan_fast(&level.image, &area, strong, map);
         if weak < strong {
             let mut has_strong = vec![false; ncx * ncy];
-            for c in &self.corners {
-                if let Some(f) = has_strong.get_mut(c.cell as usize) {
-                    *f = true;
+            for (y, row) in map.chunks_exact(w).enumerate().take(EDGE_PX + ny).skip(EDGE_PX) {
+                for (x, _) in row.iter().enumerate().take(EDGE_PX + nx).skip(EDGE_PX).filter(|(_, &v)| v != 0) {
+                    if let Some(f) = has_strong.get_mut(((y - EDGE_PX) / cell) * ncx + (x - EDGE_PX) / cell) {
+                        *f = true;
+                    }
                 }
             }
             for (cid, _) in has_strong.iter().enumerate().filter(|(_, s)| !**s) {
                 let (x0, y0) = (EDGE_PX + (cid % ncx) * cell, EDGE_PX + (cid / ncx) * cell);
-                let xs = (x0, (x0 + cell).min(EDGE_PX + nx));
-                let ys = (y0, (y0 + cell).min(EDGE_PX + ny));
-                scan_fast(&level.image, &geometry, xs, ys, weak, &mut self.corners);
+                let cell_area = ScanArea {
+                    width: w,
+                    xs: (x0, (x0 + cell).min(EDGE_PX + nx)),
+                    ys: (y0, (y0 + cell).min(EDGE_PX + ny)),
+                };
+                scan_fast(&level.image, &cell_area, weak, map);
             }
         }
-        for c in &self.corners {
-            if let Some(s) = self.score_buf.get_mut(c.y as usize * w + c.x as usize) {
-                *s = c.score;
-            }
-        }
-        // 3x3 non-maximum suppression (ties: the first in raster order wins).
-        let buf = &self.score_buf;
-        let mut keep = std::mem::take(&mut self.keep);
-        keep.clear();
-        keep.extend(self.corners.iter().map(|c| {
-            let i = c.y as usize * w + c.x as usize;
-            let s = c.score;
-            match (buf.get(i - w - 1..i - w + 2), buf.get(i - 1..i + 2), buf.get(i + w - 1..i + w + 2)) {
-                (Some(a), Some(m), Some(b)) => {
-                    // Raster order of the neighbours decides ties.
-                    let (before, after) = ([a[0], a[1], a[2], m[0]], [m[2], b[0], b[1], b[2]]);
-                    before.iter().all(|&v| v < s) && after.iter().all(|&v| v <= s)
+        // 3x3 non-maximum suppression over the map (ties: the first in raster order wins); the
+        // survivors become the level's corners, in raster order.
+        let map = &self.score_buf;
+        for y in EDGE_PX..EDGE_PX + ny {
+            let row = y * w;
+            let cell_row = ((y - EDGE_PX) / cell) * ncx;
+            let Some(scores) = map.get(row + EDGE_PX..row + EDGE_PX + nx) else {
+                continue;
+            };
+            for (k, chunk) in scores.chunks(LANES).enumerate() {
+                if chunk.iter().all(|&v| v == 0) {
+                    continue;
                 }
-                _ => false,
-            }
-        }));
-        // Clear the score map for the next level.
-        for c in &self.corners {
-            if let Some(s) = self.score_buf.get_mut(c.y as usize * w + c.x as usize) {
-                *s = 0;
+                for (j, &s) in chunk.iter().enumerate().filter(|(_, &v)| v != 0) {
+                    let x = EDGE_PX + k * LANES + j;
+                    let i = row + x;
+                    let keep =
+                        match (map.get(i - w - 1..i - w + 2), map.get(i - 1..i + 2), map.get(i + w - 1..i + w + 2)) {
+                            (Some(a), Some(m), Some(b)) => {
+                                // Raster order of the neighbours decides ties.
+                                a[0] < s
+                                    && a[1] < s
+                                    && a[2] < s
+                                    && m[0] < s
+                                    && m[2] <= s
+                                    && b[0] <= s
+                                    && b[1] <= s
+                                    && b[2] <= s
+                            }
+                            _ => false,
+                        };
+                    if keep {
+                        let score = u16::from(s);
+                        self.corners.push(Corner {
+                            x: x as u32,
+                            y: y as u32,
+                            score,
+                            strength: u32::from(score),
+                            cell: (cell_row + (x - EDGE_PX) / cell) as u32,
+                            round: 0,
+                        });
+                    }
+                }
             }
         }
-        let mut flags = keep.iter();
-        self.corners.retain(|_| flags.next().copied().unwrap_or(false));
-        self.keep = keep;
         let spread = (self.config.spread_share * want as f64).round() as usize;
         if self.config.ranking == Ranking::Harris {
             // Preselect by FAST score (spread over the grid as well), then rank by Harris.
@@ -504,26 +553,26 @@ impl OrbExtractor {
     }
 }
 
-/// Where [`scan_fast`] looks: the level's width and its grid of cells.
+/// Where [`scan_fast`] looks: the level's width, its columns `xs.0..xs.1` and rows `ys.0..ys.1`.
 struct ScanArea {
     width: usize,
-    cell: usize,
-    ncx: usize,
+    xs: (usize, usize),
+    ys: (usize, usize),
 }
 
-/// FAST-9 corners at threshold `t` in columns `xs.0..xs.1` and rows `ys.0..ys.1` (inside the level
-/// by [`EDGE_PX`]), appended to `out` with their FAST score and cell.
-fn scan_fast(img: &[u8], area: &ScanArea, xs: (usize, usize), ys: (usize, usize), t: u8, out: &mut Vec<Corner>) {
+/// FAST-9 at threshold `t` over `area` (inside the level by [`EDGE_PX`]): each pixel's FAST score
+/// (0: no corner) written into `scores` (row stride `area.width`); pixels outside `area` are left
+/// as they are.
+fn scan_fast(img: &[u8], area: &ScanArea, t: u8, scores: &mut [u8]) {
     let w = area.width;
     let offsets: [isize; 16] = CIRCLE.map(|(dx, dy)| dy * w as isize + dx);
-    let (x_from, x_to) = xs;
+    let (x_from, x_to) = area.xs;
     if x_to <= x_from {
         return;
     }
     let n = x_to - x_from;
-    for y in ys.0..ys.1 {
+    for y in area.ys.0..area.ys.1 {
         let row = y * w;
-        let cell_row = ((y - EDGE_PX) / area.cell) * area.ncx;
         // `LANES` pixels at a time (OpenCV's SIMD FAST); the last chunk overlaps the previous one
         // (back from the row end) rather than leave the row.
         let mut x0 = x_from;
@@ -532,22 +581,12 @@ fn scan_fast(img: &[u8], area: &ScanArea, xs: (usize, usize), ys: (usize, usize)
             if x0 + LANES > x_to {
                 x0 = x_to.saturating_sub(LANES).max(EDGE_PX);
             }
-            let scores = fast_lanes(img, row + x0, &offsets, t);
-            if u128::from_le_bytes(scores) != 0 {
-                for (j, &s) in scores.iter().enumerate() {
-                    let x = x0 + j;
-                    if s == 0 || x < done_to || x >= x_to {
-                        continue;
-                    }
-                    let score = u16::from(s - 1);
-                    out.push(Corner {
-                        x: x as u32,
-                        y: y as u32,
-                        score,
-                        strength: u32::from(score),
-                        cell: (cell_row + (x - EDGE_PX) / area.cell) as u32,
-                        round: 0,
-                    });
+            let lanes = fast_lanes(img, row + x0, &offsets, t);
+            // Lanes hold the score + 1 (0: no corner); only those inside the area are written.
+            let (from, to) = (x0.max(x_from), (x0 + LANES).min(x_to));
+            if let (Some(dst), Some(src)) = (scores.get_mut(row + from..row + to), lanes.get(from - x0..to - x0)) {
+                for (d, &s) in dst.iter_mut().zip(src) {
+                    *d = s.saturating_sub(1);
                 }
             }
             done_to = (x0 + LANES).min(x_to);
@@ -900,6 +939,25 @@ mod tests {
         let correct =
             matches.iter().filter(|m| close(&a.keypoints[m.query_index], &b.keypoints[m.train_index])).count();
         (correct as f64 / matches.len().max(1) as f64, correct as f64 / repeatable.max(1) as f64, matches.len())
+    }
+
+    #[test]
+    fn hamming_counts_the_differing_bits() {
+        let mut x = 0x9E37_79B9_7F4A_7C15u64;
+        let mut next = || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            x
+        };
+        for _ in 0..1000 {
+            let (a, b): (Descriptor, Descriptor) = ([next(), next(), next(), next()], [next(), next(), next(), next()]);
+            let want: u32 = a.iter().zip(&b).map(|(p, q)| (p ^ q).count_ones()).sum();
+            assert_eq!(hamming(&a, &b), want);
+        }
+        assert_eq!(hamming(&[0; 4], &[u64::MAX; 4]), 256);
+        assert_eq!(hamming(&[u64::MAX; 4], &[u64::MAX; 4]), 0);
+        assert_eq!(hamming(&[1, 0, 0, 1 << 63], &[0; 4]), 2);
     }
 
     #[test]

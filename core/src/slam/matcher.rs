@@ -107,13 +107,25 @@ pub fn orientation_consistent(
     bin_of.iter().map(|b| b.is_some_and(|b| kept.contains(&b))).collect()
 }
 
-/// A uniform grid over level-0 pixels holding keypoint indices, for radius searches.
+/// A uniform grid over level-0 pixels holding keypoint indices, for radius searches. The cells
+/// are stored row-major in one array (each cell's keypoints in index order, with their
+/// positions), so that the cells of one grid row in a search window are one contiguous slice.
 #[derive(Debug, Clone)]
 pub struct KeypointGrid {
     cell_px: f32,
     cols: usize,
     rows: usize,
-    cells: Vec<Vec<u32>>,
+    /// `entries[starts[c]..starts[c + 1]]` are cell `c`'s keypoints.
+    starts: Vec<u32>,
+    entries: Vec<GridEntry>,
+}
+
+/// A keypoint in a [`KeypointGrid`]: its position and index.
+#[derive(Debug, Clone, Copy)]
+struct GridEntry {
+    x: f32,
+    y: f32,
+    index: u32,
 }
 
 impl KeypointGrid {
@@ -122,35 +134,49 @@ impl KeypointGrid {
         let cell_px = cell_px.max(1.0);
         let cols = ((width as f32 / cell_px).ceil() as usize).max(1);
         let rows = ((height as f32 / cell_px).ceil() as usize).max(1);
-        let mut cells = vec![Vec::new(); cols * rows];
-        for (i, k) in keypoints.iter().enumerate() {
+        let cell_of = |k: &Keypoint| {
             let (cx, cy) = ((k.x / cell_px) as usize, (k.y / cell_px) as usize);
-            if k.x >= 0.0 && k.y >= 0.0 && cx < cols && cy < rows {
-                cells[cy * cols + cx].push(i as u32);
+            (k.x >= 0.0 && k.y >= 0.0 && cx < cols && cy < rows).then_some(cy * cols + cx)
+        };
+        // Counting sort by cell (stable: index order within a cell).
+        let mut starts = vec![0u32; cols * rows + 1];
+        for c in keypoints.iter().filter_map(cell_of) {
+            starts[c + 1] += 1;
+        }
+        for c in 0..cols * rows {
+            starts[c + 1] += starts[c];
+        }
+        let mut fill: Vec<u32> = starts[..cols * rows].to_vec();
+        let mut entries = vec![GridEntry { x: 0.0, y: 0.0, index: 0 }; starts[cols * rows] as usize];
+        for (i, k) in keypoints.iter().enumerate() {
+            if let Some(c) = cell_of(k) {
+                entries[fill[c] as usize] = GridEntry { x: k.x, y: k.y, index: i as u32 };
+                fill[c] += 1;
             }
         }
-        Self { cell_px, cols, rows, cells }
+        Self { cell_px, cols, rows, starts, entries }
     }
 
     /// Indices of keypoints within `radius_px` of `(u, v)` (appended to `out`, which is cleared).
+    /// `keypoints` are the ones the grid was built from.
     pub fn within(&self, keypoints: &[Keypoint], u: f32, v: f32, radius_px: f32, out: &mut Vec<u32>) {
         out.clear();
-        if !(u.is_finite() && v.is_finite()) {
+        if !(u.is_finite() && v.is_finite()) || keypoints.is_empty() {
             return;
         }
         let c0 = ((u - radius_px) / self.cell_px).floor().max(0.0) as usize;
         let c1 = (((u + radius_px) / self.cell_px).floor().max(0.0) as usize).min(self.cols - 1);
         let r0 = ((v - radius_px) / self.cell_px).floor().max(0.0) as usize;
         let r1 = (((v + radius_px) / self.cell_px).floor().max(0.0) as usize).min(self.rows - 1);
+        if c0 > c1 {
+            return;
+        }
         let r2 = radius_px * radius_px;
         for r in r0..=r1 {
-            for c in c0..=c1 {
-                for &i in &self.cells[r * self.cols + c] {
-                    if let Some(k) = keypoints.get(i as usize) {
-                        if (k.x - u).powi(2) + (k.y - v).powi(2) <= r2 {
-                            out.push(i);
-                        }
-                    }
+            let (from, to) = (self.starts[r * self.cols + c0] as usize, self.starts[r * self.cols + c1 + 1] as usize);
+            for e in self.entries.get(from..to).unwrap_or(&[]) {
+                if (e.x - u).powi(2) + (e.y - v).powi(2) <= r2 {
+                    out.push(e.index);
                 }
             }
         }

@@ -151,8 +151,16 @@ pub(crate) fn huber_weight(chi2: f64, delta2: f64) -> f64 {
     if chi2 <= delta2 {
         1.0
     } else {
-        (delta2 / chi2).sqrt()
+        huber_down_weight(chi2, delta2)
     }
+}
+
+/// The weight of a residual beyond the Huber width. Out of line so that the common inlier case
+/// is a branch, not a division and a square root computed and discarded.
+#[cold]
+#[inline(never)]
+fn huber_down_weight(chi2: f64, delta2: f64) -> f64 {
+    (delta2 / chi2).sqrt()
 }
 
 /// Left-multiply an increment `(ω, v)` onto `camera_from_world`.
@@ -163,11 +171,60 @@ pub(crate) fn apply_increment(camera_from_world: &Se3, delta: &Vector6<f64>) -> 
     inc * camera_from_world
 }
 
-/// Jacobian of the camera-frame point w.r.t. a left increment `(ω, v)`: `[−[X]×, I]`.
+/// Rows of `j · [−[x]×, I]`, the whitened residual's Jacobian w.r.t. a left increment `(ω, v)`
+/// of the pose, for a [`residual`] Jacobian `j` (zero but for its entries (0, 0), (0, 2), (1, 1),
+/// (1, 2), (2, 2)) at the camera-frame point `x`, written out; the third row is zero without depth.
 #[inline]
-pub(crate) fn point_jacobian(p_in_camera: &Vector3<f64>) -> nalgebra::Matrix3x6<f64> {
-    let (x, y, z) = (p_in_camera.x, p_in_camera.y, p_in_camera.z);
-    nalgebra::Matrix3x6::new(0.0, z, -y, 1.0, 0.0, 0.0, -z, 0.0, x, 0.0, 1.0, 0.0, y, -x, 0.0, 0.0, 0.0, 1.0)
+pub(crate) fn pose_jacobian_rows(j: &Matrix3<f64>, x: &Vector3<f64>) -> [[f64; 6]; 3] {
+    let (a, c, d, f, g) = (j[(0, 0)], j[(0, 2)], j[(1, 1)], j[(1, 2)], j[(2, 2)]);
+    let (px, py, pz) = (x.x, x.y, x.z);
+    [
+        [c * py, a * pz - c * px, -a * py, a, 0.0, c],
+        [f * py - d * pz, -f * px, d * px, 0.0, d, f],
+        [g * py, -g * px, 0.0, 0.0, 0.0, g],
+    ]
+}
+
+/// Gauss-Newton normal equations of a 6-DoF pose, accumulated upper triangle first
+/// ([`NormalEquations6::add`]), then [`NormalEquations6::system`].
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct NormalEquations6 {
+    /// Row-major 6x6, upper triangle filled.
+    h: [f64; 36],
+    b: [f64; 6],
+}
+
+impl NormalEquations6 {
+    pub(crate) fn new() -> Self {
+        Self { h: [0.0; 36], b: [0.0; 6] }
+    }
+
+    /// Add `w Jᵀ J` and `−w Jᵀ e` for the first `n_rows` rows of `rows` (J) and `e`.
+    #[inline]
+    pub(crate) fn add(&mut self, rows: &[[f64; 6]; 3], e: &Vector3<f64>, w: f64, n_rows: usize) {
+        for (r, &er) in rows.iter().zip(e.iter()).take(n_rows) {
+            let wr: [f64; 6] = std::array::from_fn(|k| w * r[k]);
+            for (i, (&wi, b)) in wr.iter().zip(self.b.iter_mut()).enumerate() {
+                *b -= wi * er;
+                for (h, &rk) in self.h[i * 6 + i..i * 6 + 6].iter_mut().zip(&r[i..]) {
+                    *h += wi * rk;
+                }
+            }
+        }
+    }
+
+    /// The full symmetric `H` and `b`.
+    pub(crate) fn system(&self) -> (Matrix6<f64>, Vector6<f64>) {
+        let h = Matrix6::from_fn(|i, k| if i <= k { self.h[i * 6 + k] } else { self.h[k * 6 + i] });
+        (h, Vector6::from_column_slice(&self.b))
+    }
+}
+
+/// `camera_from_world` as a rotation matrix and a translation (cheaper per point than the
+/// quaternion).
+#[inline]
+pub(crate) fn rigid_parts(camera_from_world: &Se3) -> (Matrix3<f64>, Vector3<f64>) {
+    (*camera_from_world.rotation.to_rotation_matrix().matrix(), camera_from_world.translation.vector)
 }
 
 /// Gauss-Newton on the selected correspondences (Huber if `robust`), from `camera_from_world`.
@@ -185,19 +242,18 @@ fn gauss_newton(
     let idx: Vec<usize> = selected.collect();
     let mut pose = camera_from_world;
     for _ in 0..iterations {
-        let mut h = Matrix6::<f64>::zeros();
-        let mut b = Vector6::<f64>::zeros();
+        let mut normal = NormalEquations6::new();
+        let (rot, t) = rigid_parts(&pose);
         for &i in &idx {
             let Some(c) = corr.get(i) else { continue };
-            let x = pose * c.p_in_world;
-            let Some((e, j, has_depth)) = residual(camera, bf, &x.coords, c.pixel, c.depth_m, c.sigma_px) else {
+            let x = rot * c.p_in_world.coords + t;
+            let Some((e, j, has_depth)) = residual(camera, bf, &x, c.pixel, c.depth_m, c.sigma_px) else {
                 continue;
             };
-            let jj = j * point_jacobian(&x.coords);
             let w = if robust { huber_weight(e.norm_squared(), chi2_threshold(has_depth)) } else { 1.0 };
-            h += jj.transpose() * jj * w;
-            b -= jj.transpose() * e * w;
+            normal.add(&pose_jacobian_rows(&j, &x), &e, w, if has_depth { 3 } else { 2 });
         }
+        let (mut h, b) = normal.system();
         // Tiny Levenberg damping keeps near-degenerate minimal sets solvable.
         for k in 0..6 {
             h[(k, k)] += 1e-9 + 1e-6 * h[(k, k)];
@@ -217,15 +273,24 @@ fn gauss_newton(
 /// Squared whitened residual of each correspondence under `camera_from_world` (∞ behind camera)
 /// and whether it has depth.
 fn chi2_all(corr: &[Correspondence], camera: &PinholeCamera, bf: f64, camera_from_world: &Se3) -> Vec<(f64, bool)> {
-    corr.iter()
-        .map(|c| {
-            let x = camera_from_world * c.p_in_world;
-            match residual(camera, bf, &x.coords, c.pixel, c.depth_m, c.sigma_px) {
-                Some((e, _, d)) => (e.norm_squared(), d),
-                None => (f64::INFINITY, c.depth_m.is_some()),
-            }
-        })
-        .collect()
+    chi2_iter(corr, camera, bf, camera_from_world).collect()
+}
+
+/// [`chi2_all`] as an iterator.
+fn chi2_iter<'a>(
+    corr: &'a [Correspondence],
+    camera: &'a PinholeCamera,
+    bf: f64,
+    camera_from_world: &Se3,
+) -> impl Iterator<Item = (f64, bool)> + 'a {
+    let (rot, t) = rigid_parts(camera_from_world);
+    corr.iter().map(move |c| {
+        let x = rot * c.p_in_world.coords + t;
+        match residual(camera, bf, &x, c.pixel, c.depth_m, c.sigma_px) {
+            Some((e, _, d)) => (e.norm_squared(), d),
+            None => (f64::INFINITY, c.depth_m.is_some()),
+        }
+    })
 }
 
 fn check_inputs(corr: &[Correspondence], prior: &Se3, required: usize) -> Result<(), SlamError> {
@@ -284,7 +349,7 @@ pub fn solve_pnp_ransac(
     check_inputs(corr, prior_world_from_camera, 3)?;
     let bf = camera.fx * refine.depth_baseline_m;
     let prior = prior_world_from_camera.inverse();
-    let count = |pose: &Se3| chi2_all(corr, camera, bf, pose).iter().filter(|(c, d)| *c <= chi2_threshold(*d)).count();
+    let count = |pose: &Se3| chi2_iter(corr, camera, bf, pose).filter(|(c, d)| *c <= chi2_threshold(*d)).count();
     let n = corr.len();
     // Hypotheses needed for `confidence` that one was drawn from inliers only, at the inlier
     // share of the best pose so far (the prior counts as the first hypothesis).

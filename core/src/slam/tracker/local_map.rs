@@ -297,14 +297,19 @@ impl Tracker {
             let Some(kf) = self.keyframes.get_mut(k) else {
                 continue;
             };
-            for &oi in list.iter().rev() {
-                if oi < kf.observations.len() {
-                    let o = kf.observations.remove(oi);
+            // `list` is ascending: one pass keeps the others in order.
+            let mut dropped = list.iter().peekable();
+            let mut oi = 0;
+            kf.observations.retain(|o| {
+                let gone = dropped.next_if_eq(&&oi).is_some();
+                oi += 1;
+                if gone {
                     if let Some(p) = self.points.get_mut(&o.point_id) {
                         p.keyframes.retain(|&x| x != k);
                     }
                 }
-            }
+                !gone
+            });
         }
     }
 
