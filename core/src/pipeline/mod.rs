@@ -649,7 +649,14 @@ impl ObjectPipeline {
 
     /// Fold overlapping same-label objects into the older one (see `PipelineConfig::consolidate`).
     fn consolidate(&mut self) {
+        // Every fold removes one object from the raw map; a pair the fold table already joins is
+        // not folded again, so this bound is never reached by a working fold.
+        let mut budget = self.raw_map_with(false).objects.len();
         loop {
+            if budget == 0 {
+                break;
+            }
+            budget -= 1;
             // The phantom fold compares with the objects before any fold (none: the fold is off).
             let unfolded =
                 if self.config.consolidate_covered_share <= 1.0 { self.base_map() } else { ObjectMap::default() };
@@ -660,6 +667,9 @@ impl ObjectPipeline {
             let mut fold: Option<(u32, u32, bool)> = None;
             'pairs: for (i, a) in map.objects.iter().enumerate() {
                 for (j, b) in map.objects.iter().enumerate().skip(i + 1) {
+                    if self.resolve_id(a.id) == self.resolve_id(b.id) {
+                        continue;
+                    }
                     let common = frames[i].intersection(&frames[j]).count();
                     if let Some((minor, major)) = self.covered_phantom(a, b, &own) {
                         fold = Some((minor, major, a.label != b.label));
@@ -846,9 +856,18 @@ impl ObjectPipeline {
         let present: BTreeSet<u32> = base.objects.iter().map(|o| o.id).collect();
         let mut groups: BTreeMap<u32, Vec<MapObject>> = BTreeMap::new();
         for o in base.objects {
-            let mut root = self.resolve_id(o.id);
-            if !present.contains(&root) {
-                root = o.id;
+            // The last object on the fold chain that is still in the association's map (a chain
+            // may pass through an id the association itself merged away).
+            let (mut id, mut root, mut guard) = (o.id, o.id, 0);
+            while let Some(next) = self.merged_into.get(&id) {
+                id = *next;
+                if present.contains(&id) {
+                    root = id;
+                }
+                guard += 1;
+                if guard > 10_000 {
+                    break;
+                }
             }
             groups.entry(root).or_default().push(o);
         }
