@@ -14,12 +14,8 @@
 #![allow(missing_docs)]
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use nalgebra::Point3;
-use objslam_core::geometry::PinholeCamera;
-use objslam_core::slam::synthetic::{look_at, shapes_texture, TabletopScene};
-use objslam_core::slam::{
-    OrbConfig, OrbExtractor, PriorNoiseConfig, SyntheticPriorError, TrackInput, Tracker, TrackerConfig,
-};
+use objslam_core::slam::synthetic::{shapes_texture, TrackSequence};
+use objslam_core::slam::{OrbConfig, OrbExtractor, Tracker, TrackerConfig};
 
 /// Frames cycled through by the ORB benchmark (same count as the Python reference).
 const N_FRAMES: u64 = 8;
@@ -38,35 +34,12 @@ fn orb_extract(c: &mut Criterion) {
 }
 
 fn track_frame(c: &mut Criterion) {
-    let cam = PinholeCamera::from_fovy(640, 480, 50f64.to_radians()).unwrap_or_else(|e| panic!("{e}"));
-    let scene = TabletopScene::tabletop(3);
-    let poses: Vec<_> = (0..20)
-        .map(|i| {
-            let theta = -0.2 + 0.02 * f64::from(i);
-            look_at(Point3::new(0.5 - 0.25 * theta.cos(), 0.25 * theta.sin(), 0.45), Point3::new(0.5, 0.0, 0.0))
-        })
-        .collect();
-    let frames: Vec<_> = poses.iter().map(|p| scene.render(&cam, p)).collect();
-    // Back-and-forth playback order.
-    let order: Vec<usize> = (0..frames.len()).chain((1..frames.len() - 1).rev()).collect();
-    // The prior of a robot with an independent 1 cm / 1° error per view.
-    let robot = SyntheticPriorError::new(PriorNoiseConfig::default(), 1);
+    let seq = TrackSequence::new().unwrap_or_else(|e| panic!("{e}"));
     let mut tracker = Tracker::new(TrackerConfig::default()).unwrap_or_else(|e| panic!("{e}"));
     let mut step = 0usize;
-    let run = |tracker: &mut Tracker, step: usize| {
-        let i = order[step % order.len()];
-        let (grey, depth) = &frames[i];
-        let input = TrackInput {
-            grey,
-            depth,
-            camera: &cam,
-            world_from_camera_prior: robot.perturb(&poses[i], (step / 2) as u64, step as u64),
-            view_index: (step / 2) as u64,
-            world_from_camera_oracle: None,
-        };
-        tracker.track(&input).unwrap_or_else(|e| panic!("{e}"))
-    };
-    for _ in 0..order.len() {
+    let run = |tracker: &mut Tracker, step: usize| tracker.track(&seq.input(step)).unwrap_or_else(|e| panic!("{e}"));
+    // The map is warmed up over the first pass.
+    for _ in 0..seq.order.len() {
         run(&mut tracker, step);
         step += 1;
     }

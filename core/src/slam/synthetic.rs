@@ -220,3 +220,51 @@ pub fn look_at(eye: Point3<f64>, target: Point3<f64>) -> Se3 {
     let up = if z.cross(&Vector3::z()).norm() < 1e-6 * z.norm() { Vector3::x() } else { Vector3::z() };
     crate::geometry::look_at_with_up(&eye, &target, &up).unwrap_or(Se3::identity())
 }
+
+/// The `track_frame` benchmark's sequence: 640 x 480 frames (50° vertical field of view)
+/// ray-cast from [`TabletopScene::tabletop`]`(3)` along a 20-pose arc, played back and forth so
+/// the motion stays smooth, each with the prior of a robot whose error is
+/// [`PriorNoiseConfig::default`] per view of two frames (seed 1).
+pub struct TrackSequence {
+    /// The camera.
+    pub camera: PinholeCamera,
+    /// The true poses of the arc.
+    pub poses: Vec<Se3>,
+    /// Each pose's grey image and depth.
+    pub frames: Vec<(GreyImage, DepthImage)>,
+    /// Playback order (forth and back) of the frames.
+    pub order: Vec<usize>,
+    robot: super::SyntheticPriorError,
+}
+
+impl TrackSequence {
+    /// Render the sequence (about 0.4 s).
+    pub fn new() -> Result<Self, crate::geometry::GeometryError> {
+        let camera = PinholeCamera::from_fovy(640, 480, 50f64.to_radians())?;
+        let scene = TabletopScene::tabletop(3);
+        let poses: Vec<Se3> = (0..20)
+            .map(|i| {
+                let theta = -0.2 + 0.02 * f64::from(i);
+                look_at(Point3::new(0.5 - 0.25 * theta.cos(), 0.25 * theta.sin(), 0.45), Point3::new(0.5, 0.0, 0.0))
+            })
+            .collect();
+        let frames = poses.iter().map(|p| scene.render(&camera, p)).collect();
+        let order = (0..poses.len()).chain((1..poses.len() - 1).rev()).collect();
+        let robot = super::SyntheticPriorError::new(super::PriorNoiseConfig::default(), 1);
+        Ok(Self { camera, poses, frames, order, robot })
+    }
+
+    /// The tracker's input at playback step `step` (the order repeats).
+    pub fn input(&self, step: usize) -> super::TrackInput<'_> {
+        let i = self.order[step % self.order.len()];
+        let (grey, depth) = &self.frames[i];
+        super::TrackInput {
+            grey,
+            depth,
+            camera: &self.camera,
+            world_from_camera_prior: self.robot.perturb(&self.poses[i], (step / 2) as u64, step as u64),
+            view_index: (step / 2) as u64,
+            world_from_camera_oracle: None,
+        }
+    }
+}
