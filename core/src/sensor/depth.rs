@@ -683,9 +683,15 @@ impl Registration {
                 (lo, hi) = (lo.min(y0), hi.max(y1));
             }
             let (nx, ny) = (x1 - x0, y1 - y0);
+            if (nx == 1) & (ny == 1) {
+                // One target pixel (nearly every pixel: the depth and colour grids have nearly
+                // the same scale and the rectangles are a hair wider than a pixel).
+                let o = &mut out[y0 as usize * w + x0 as usize];
+                *o = min_f(zv, *o);
+                continue;
+            }
             if nx <= 2 && ny <= 2 {
-                // At most 2 × 2 target pixels (nearly every pixel: the depth and colour grids have
-                // nearly the same scale): the four written without branches, +inf outside the
+                // At most 2 × 2 target pixels: the four written without branches, +inf outside the
                 // rectangle (an index past the image is held at its last pixel).
                 let base = y0 as usize * w + x0 as usize;
                 for (dy, dx) in [(0, 0), (0, 1), (1, 0), (1, 1)] {
