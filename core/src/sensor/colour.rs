@@ -119,6 +119,42 @@ impl NoiseTable {
             }
         }
     }
+
+    /// [`Self::apply`] on the RGB of `rgbx` (four bytes a pixel, the fourth ignored), written to
+    /// `row` (three bytes a pixel): the same bytes as copying the RGB and then applying.
+    fn apply_from(&self, rgbx: &[u8], row: &mut [u8], seed: u64, frame_index: u64, y: usize) {
+        let mut rng = SplitMix64::new(seed, &[TAG_COLOUR, frame_index, y as u64]);
+        // Eight pixels take three draws (24 uniforms, one per byte, in byte order).
+        let mut out = row.chunks_exact_mut(24);
+        let mut src = rgbx.chunks_exact(32);
+        for (o, p) in (&mut out).zip(&mut src) {
+            let mut u = [0u8; 24];
+            for (c, d) in u.chunks_exact_mut(8).zip([rng.next_u64(), rng.next_u64(), rng.next_u64()]) {
+                c.copy_from_slice(&d.to_le_bytes());
+            }
+            for ((o, p), u) in o.chunks_exact_mut(3).zip(p.chunks_exact(4)).zip(u.chunks_exact(3)) {
+                for c in 0..3 {
+                    o[c] = self.0[(p[c] as usize) << 8 | u[c] as usize];
+                }
+            }
+        }
+        let rest = out.into_remainder();
+        for (o, p) in rest.chunks_exact_mut(3).zip(src.remainder().chunks_exact(4)) {
+            o.copy_from_slice(&p[..3]);
+        }
+        let mut tail = rest.chunks_exact_mut(8);
+        for chunk in &mut tail {
+            for (v, u) in chunk.iter_mut().zip(rng.next_u64().to_le_bytes()) {
+                *v = self.0[(*v as usize) << 8 | u as usize];
+            }
+        }
+        let tail = tail.into_remainder();
+        if !tail.is_empty() {
+            for (v, u) in tail.iter_mut().zip(rng.next_u64().to_le_bytes()) {
+                *v = self.0[(*v as usize) << 8 | u as usize];
+            }
+        }
+    }
 }
 
 /// The colour model on whole rows of one frame, in any order (each row's result depends on the
@@ -153,12 +189,23 @@ impl<'a> ColourRows<'a> {
     pub(crate) fn run(&mut self, y0: usize, out: &mut [u8]) {
         let w = self.w;
         for (y, row) in (y0..).zip(out.chunks_exact_mut(3 * w.max(1))) {
-            match self.blur.as_mut() {
-                Some(b) => b.row(y, row),
-                None => row.copy_from_slice(&self.src[3 * y * w..3 * (y + 1) * w]),
-            }
-            if let Some(table) = self.noise {
-                table.apply(row, self.seed, self.frame_index, y);
+            match (self.blur.as_mut(), self.noise) {
+                (Some(b), Some(table)) => {
+                    b.row(y);
+                    table.apply_from(&b.bytes, row, self.seed, self.frame_index, y);
+                }
+                (Some(b), None) => {
+                    b.row(y);
+                    for (o, p) in row.chunks_exact_mut(3).zip(b.bytes.chunks_exact(4)) {
+                        o.copy_from_slice(&p[..3]);
+                    }
+                }
+                (None, table) => {
+                    row.copy_from_slice(&self.src[3 * y * w..3 * (y + 1) * w]);
+                    if let Some(table) = table {
+                        table.apply(row, self.seed, self.frame_index, y);
+                    }
+                }
             }
         }
     }
@@ -325,7 +372,7 @@ struct MotionBlur<'a> {
     f1: Vec<f32>,
     inv_len: Vec<f32>,
     slope: Vec<f32>,
-    /// Scratch: the row's blurred values, then as bytes.
+    /// The row's blurred values, then as bytes (four a pixel).
     tot: Vec<Px>,
     bytes: Vec<u8>,
 }
@@ -363,8 +410,8 @@ impl<'a> MotionBlur<'a> {
         }
     }
 
-    /// Blurs row `y` into `out`.
-    fn row(&mut self, y: usize, out: &mut [u8]) {
+    /// Blurs row `y` into `bytes` (four bytes a pixel: RGB and a spare).
+    fn row(&mut self, y: usize) {
         let (w, h) = (self.w, self.h);
         let (any, all) = self.motion(y);
         let mode = if all {
@@ -400,9 +447,6 @@ impl<'a> MotionBlur<'a> {
         // Rounded to the nearest level (the low byte of the rounding sum).
         for (b, t) in self.bytes.iter_mut().zip(self.tot.as_flattened()) {
             *b = (min_f(max_f(*t, 0.0), 255.0) + ROUND_F32).to_bits() as u8;
-        }
-        for (o, b) in out.chunks_exact_mut(3).zip(self.bytes.chunks_exact(4)) {
-            o.copy_from_slice(&b[..3]);
         }
     }
 
@@ -605,6 +649,20 @@ mod tests {
             // Rounding adds 1/12.
             let want = cfg.shot_gain * level as f64 + cfg.read_noise.powi(2) + 1.0 / 12.0;
             assert!((var / want - 1.0).abs() < 0.1, "level {level}: var {var} vs {want}");
+        }
+    }
+
+    #[test]
+    fn noise_from_four_byte_pixels_equals_copy_then_noise() {
+        let table = NoiseTable::new(&ColourConfig::default()).unwrap();
+        // Row lengths with and without a remainder after groups of eight pixels.
+        for w in [1usize, 5, 8, 13, 16, 21] {
+            let rgbx: Vec<u8> = (0..4 * w).map(|i| (i * 37 % 251) as u8).collect();
+            let mut want: Vec<u8> = rgbx.chunks_exact(4).flat_map(|p| p[..3].to_vec()).collect();
+            table.apply(&mut want, 9, 2, 7);
+            let mut got = vec![0u8; 3 * w];
+            table.apply_from(&rgbx, &mut got, 9, 2, 7);
+            assert_eq!(got, want, "w {w}");
         }
     }
 
