@@ -35,10 +35,11 @@
 
 pub mod colour;
 pub mod depth;
+pub mod synthetic;
 
 use nalgebra::{Matrix3, Matrix4, Rotation3, Vector3};
 use serde::{Deserialize, Serialize};
-use std::sync::{Mutex, OnceLock};
+use std::sync::{Barrier, Mutex, OnceLock, RwLock};
 use thiserror::Error;
 
 pub use colour::{colour_image, ColourConfig};
@@ -432,8 +433,9 @@ pub fn simulate_frame(
     let noise = colour::NoiseTable::new(&config.colour);
     let with_colour = !frame.rgb.is_empty();
     let mut rgb = vec![0u8; if with_colour { 3 * n } else { 0 }];
-    let mut depth_m = vec![f32::INFINITY; n];
-    let part = |rows: std::ops::Range<usize>, scratch: &mut PartScratch, zbuf: Option<&mut [f32]>, rgb: &mut [u8]| {
+    // Every value is written by the depth image pass (zeroed pages cost nothing until then).
+    let mut depth_m = vec![0.0f32; n];
+    let part = |rows: std::ops::Range<usize>, scratch: &mut PartScratch, zbuf: &mut [f32], rgb: &mut [u8]| {
         // Steps 1-3 on the part's rows and, uncounted, on the mixed band's rows around them
         // (step 4 reads them); every row's result is the same whichever part computes it.
         let band = config.stereo.mixed_band_px;
@@ -443,10 +445,6 @@ pub fn simulate_frame(
             depth.surfaces(rows.start, &mut z[rows.start * w..rows.end * w], &mut state[rows.start * w..rows.end * w]);
         depth.surfaces(lo, &mut z[lo * w..rows.start * w], &mut state[lo * w..rows.start * w]);
         depth.surfaces(rows.end, &mut z[rows.end * w..hi * w], &mut state[rows.end * w..hi * w]);
-        let zbuf = match zbuf {
-            Some(b) => b,
-            None => &mut scratch.zbuf[..n],
-        };
         let touched;
         (stats.mixed, touched) = depth.register(rows.clone(), &scratch.z, &scratch.state, zbuf);
         if with_colour {
@@ -466,30 +464,98 @@ pub fn simulate_frame(
     let mut scratch = PartScratch::take(n);
     let mut stats;
     if crate::worker_threads() < 2 || h < 2 {
-        (stats, _) = part(0..h, &mut scratch, Some(&mut depth_m), &mut rgb);
+        let mut zbuf = std::mem::take(&mut scratch.zbuf);
+        let touched;
+        (stats, touched) = part(0..h, &mut scratch, &mut zbuf, &mut rgb);
+        stats.valid_out = depth_image(&[&zbuf], &mut depth_m);
+        zbuf[touched.start * w..touched.end * w].fill(f32::INFINITY);
+        scratch.zbuf = zbuf;
     } else {
-        // Two threads, each on half of the rows: the first registers into the output, the second
-        // into its own z-buffer, merged by the nearest depth.
+        // Two threads, each on half of the rows, each registering into its own z-buffer; once
+        // both are done (the registration moves depths across the halves' border), each makes
+        // its half of the depth image from both z-buffers, then resets its own.
         let mut second = PartScratch::take(n);
         let half = h / 2;
         let (rgb_a, rgb_b) = rgb.split_at_mut(if with_colour { 3 * half * w } else { 0 });
+        let (out_a, out_b) = depth_m.split_at_mut(half * w);
+        let zbufs = [RwLock::new(std::mem::take(&mut scratch.zbuf)), RwLock::new(std::mem::take(&mut second.zbuf))];
+        let barrier = Barrier::new(2);
+        let run =
+            |i: usize, rows: std::ops::Range<usize>, scratch: &mut PartScratch, rgb: &mut [u8], out: &mut [f32]| {
+                // A panic on either thread still meets the other at every rendezvous.
+                let mut meet = Rendezvous { barrier: &barrier, owed: 2 };
+                let (stats, touched) = part(rows.clone(), scratch, &mut write(&zbufs[i]), rgb);
+                meet.wait();
+                let span = rows.start * w..rows.end * w;
+                let valid = depth_image(&[&read(&zbufs[0])[span.clone()], &read(&zbufs[1])[span]], out);
+                meet.wait();
+                write(&zbufs[i])[touched.start * w..touched.end * w].fill(f32::INFINITY);
+                (stats, valid)
+            };
         let (a, b) = std::thread::scope(|s| {
-            let b = s.spawn(|| part(half..h, &mut second, None, rgb_b));
-            (part(0..half, &mut scratch, Some(&mut depth_m), rgb_a), b.join())
+            let b = s.spawn(|| run(1, half..h, &mut second, rgb_b, out_b));
+            (run(0, 0..half, &mut scratch, rgb_a, out_a), b.join())
         });
-        let (b, touched) = b.unwrap_or_else(|e| std::panic::resume_unwind(e));
-        stats = a.0.plus(&b);
-        // Merged, and the second z-buffer back to +inf for the next frame.
-        let rows = touched.start * w..touched.end * w;
-        for (v, u) in depth_m[rows.clone()].iter_mut().zip(&mut second.zbuf[rows]) {
-            *v = min_f(*u, *v);
-            *u = f32::INFINITY;
-        }
+        let b = b.unwrap_or_else(|e| std::panic::resume_unwind(e));
+        stats = a.0.plus(&b.0);
+        stats.valid_out = a.1 + b.1;
+        let [za, zb] = zbufs.map(|z| z.into_inner().unwrap_or_else(|e| e.into_inner()));
+        (scratch.zbuf, second.zbuf) = (za, zb);
         second.give_back();
     }
     scratch.give_back();
-    stats.valid_out = depth.finish(&mut depth_m);
     Ok(SensorFrame { depth_m, rgb, stats })
+}
+
+/// The depth image from z-buffers of the same pixels (+inf = nothing): the nearest depth, 0
+/// where none; returns the count with a depth.
+fn depth_image(zbufs: &[&[f32]], out: &mut [f32]) -> usize {
+    let mut valid = 0u32;
+    if let [a, b] = zbufs {
+        for (o, (&u, &v)) in out.iter_mut().zip(a.iter().zip(b.iter())) {
+            let m = min_f(u, v);
+            let d = if m < f32::INFINITY { m } else { 0.0 };
+            valid += u32::from(d > 0.0);
+            *o = d;
+        }
+    } else {
+        for (o, &u) in out.iter_mut().zip(zbufs.first().copied().unwrap_or_default()) {
+            let d = if u < f32::INFINITY { u } else { 0.0 };
+            valid += u32::from(d > 0.0);
+            *o = d;
+        }
+    }
+    valid as usize
+}
+
+fn read<T>(lock: &RwLock<T>) -> std::sync::RwLockReadGuard<'_, T> {
+    lock.read().unwrap_or_else(|e| e.into_inner())
+}
+
+fn write<T>(lock: &RwLock<T>) -> std::sync::RwLockWriteGuard<'_, T> {
+    lock.write().unwrap_or_else(|e| e.into_inner())
+}
+
+/// A thread's remaining meetings at a two-thread barrier: the ones not kept (the thread
+/// panicked) are kept when it unwinds, so the other thread never waits forever.
+struct Rendezvous<'a> {
+    barrier: &'a Barrier,
+    owed: usize,
+}
+
+impl Rendezvous<'_> {
+    fn wait(&mut self) {
+        self.owed = self.owed.saturating_sub(1);
+        self.barrier.wait();
+    }
+}
+
+impl Drop for Rendezvous<'_> {
+    fn drop(&mut self) {
+        while self.owed > 0 {
+            self.wait();
+        }
+    }
 }
 
 /// The large buffers of one part of a frame (per-thread scratch), kept in a pool between frames
