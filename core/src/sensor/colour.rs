@@ -653,6 +653,26 @@ mod tests {
     }
 
     #[test]
+    fn row_prefix_sums_are_running_sums() {
+        for w in [1usize, 2, 7, 10] {
+            let h = 3;
+            let src: Vec<u8> = (0..3 * w * h).map(|i| (i * 53 % 256) as u8).collect();
+            let mut prefix = Prefix::default();
+            prefix.reset_rows(w, h);
+            prefix.ensure(&src, w, 0, h - 1);
+            for r in 0..h {
+                let mut want = [0.0f32; 4];
+                for k in 0..=w {
+                    assert_eq!(prefix.sums[r * (w + 1) + k], want, "w {w} row {r} k {k}");
+                    if k < w {
+                        want = add4(want, px4(&src[3 * (r * w + k)..]));
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
     fn noise_from_four_byte_pixels_equals_copy_then_noise() {
         let table = NoiseTable::new(&ColourConfig::default()).unwrap();
         // Row lengths with and without a remainder after groups of eight pixels.
