@@ -41,7 +41,7 @@ from typing import Any
 import numpy as np
 import sapien
 from objslam import _native
-from objslam.camera import CV_FROM_GL, SAPIEN_FROM_CV, RgbdSensor
+from objslam.camera import SAPIEN_FROM_CV, RgbdSensor
 from objslam.camera_path import look_at
 from objslam.config import load_run_config, to_dict
 from objslam.episode import run_episode
@@ -136,10 +136,10 @@ class Truth:
         # The live depth: the run's sensor model on the same render; the robot's own pixels are
         # masked as the episodes' hand camera masks them (camera.mask_robot_depth).
         if self.sensor is not None:
-            points = pos[..., :3] * CV_FROM_GL
-            points[(pos[..., 3] >= 1) | robot] = 0.0
-            normals = self.camera.get_picture("Normal")[..., :3] * CV_FROM_GL
-            colour, self.live = self.sensor.apply(points, normals, self.rgb, frame_index=self.frames)
+            pos[robot, 3] = 1.0  # no surface, as the sensor model's renderer buffers mark it
+            colour, self.live = self.sensor.apply(
+                pos, self.camera.get_picture("Normal"), self.camera.get_picture("Color"), frame_index=self.frames
+            )
         else:
             colour, self.live = self.rgb, self.camera_config.depth_noise.apply(depth, self.live_rng)
         self.grey = np.round(colour.astype(np.float32).mean(axis=2)).astype(np.uint8)

@@ -120,6 +120,34 @@ def test_sensor_binding_rejects_bad_buffers() -> None:
         _native.sensor_model("{}", pts, nrm, None)
 
 
+def test_renderer_buffers_give_the_frame_of_their_opencv_form() -> None:
+    """The renderer's own (H, W, 4) buffers (OpenGL axes, w >= 1 = no surface, RGBA in [0, 1])
+    give exactly the depth and colour of the same frame converted to OpenCV axes and 8 bits."""
+    cam = CameraConfig(width=W, height=H)
+    pts, nrm = _plane(0.5, cam.intrinsics(), box=(0.4, slice(100, 200)))
+    rng = np.random.default_rng(3)
+    gl = np.array([1.0, -1.0, -1.0], dtype=np.float32)
+    pos = np.concatenate([pts * gl, np.zeros((H, W, 1), np.float32)], axis=-1)
+    pos[:20, :, 3] = 1.0  # nothing hit
+    normal = np.concatenate([nrm * gl, np.zeros((H, W, 1), np.float32)], axis=-1)
+    rgba = rng.uniform(-0.1, 1.1, size=(H, W, 4)).astype(np.float32)
+    points = pos[..., :3] * gl
+    points[pos[..., 3] >= 1] = 0.0
+    rgb = (np.clip(rgba[..., :3] * np.float32(255.0), 0.0, 255.0) + np.float32(0.5)).astype(np.uint8)
+    motion = np.eye(4)
+    motion[0, 3] = 0.004
+    sensor = RgbdSensor(cam, seed=2)
+    for m in (None, motion):
+        want = sensor.apply(points, nrm, rgb, frame_index=1, camera_end_from_start=m)
+        got = sensor.apply(pos, normal, rgba, frame_index=1, camera_end_from_start=m)
+        np.testing.assert_array_equal(got[0], want[0])
+        np.testing.assert_array_equal(got[1], want[1])
+    with pytest.raises(_native.InputError, match="rgb"):
+        _native.sensor_model(json.dumps(cam.sensor_request(seed=0)), pos, normal, rgb)
+    with pytest.raises(_native.InputError, match="normals"):
+        _native.sensor_model(json.dumps(cam.sensor_request(seed=0)), pos, normal[:, :, :3].copy(), rgba)
+
+
 def _view(eye: np.ndarray, centre: np.ndarray) -> DetectorView:
     m = np.eye(4)
     m[:3, 3] = eye

@@ -237,16 +237,18 @@ class RgbdSensor:
         frame_index: int,
         camera_end_from_start: np.ndarray | None = None,
     ) -> tuple[np.ndarray, np.ndarray]:
-        """``(rgb, depth_m)`` the sensor delivers from rendered (H, W, 3) camera-frame points
-        (OpenCV axes, z ≤ 0 = no surface), normals and colour; ``camera_end_from_start`` is the
-        camera's motion over the exposure (4x4, None = at rest)."""
+        """``(rgb, depth_m)`` the sensor delivers from a rendered frame: (H, W, 3) camera-frame
+        points (OpenCV axes, z ≤ 0 = no surface), normals and 8-bit colour, or the renderer's own
+        (H, W, 4) position (OpenGL axes, w ≥ 1 = no surface), normal and RGBA in [0, 1] buffers;
+        ``camera_end_from_start`` is the camera's motion over the exposure (4x4, None = at rest)."""
         motion = None if camera_end_from_start is None else np.asarray(camera_end_from_start).tolist()
         req = dict(self._request, frame_index=int(frame_index), camera_end_from_start=motion)
+        renderer = np.shape(points_in_camera)[-1] == 4
         depth, colour, info = self._native.sensor_model(
             json.dumps(req),
             np.ascontiguousarray(points_in_camera, dtype=np.float32),
             np.ascontiguousarray(normals_in_camera, dtype=np.float32),
-            np.ascontiguousarray(rgb, dtype=np.uint8),
+            np.ascontiguousarray(rgb, dtype=np.float32 if renderer else np.uint8),
         )
         self.last_stats = json.loads(info)["stats"]
         return colour, depth

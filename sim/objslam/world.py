@@ -36,7 +36,7 @@ import sapien
 
 from . import _native
 from .calibration import ArmErrors, ContactConfig
-from .camera import CV_FROM_GL, SAPIEN_FROM_CV, CameraConfig, RgbdSensor
+from .camera import SAPIEN_FROM_CV, CameraConfig, RgbdSensor
 from .camera_path import CameraPaths, quat_from_matrix
 from .detector import DetectorView
 from .meshes import get_asset
@@ -529,30 +529,27 @@ class SimWorld:
         seg = self.camera.get_picture("Segmentation")[..., 1].astype(np.uint32)
         normals_gl = self.camera.get_picture("Normal") if self.sensor is not None else None
         t1 = time.perf_counter()
-        # [0, 1] to 8 bits, rounded: one float copy, scaled, clipped and offset in place.
-        scaled = rgba[..., :3] * np.float32(255.0)
-        np.clip(scaled, 0.0, 255.0, out=scaled)
-        scaled += np.float32(0.5)
-        rgb = scaled.astype(np.uint8)
         robot = np.isin(seg, list(self.robot_actor_ids)) if self.camera_config.mask_robot_depth else None
         q = self.qpos_delayed()
         if self.sensor is None or normals_gl is None:
+            # [0, 1] to 8 bits, rounded: one float copy, scaled, clipped and offset in place.
+            scaled = rgba[..., :3] * np.float32(255.0)
+            np.clip(scaled, 0.0, 255.0, out=scaled)
+            scaled += np.float32(0.5)
+            rgb = scaled.astype(np.uint8)
             depth = np.where(pos[..., 3] < 1, -pos[..., 2], 0.0).astype(np.float32)
             depth[depth > self.camera_config.far_m] = 0.0
             if robot is not None:
                 depth[robot] = 0.0
             depth = self.camera_config.depth_noise.apply(depth, self.rng)
         else:
-            # The renderer's geometry in OpenCV camera axes; no surface (and the robot's own
-            # pixels, the finger tips) as z = 0. Segmentation is used only for the robot mask.
-            points = pos[..., :3] * CV_FROM_GL
-            gone = pos[..., 3] >= 1
+            # The renderer's own buffers go to the sensor model, which reads them in OpenGL axes;
+            # the robot's own pixels (the finger tips) are marked as no surface. Segmentation is
+            # used only for that mask.
             if robot is not None:
-                gone |= robot
-            points[gone] = 0.0
-            normals = normals_gl[..., :3] * CV_FROM_GL
+                pos[robot, 3] = 1.0
             rgb, depth = self.sensor.apply(
-                points, normals, rgb, frame_index=self.frame_index, camera_end_from_start=self._exposure_motion(self.qpos())
+                pos, normals_gl, rgba, frame_index=self.frame_index, camera_end_from_start=self._exposure_motion(self.qpos())
             )
         self.last_timings_ms = {"render": (t1 - t0) * 1e3, "sensor": (time.perf_counter() - t1) * 1e3}
         world_from_camera_gt = self.world_from_camera_gt()

@@ -388,6 +388,108 @@ pub struct RenderedFrame<'a> {
     pub rgb: &'a [u8],
 }
 
+/// A rendered frame as the renderer's camera delivers its buffers (SAPIEN's "Position", "Normal"
+/// and "Color" pictures): four floats a pixel, row-major, in the camera's OpenGL axes (x right,
+/// y up, z backward).
+#[derive(Debug, Clone, Copy)]
+pub struct RendererBuffers<'a> {
+    /// Image width, pixels.
+    pub width: usize,
+    /// Image height, pixels.
+    pub height: usize,
+    /// Per pixel: (x, y, z, w), the surface point in metres; `w >= 1` where nothing was hit (or
+    /// where the caller drops the pixel, e.g. the robot's own). Length `4 · width · height`.
+    pub position: &'a [f32],
+    /// Per pixel: (x, y, z, unused), the surface normal. Length `4 · width · height`.
+    pub normal: &'a [f32],
+    /// Per pixel: (r, g, b, a) in [0, 1]. Length `4 · width · height`, or empty for depth only.
+    pub colour: &'a [f32],
+}
+
+/// The buffers of a [`RenderedFrame`], owned.
+#[derive(Debug, Clone, Default)]
+pub struct FrameBuffers {
+    /// Image width, pixels.
+    pub width: usize,
+    /// Image height, pixels.
+    pub height: usize,
+    /// [`RenderedFrame::points_in_camera`].
+    pub points: Vec<f32>,
+    /// [`RenderedFrame::normals_in_camera`].
+    pub normals: Vec<f32>,
+    /// [`RenderedFrame::rgb`].
+    pub rgb: Vec<u8>,
+}
+
+impl FrameBuffers {
+    /// The buffers as the sensor model's input.
+    pub fn frame(&self) -> RenderedFrame<'_> {
+        RenderedFrame {
+            width: self.width,
+            height: self.height,
+            points_in_camera: &self.points,
+            normals_in_camera: &self.normals,
+            rgb: &self.rgb,
+        }
+    }
+}
+
+impl RendererBuffers<'_> {
+    /// The buffers in the sensor model's conventions, into `out` (its allocations reused):
+    /// OpenCV axes (y and z negated), the point (0, 0, 0) where nothing was hit, colour to 8 bits
+    /// rounded to nearest (`clamp(255 c, 0, 255) + ½`, truncated). On two threads where the
+    /// machine has two cores.
+    pub fn convert_into(&self, out: &mut FrameBuffers) -> Result<(), SensorError> {
+        let (w, h) = (self.width, self.height);
+        let n = w * h;
+        for (field, len) in [("position", self.position.len()), ("normal", self.normal.len())] {
+            if len != 4 * n {
+                return Err(SensorError::BufferLength { field, expected: 4 * n, actual: len });
+            }
+        }
+        if !self.colour.is_empty() && self.colour.len() != 4 * n {
+            return Err(SensorError::BufferLength { field: "colour", expected: 4 * n, actual: self.colour.len() });
+        }
+        let with_colour = !self.colour.is_empty();
+        (out.width, out.height) = (w, h);
+        out.points.resize(3 * n, 0.0);
+        out.normals.resize(3 * n, 0.0);
+        out.rgb.resize(if with_colour { 3 * n } else { 0 }, 0);
+        let convert = |rows: std::ops::Range<usize>, points: &mut [f32], normals: &mut [f32], rgb: &mut [u8]| {
+            let span = 4 * rows.start * w..4 * rows.end * w;
+            for (o, p) in points.chunks_exact_mut(3).zip(self.position[span.clone()].chunks_exact(4)) {
+                let hit = p[3] < 1.0 || p[3].is_nan();
+                o[0] = if hit { p[0] } else { 0.0 };
+                o[1] = if hit { -p[1] } else { 0.0 };
+                o[2] = if hit { -p[2] } else { 0.0 };
+            }
+            for (o, v) in normals.chunks_exact_mut(3).zip(self.normal[span.clone()].chunks_exact(4)) {
+                (o[0], o[1], o[2]) = (v[0], -v[1], -v[2]);
+            }
+            if with_colour {
+                for (o, c) in rgb.chunks_exact_mut(3).zip(self.colour[span].chunks_exact(4)) {
+                    for (o, &c) in o.iter_mut().zip(c) {
+                        *o = (min_f(max_f(c * 255.0, 0.0), 255.0) + 0.5) as u8;
+                    }
+                }
+            }
+        };
+        if crate::worker_threads() < 2 || h < 2 {
+            convert(0..h, &mut out.points, &mut out.normals, &mut out.rgb);
+            return Ok(());
+        }
+        let half = h / 2;
+        let (pa, pb) = out.points.split_at_mut(3 * half * w);
+        let (na, nb) = out.normals.split_at_mut(3 * half * w);
+        let (ra, rb) = out.rgb.split_at_mut(if with_colour { 3 * half * w } else { 0 });
+        std::thread::scope(|s| {
+            s.spawn(|| convert(half..h, pb, nb, rb));
+            convert(0..half, pa, na, ra);
+        });
+        Ok(())
+    }
+}
+
 /// What the sensor delivers for a frame.
 #[derive(Debug, Clone)]
 pub struct SensorFrame {
@@ -629,12 +731,32 @@ pub struct SensorInfo {
 impl SensorRequest {
     /// Draws the episode's unit and, given a rendered frame, simulates it ([`simulate_frame`]).
     pub fn run(&self, frame: Option<&RenderedFrame<'_>>) -> Result<(SensorInfo, Option<SensorFrame>), SensorError> {
-        let k = Intrinsics::from_matrix(&Matrix3::from_fn(|r, c| self.intrinsics[r][c]));
-        let unit = SensorUnit::draw(&self.config, k, self.seed)?;
+        let unit = self.unit()?;
         let Some(frame) = frame else { return Ok((SensorInfo { unit, stats: None }, None)) };
-        let motion = self.camera_end_from_start.map(|m| Matrix4::from_fn(|r, c| m[r][c]));
-        let out = simulate_frame(&self.config, &unit, frame, motion.as_ref(), self.seed, self.frame_index)?;
+        let out = self.simulate(&unit, frame)?;
         Ok((SensorInfo { unit, stats: Some(out.stats) }, Some(out)))
+    }
+
+    /// [`Self::run`] on the renderer's own buffers ([`RendererBuffers::convert_into`]; the
+    /// converted buffers are kept between calls).
+    pub fn run_renderer(&self, buffers: &RendererBuffers<'_>) -> Result<(SensorInfo, SensorFrame), SensorError> {
+        static CONVERTED: Mutex<Option<FrameBuffers>> = Mutex::new(None);
+        let unit = self.unit()?;
+        let mut converted = CONVERTED.lock().unwrap_or_else(|e| e.into_inner()).take().unwrap_or_default();
+        let out = buffers.convert_into(&mut converted).and_then(|()| self.simulate(&unit, &converted.frame()));
+        *CONVERTED.lock().unwrap_or_else(|e| e.into_inner()) = Some(converted);
+        let out = out?;
+        Ok((SensorInfo { unit, stats: Some(out.stats) }, out))
+    }
+
+    fn unit(&self) -> Result<SensorUnit, SensorError> {
+        let k = Intrinsics::from_matrix(&Matrix3::from_fn(|r, c| self.intrinsics[r][c]));
+        SensorUnit::draw(&self.config, k, self.seed)
+    }
+
+    fn simulate(&self, unit: &SensorUnit, frame: &RenderedFrame<'_>) -> Result<SensorFrame, SensorError> {
+        let motion = self.camera_end_from_start.map(|m| Matrix4::from_fn(|r, c| m[r][c]));
+        simulate_frame(&self.config, unit, frame, motion.as_ref(), self.seed, self.frame_index)
     }
 }
 
@@ -700,6 +822,25 @@ mod tests {
             assert!(stats.mixed > 0 && stats.shadow > 0);
             assert_eq!(both.rgb, colour_image(&cfg.colour, &unit, &frame, Some(&m), 9, 4));
         }
+    }
+
+    #[test]
+    fn renderer_buffers_convert_to_opencv_axes_and_bytes() {
+        let (w, h) = (3usize, 4usize);
+        let position: Vec<f32> =
+            (0..w * h).flat_map(|i| [0.1 * i as f32, 0.2, -0.5, if i == 5 { 1.0 } else { 0.0 }]).collect();
+        let normal: Vec<f32> = (0..w * h).flat_map(|_| [0.0, 0.6, 0.8, 0.0]).collect();
+        let colour: Vec<f32> = (0..w * h).flat_map(|i| [-0.2, 0.5, 1.3, 1.0].map(|c| c + 0.001 * i as f32)).collect();
+        let buffers = RendererBuffers { width: w, height: h, position: &position, normal: &normal, colour: &colour };
+        let mut out = FrameBuffers::default();
+        buffers.convert_into(&mut out).unwrap();
+        assert_eq!(&out.points[..3], &[0.0, -0.2, 0.5]);
+        assert_eq!(&out.points[15..18], &[0.0, 0.0, 0.0]); // pixel 5: nothing hit
+        assert_eq!(&out.normals[..3], &[0.0, -0.6, -0.8]);
+        assert_eq!(&out.rgb[..3], &[0, 128, 255]);
+        assert_eq!((out.width, out.height, out.rgb.len()), (w, h, 3 * w * h));
+        let short = RendererBuffers { normal: &normal[4..], ..buffers };
+        assert!(short.convert_into(&mut out).unwrap_err().to_string().contains("normal"));
     }
 
     #[test]
