@@ -49,6 +49,8 @@ class _Capturing:
 
     def update(self, **kw):
         grey = kw.get("grey")
+        if grey is not None and np.ndim(grey) == 3:
+            grey = episode.grey_of(grey)  # the RGB image the core takes the luma of, as the core does
         if grey is not None:
             rec = {
                 "index": int(kw["index"]),

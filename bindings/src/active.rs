@@ -79,7 +79,8 @@ impl ActiveMapperPy {
 
     /// Fuse one frame into the map and the surface grids; returns per-detection object ids.
     /// With a tracker, `world_from_camera` is the forward-kinematics prior and the tracked pose is
-    /// used (`grey` required); `world_from_camera_gt` (evaluation only: ATE / RPE, and the
+    /// used (`grey` required: uint8 (H, W), or the (H, W, 3) RGB image, whose BT.601 luma the core
+    /// takes); `world_from_camera_gt` (evaluation only: ATE / RPE, and the
     /// `ground_truth` pose source) and `view_index` (per-view calibration bias) feed the tracker.
     #[pyo3(signature = (*, index, intrinsics, depth, world_from_camera, detections, grey = None,
                         world_from_camera_gt = None, view_index = 0))]
@@ -95,9 +96,18 @@ impl ActiveMapperPy {
         world_from_camera_gt: Option<&Bound<'_, PyAny>>,
         view_index: u64,
     ) -> PyResult<Vec<Option<u32>>> {
-        let grey = grey.map(|g| array::<u8, 2>(g, "grey", [None, None], "(H, W)")).transpose()?;
-        let grey =
-            grey.map(|(data, [h, w])| GreyImage::new(w as u32, h as u32, data)).transpose().map_err(input_err)?;
+        // Grey levels (H, W), or an RGB image (H, W, 3) whose luma the core takes.
+        let grey = match grey {
+            Some(g) if g.getattr("ndim").and_then(|n| n.extract::<usize>()).ok() == Some(3) => {
+                let (rgb, [h, w, _]) = array::<u8, 3>(g, "grey", [None, None, Some(3)], "(H, W, 3)")?;
+                Some(GreyImage::from_rgb(w as u32, h as u32, &rgb))
+            }
+            g => g
+                .map(|g| array::<u8, 2>(g, "grey", [None, None], "(H, W)"))
+                .transpose()?
+                .map(|(data, [h, w])| GreyImage::new(w as u32, h as u32, data)),
+        };
+        let grey = grey.transpose().map_err(input_err)?;
         let frame = frame_from_py(index, intrinsics, depth, world_from_camera, detections)?;
         let world_from_camera_gt = world_from_camera_gt.map(|g| pose(g, "world_from_camera_gt")).transpose()?;
         self.system

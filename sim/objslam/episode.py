@@ -730,7 +730,7 @@ class Episode:
             depth=frame.depth_m,
             world_from_camera=prior,
             detections=[d.as_tuple() for d in dets],
-            grey=grey_of(frame.rgb) if (cfg.map["parameterize"] or cfg.pose_source != "fk") else None,
+            grey=frame.rgb if (cfg.map["parameterize"] or cfg.pose_source != "fk") else None,
             world_from_camera_gt=frame.world_from_camera_gt,
             view_index=self.view_index,
         )

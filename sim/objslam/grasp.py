@@ -216,7 +216,7 @@ class GraspSession:
         """Close views of ``target`` (top-down, then two obliques from the robot's side) fused into a
         fresh local map; returns the local object that refines the target (nearest centre within
         ``reobserve_match_m``, same label first) or None, all local objects, and the frames used."""
-        from .episode import grey_of, new_mapper
+        from .episode import new_mapper
 
         cfg, rc = self.cfg, self.run_cfg
         mapper = new_mapper(rc, self.scene)
@@ -267,7 +267,7 @@ class GraspSession:
                     depth=frame.depth_m,
                     world_from_camera=self.arm.prior(frame.world_from_camera_fk, vi, frame.index),
                     detections=[d.as_tuple() for d in dets],
-                    grey=grey_of(frame.rgb) if (rc.map["parameterize"] or rc.pose_source != "fk") else None,
+                    grey=frame.rgb if (rc.map["parameterize"] or rc.pose_source != "fk") else None,
                     world_from_camera_gt=frame.world_from_camera_gt,
                     view_index=vi,
                 )

@@ -111,6 +111,20 @@ impl GreyImage {
         }
         Ok(Self { width, height, data })
     }
+
+    /// The ITU-R BT.601 luma of an RGB image (three bytes a pixel, row-major):
+    /// `0.299 R + 0.587 G + 0.114 B` in `f32`, rounded to nearest (`+ ½`, clamped, truncated).
+    pub fn from_rgb(width: u32, height: u32, rgb: &[u8]) -> Result<Self, FrameError> {
+        let expected = 3 * width as usize * height as usize;
+        if rgb.len() != expected {
+            return Err(FrameError::BufferLength { field: "rgb", expected, actual: rgb.len() });
+        }
+        let luma = |p: &[u8]| {
+            let g = f32::from(p[0]) * 0.299 + f32::from(p[1]) * 0.587 + f32::from(p[2]) * 0.114;
+            (g + 0.5).clamp(0.0, 255.0) as u8
+        };
+        Ok(Self { width, height, data: rgb.chunks_exact(3).map(luma).collect() })
+    }
 }
 
 /// A 2D detection: box, class label and confidence.
@@ -172,6 +186,15 @@ impl Frame {
 mod tests {
     use super::*;
     use crate::geometry::PinholeCamera;
+
+    #[test]
+    fn luma_of_rgb_is_bt601_rounded() {
+        let rgb = [255, 255, 255, 0, 0, 0, 255, 0, 0, 0, 255, 0, 0, 0, 255, 100, 150, 200];
+        let grey = GreyImage::from_rgb(3, 2, &rgb).unwrap();
+        // 0.299 · 255 = 76.2, 0.587 · 255 = 149.7, 0.114 · 255 = 29.1, 29.9 + 88.05 + 22.8 = 140.75.
+        assert_eq!(grey.data, vec![255, 0, 76, 150, 29, 141]);
+        assert!(GreyImage::from_rgb(3, 3, &rgb).unwrap_err().to_string().contains("rgb"));
+    }
 
     fn frame() -> Frame {
         let camera = PinholeCamera::from_fovy(4, 3, 1.0).unwrap();
