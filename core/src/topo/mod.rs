@@ -56,7 +56,8 @@
 //!    `inlier_threshold` in prior units, sizes consistent with the hypothesis's scale, and, for the
 //!    gravity-aligned model, a cuboid's yaw difference within `noise.yaw_gate_rad` of the
 //!    hypothesis's rotation modulo its symmetry — this rejects look-alikes standing at the right
-//!    place with the wrong heading). It stops early when every candidate object is explained and no
+//!    place with the wrong heading; with `noise.fold_swapped_sides`, modulo 90° for a pair whose long
+//!    and short footprint sides are swapped between the maps, as for a cuboid seen end-on). It stops early when every candidate object is explained and no
 //!    inlier object has an alternative candidate (the "all-distinct labels" case stops after the
 //!    first iteration), or by the classic adaptive RANSAC count for `ransac_confidence`. The best
 //!    hypothesis is refitted on its inliers up to `refine_rounds` times, re-collecting inliers with
