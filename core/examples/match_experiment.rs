@@ -8,7 +8,7 @@
 //! Options: `--trials N` (default 500 per row), `--seed S` (default 2026), `--full-rotation`
 //! (random 3D rotation and the 7-DoF model instead of the gravity-aligned one), `--config-json J`
 //! (a partial `MatchConfig` as JSON; unnamed fields keep their defaults; without it the matcher
-//! is set for the experiment's noise: `size_tolerance` 5 σ_size, `noise.size_rel` σ_size, exact labels), `--other-seeds 1,2,3`
+//! is set for the experiment's noise: `size_tolerance` 5 σ_size, `noise.size_rel` σ_size, exact labels, no swapped-side yaw folding), `--other-seeds 1,2,3`
 //! (the main protocol again with these seeds, successes only). Set `MATCH_DEBUG=1`
 //! to print every failed trial with its inlier pairs (diagnosis only).
 //!
@@ -626,13 +626,14 @@ fn main() -> Result<()> {
     let noise = Noise { on_prior: true, pos_m: 0.01, yaw_rad: 3f64.to_radians(), size_rel: 0.05 };
     let model = if full_rotation { TransformModel::Similarity3 } else { TransformModel::YawSimilarity };
     // Without --config-json the matcher is set for this experiment's maps: their size noise and
-    // exact labels (no detector confuses labels here). The defaults are set for maps of the realistic
+    // exact labels (no detector confuses labels here), and their cuboid footprints are never swapped
+    // between the maps (no end-on views). The defaults are set for maps of the realistic
     // world built from a few views, whose sizes are far less reliable.
     let base: MatchConfig = match &config_json {
         Some(text) => serde_json::from_str(text).context("--config-json")?,
         None => MatchConfig {
             size_tolerance: 5.0 * noise.size_rel,
-            noise: NoiseModel { size_rel: noise.size_rel, ..NoiseModel::default() },
+            noise: NoiseModel { size_rel: noise.size_rel, fold_swapped_sides: false, ..NoiseModel::default() },
             descriptor: DescriptorConfig { label_match: LabelMatch::Exact, ..DescriptorConfig::default() },
             ..MatchConfig::default()
         },

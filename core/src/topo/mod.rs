@@ -56,7 +56,8 @@
 //!    `inlier_threshold` in prior units, sizes consistent with the hypothesis's scale, and, for the
 //!    gravity-aligned model, a cuboid's yaw difference within `noise.yaw_gate_rad` of the
 //!    hypothesis's rotation modulo its symmetry — this rejects look-alikes standing at the right
-//!    place with the wrong heading). It stops early when every candidate object is explained and no
+//!    place with the wrong heading; with `noise.fold_swapped_sides`, modulo 90° for a pair whose long
+//!    and short footprint sides are swapped between the maps, as for a cuboid seen end-on). It stops early when every candidate object is explained and no
 //!    inlier object has an alternative candidate (the "all-distinct labels" case stops after the
 //!    first iteration), or by the classic adaptive RANSAC count for `ransac_confidence`. The best
 //!    hypothesis is refitted on its inliers up to `refine_rounds` times, re-collecting inliers with
@@ -489,18 +490,39 @@ struct Hypothesis {
     transform: Similarity3<f64>,
 }
 
-/// Yaw symmetry period of a matched pair: π/2 for square-footprint cuboids (either map), π for other
-/// cuboids, `None` for cylinders (yaw undefined).
-fn yaw_period(a: &TopoNode, b: &TopoNode, square_tolerance: f64) -> Option<f64> {
+/// Yaw symmetry period of a matched pair under a transform of scale `scale` (query units per prior
+/// unit): π/2 for square-footprint cuboids (either map, `noise.square_tolerance`) and, with
+/// `noise.fold_swapped_sides`, for cuboids whose long and short footprint sides are swapped between
+/// the maps ([`sides_swapped`]); π for other cuboids; `None` for cylinders (yaw undefined).
+fn yaw_period(a: &TopoNode, b: &TopoNode, noise: &NoiseModel, scale: f64) -> Option<f64> {
     let square = |n: &TopoNode| {
         let (x, y) = (n.half_extents.x.abs(), n.half_extents.y.abs());
-        (x - y).abs() <= square_tolerance * x.max(y)
+        (x - y).abs() <= noise.square_tolerance * x.max(y)
     };
     match a.label.shape() {
         Shape::Cuboid if square(a) || square(b) => Some(std::f64::consts::FRAC_PI_2),
+        Shape::Cuboid if noise.fold_swapped_sides && sides_swapped(a, b, scale) => Some(std::f64::consts::FRAC_PI_2),
         Shape::Cuboid => Some(std::f64::consts::PI),
         Shape::Cylinder => None,
     }
+}
+
+/// Whether two maps disagree on which footprint side of an object is the long one: the query's long
+/// side divided by `scale` is closer in ratio to the prior's short side than to its long side, or
+/// the prior's long side times `scale` is closer to the query's short side than to its long side.
+/// `false` on non-positive or non-finite sides or scale.
+pub fn sides_swapped(prior: &TopoNode, query: &TopoNode, scale: f64) -> bool {
+    let sides = |n: &TopoNode| {
+        let (x, y) = (n.half_extents.x.abs(), n.half_extents.y.abs());
+        (x.max(y), x.min(y))
+    };
+    let ((pl, ps), (ql, qs)) = (sides(prior), sides(query));
+    let (ql, qs) = (ql / scale, qs / scale);
+    let dist = |x: f64, y: f64| (x / y).ln().abs();
+    if ![pl, ps, ql, qs].iter().all(|v| v.is_finite() && *v > 0.0) {
+        return false;
+    }
+    dist(ql, ps) < dist(ql, pl) || dist(pl, qs) < dist(pl, ql)
 }
 
 /// Reusable buffers of the inlier search.
@@ -580,7 +602,7 @@ impl Matcher<'_> {
             }
             // Gravity-aligned model: a cuboid's yaw must follow the hypothesis's rotation (modulo its
             // symmetry); rejects look-alikes lying at the right place with the wrong heading.
-            if let (Some(theta), Some(period)) = (yaw, yaw_period(p, q, cfg.noise.square_tolerance)) {
+            if let (Some(theta), Some(period)) = (yaw, yaw_period(p, q, &cfg.noise, s)) {
                 let d = q.yaw_rad - p.yaw_rad - theta;
                 if (d - period * (d / period).round()).abs() > cfg.noise.yaw_gate_rad {
                     continue;
@@ -661,11 +683,14 @@ pub fn fit_pairs(
     config: &MatchConfig,
 ) -> Option<PairFit> {
     let (mut p, mut q) = (Vec::with_capacity(pairs.len()), Vec::with_capacity(pairs.len()));
+    for &(i, j) in pairs {
+        p.push(prior.get(i)?.center);
+        q.push(query.get(j)?.center);
+    }
+    let fit = solve::solve(config.model, &p, &q)?;
     let mut cues = Vec::with_capacity(pairs.len());
     for &(i, j) in pairs {
         let (a, b) = (prior.get(i)?, query.get(j)?);
-        p.push(a.center);
-        q.push(b.center);
         cues.push(CuePair {
             prior_center: a.center,
             query_center: b.center,
@@ -673,10 +698,9 @@ pub fn fit_pairs(
             query_extents: b.sorted_extents(),
             prior_yaw: a.yaw_rad,
             query_yaw: b.yaw_rad,
-            yaw_period: yaw_period(a, b, config.noise.square_tolerance),
+            yaw_period: yaw_period(a, b, &config.noise, fit.scaling()),
         });
     }
-    let fit = solve::solve(config.model, &p, &q)?;
     let ratio = scale_from_distance_ratios(&p, &q, MIN_EDGE_LENGTH);
     let chosen = match config.scale_source {
         ScaleSource::Umeyama => fit,

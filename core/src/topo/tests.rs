@@ -302,6 +302,54 @@ fn a_cuboid_with_the_wrong_heading_is_not_an_inlier() {
 }
 
 #[test]
+fn swapped_footprint_sides_are_detected_after_the_scale() {
+    let node = |x: f64, y: f64| TopoNode {
+        label: Label::Book,
+        center: Vector3::zeros(),
+        yaw_rad: 0.0,
+        half_extents: Vector3::new(x, y, 0.02),
+    };
+    let prior = node(0.08, 0.05);
+    // Query long side / scale = 0.05: equal to the prior's short side, 1.6× off its long side.
+    assert!(sides_swapped(&prior, &node(0.085, 0.03), 1.7));
+    // The same query under scale 1: 0.085 is within 6 % of the long side 0.08.
+    assert!(!sides_swapped(&prior, &node(0.085, 0.03), 1.0));
+    // Same proportions on both sides: not swapped, whatever the axis order of the query.
+    assert!(!sides_swapped(&prior, &node(0.136, 0.085), 1.7));
+    assert!(!sides_swapped(&prior, &node(0.085, 0.136), 1.7));
+    // The prior seen end-on: its long side 0.05 matches the query's short side 0.05 / 1.
+    assert!(sides_swapped(&node(0.05, 0.02), &node(0.08, 0.05), 1.0));
+    // Degenerate sides or scale: not swapped.
+    assert!(!sides_swapped(&prior, &node(0.0, 0.03), 1.0));
+    assert!(!sides_swapped(&prior, &node(0.085, 0.03), f64::NAN));
+    assert!(!sides_swapped(&prior, &node(0.085, 0.03), 0.0));
+}
+
+#[test]
+fn a_cuboid_seen_end_on_keeps_its_pair_when_swapped_sides_are_folded() {
+    // The book at index 1 is seen end-on in the query: its long side (0.08) truncated to 0.02 along
+    // the view, so the map's long axis is the true short one and its yaw is 90° off.
+    let mut prior = layout(41, 6, &[Label::Cup, Label::Book, Label::Can, Label::Block]);
+    prior[1].half_extents = Vector3::new(0.08, 0.05, 0.02);
+    let truth = yaw_transform();
+    let mut query = transformed(&prior, &truth);
+    query[1].half_extents = Vector3::new(0.05, 0.03, 0.02) * truth.scaling();
+    query[1].yaw_rad += std::f64::consts::FRAC_PI_2;
+    let folded = MatchConfig {
+        noise: NoiseModel { fold_swapped_sides: true, ..NoiseModel::default() },
+        ..MatchConfig::default()
+    };
+    let m = expect_match(&match_maps(&prior, &query, &folded)).clone();
+    assert_eq!(m.inliers.len(), 6, "{:?}", m.inliers);
+    let rotation = (m.query_from_prior.isometry.rotation.angle_to(&truth.isometry.rotation)).to_degrees();
+    assert!(rotation < 1e-6, "{rotation}");
+    // The default (no folding): the end-on book's yaw is 90° off and it is not an inlier.
+    let m = expect_match(&match_maps(&prior, &query, &MatchConfig::default())).clone();
+    assert_eq!(m.inliers.len(), 5, "{:?}", m.inliers);
+    assert!(m.inliers.iter().all(|p| p.prior != 1));
+}
+
+#[test]
 fn fused_cues_are_exact_on_exact_data_and_sizes_pull_the_scale() {
     let nodes = layout(51, 5, &[Label::Book, Label::Block]);
     let truth = yaw_transform();
