@@ -148,7 +148,7 @@ def render_pool(cfg: Any, scene: Any, rings: list[Ring], seed: int, progress: bo
     """Render the query pool of one scene (see the module docs). ``cfg`` is the run config of the
     query session (its seed draws the arm errors and the sensor and detector noise)."""
     from .detector import SimulatedDetector
-    from .episode import episode_arm_errors
+    from .episode import episode_arm_errors, grey_of
     from .world import SimWorld, UnreachablePoseError
 
     rng_sensor = np.random.default_rng([seed, 1])
@@ -175,7 +175,7 @@ def render_pool(cfg: Any, scene: Any, rings: list[Ring], seed: int, progress: bo
                 PoolFrame(
                     ring=ri,
                     azimuth_deg=az,
-                    grey=frame.rgb,
+                    grey=grey_of(frame.rgb),
                     depth_m=frame.depth_m,
                     intrinsics=frame.intrinsics,
                     detections=[d.as_tuple() for d in dets],
