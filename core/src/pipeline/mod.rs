@@ -928,6 +928,24 @@ impl ObjectPipeline {
         map
     }
 
+    /// [`Self::map`] without the objects' clouds (`points_in_world` empty), for per-frame callers
+    /// that need ids, labels, observations and geometry only: once every confirmed object has an
+    /// estimate (after the first refresh), no cloud is copied and no raw extent computed.
+    pub fn map_without_clouds(&self) -> ObjectMap {
+        let mut map = self.raw_map_with(false);
+        self.confirmed(&mut map);
+        if map.objects.iter().any(|o| !self.estimates.contains_key(&o.id)) {
+            map = self.map();
+        }
+        for obj in &mut map.objects {
+            obj.points_in_world = Vec::new();
+            if let Some(e) = self.estimates.get(&obj.id) {
+                Self::with_geometry(obj, &e.geometry, e.stage);
+            }
+        }
+        map
+    }
+
     /// The estimator inputs of every confirmed object that has an estimator.
     pub fn estimator_inputs(&self) -> Vec<EstimatorInput> {
         let mut map = self.raw_map();
@@ -1058,8 +1076,14 @@ mod tests {
                 let id = up.assigned[0].unwrap_or_else(|| panic!("{mode:?}: frame {i} unassigned"));
                 assert!(up.observed.get(&id).is_some_and(|v| !v.is_empty()), "{mode:?}");
             }
+            let without_clouds = |map: ObjectMap| {
+                let objects = map.objects.into_iter().map(|o| MapObject { points_in_world: Vec::new(), ..o }).collect();
+                ObjectMap { objects, ..map }
+            };
+            assert_eq!(p.map_without_clouds(), without_clouds(p.map()), "{mode:?}: before the refresh");
             p.refresh_estimates();
             let map = p.map();
+            assert_eq!(p.map_without_clouds(), without_clouds(map.clone()), "{mode:?}: estimated");
             assert_eq!(map.len(), 1, "{mode:?}: {} objects", map.len());
             let g = map.objects[0].geometry();
             assert!((g.center.x).abs() < 0.02 && (g.center.y).abs() < 0.02, "{mode:?}: {:?}", g.center);

@@ -250,7 +250,8 @@ impl System {
             self.poses_true.push(g);
         }
         let summary = self.pipeline.update_with_segments(&frame, segments.as_deref(), map_points.as_deref())?;
-        let map = self.pipeline.map();
+        // The grids need the objects' geometry, not their clouds.
+        let map = self.pipeline.map_without_clouds();
         let observed: Vec<ObservedPoints> = summary
             .observed
             .into_iter()
