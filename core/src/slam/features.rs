@@ -249,6 +249,8 @@ struct LevelScratch {
     /// FAST scores of the level being detected (row stride: the level's width; 0: no corner).
     score_buf: Vec<u8>,
     corners: Vec<Corner>,
+    /// Keep flags of one row of the non-maximum suppression.
+    keep_row: Vec<u8>,
     /// The level smoothed for the binary tests ([`gaussian_blur`]).
     blurred: Vec<u8>,
     blur_rows: Vec<u16>,
@@ -509,48 +511,51 @@ impl Tables {
                 scan_fast(&level.image, &cell_area, weak, map);
             }
         }
-        // 3x3 non-maximum suppression over the map (ties: the first in raster order wins); the
+        // 3x3 non-maximum suppression over the map (ties: the first in raster order wins): a row
+        // of keep flags lane-wise (a score beats the row above and its left neighbour, and is
+        // not beaten by its right neighbour and the row below; a zero never passes), then the
         // survivors become the level's corners, in raster order.
         let map = &scratch.score_buf;
+        let keep = &mut scratch.keep_row;
+        keep.resize(nx, 0);
         for y in EDGE_PX..EDGE_PX + ny {
-            let row = y * w;
-            let cell_row = ((y - EDGE_PX) / cell) * ncx;
-            let Some(scores) = map.get(row + EDGE_PX..row + EDGE_PX + nx) else {
+            let band = |r: usize| map.get(r * w + EDGE_PX - 1..r * w + EDGE_PX + nx + 1);
+            let (Some(up), Some(mid), Some(dn)) = (band(y - 1), band(y), band(y + 1)) else {
                 continue;
             };
-            for (k, chunk) in scores.chunks(LANES).enumerate() {
-                if chunk.iter().all(|&v| v == 0) {
-                    continue;
-                }
-                for (j, &s) in chunk.iter().enumerate().filter(|(_, &v)| v != 0) {
-                    let x = EDGE_PX + k * LANES + j;
-                    let i = row + x;
-                    let keep =
-                        match (map.get(i - w - 1..i - w + 2), map.get(i - 1..i + 2), map.get(i + w - 1..i + w + 2)) {
-                            (Some(a), Some(m), Some(b)) => {
-                                // Raster order of the neighbours decides ties.
-                                a[0] < s
-                                    && a[1] < s
-                                    && a[2] < s
-                                    && m[0] < s
-                                    && m[2] <= s
-                                    && b[0] <= s
-                                    && b[1] <= s
-                                    && b[2] <= s
-                            }
-                            _ => false,
-                        };
-                    if keep {
-                        let score = u16::from(s);
-                        scratch.corners.push(Corner {
-                            x: x as u32,
-                            y: y as u32,
-                            score,
-                            strength: u32::from(score),
-                            cell: (cell_row + (x - EDGE_PX) / cell) as u32,
-                            round: 0,
-                        });
-                    }
+            let keep: &mut [u8] = keep;
+            let n = keep.len();
+            let (u0, u1, u2) = (&up[..n], &up[1..=n], &up[2..n + 2]);
+            let (m0, m1, m2) = (&mid[..n], &mid[1..=n], &mid[2..n + 2]);
+            let (d0, d1, d2) = (&dn[..n], &dn[1..=n], &dn[2..n + 2]);
+            for (i, k) in keep.iter_mut().enumerate() {
+                let s = m1[i];
+                let up_max = u0[i].max(u1[i]).max(u2[i]);
+                let dn_max = d0[i].max(d1[i]).max(d2[i]);
+                *k = u8::from((s > up_max) & (s > m0[i]) & (s >= m2[i]) & (s >= dn_max));
+            }
+            let cell_row = ((y - EDGE_PX) / cell) * ncx;
+            // Eight flags a word; the row's last flags (fewer than eight) in a zero-padded word.
+            let chunks = keep.chunks_exact(8);
+            let mut last = [0u8; 8];
+            if let Some(dst) = last.get_mut(..chunks.remainder().len()) {
+                dst.copy_from_slice(chunks.remainder());
+            }
+            let words = chunks.map(|c| <[u8; 8]>::try_from(c).unwrap_or_default()).chain(std::iter::once(last));
+            for (k, word) in words.enumerate() {
+                let mut bits = u64::from_le_bytes(word);
+                while bits != 0 {
+                    let x = EDGE_PX + k * 8 + (bits.trailing_zeros() / 8) as usize;
+                    bits &= bits - 1;
+                    let score = u16::from(mid[x - EDGE_PX + 1]);
+                    scratch.corners.push(Corner {
+                        x: x as u32,
+                        y: y as u32,
+                        score,
+                        strength: u32::from(score),
+                        cell: (cell_row + (x - EDGE_PX) / cell) as u32,
+                        round: 0,
+                    });
                 }
             }
         }
