@@ -838,8 +838,10 @@ fn ordered_bits(v: f32) -> u32 {
 fn harris_response(img: &[u8], w: usize, x: usize, y: usize) -> f32 {
     const B: usize = HARRIS_BLOCK_PX;
     const R: usize = B / 2;
-    // The window's rows and the one above and below, B + 2 columns each, as i16.
-    let mut rows = [[0i16; B + 2]; B + 2];
+    /// Lanes of a window row's gradients (the window's B columns and a cleared lane).
+    const L: usize = B + 1;
+    // The window's rows and the one above and below, B + 2 columns each (and a zero pad), as i16.
+    let mut rows = [[0i16; L + 2]; B + 2];
     for (k, row) in rows.iter_mut().enumerate() {
         let start = (y + k - R - 1) * w + x - R - 1;
         if let Some(src) = img.get(start..start + B + 2) {
@@ -848,18 +850,27 @@ fn harris_response(img: &[u8], w: usize, x: usize, y: usize) -> f32 {
             }
         }
     }
-    let (mut a, mut b, mut c) = (0i32, 0i32, 0i32);
+    // Per lane sums of the structure tensor's entries over the window's rows (exact integers,
+    // so the lane-wise order gives the same sums).
+    let (mut sa, mut sb, mut sc) = ([0i32; L], [0i32; L], [0i32; L]);
     for k in 1..=B {
         let (up, mid, dn) = (&rows[k - 1], &rows[k], &rows[k + 1]);
-        for i in 1..=B {
-            let dx = i32::from((mid[i + 1] - mid[i - 1]) * 2 + (up[i + 1] - up[i - 1]) + (dn[i + 1] - dn[i - 1]));
-            let dy = i32::from((dn[i] - up[i]) * 2 + (dn[i - 1] - up[i - 1]) + (dn[i + 1] - up[i + 1]));
-            a += dx * dx;
-            b += dy * dy;
-            c += dx * dy;
+        let mut dx = [0i16; L];
+        let mut dy = [0i16; L];
+        for i in 0..L {
+            dx[i] = (mid[i + 2] - mid[i]) * 2 + (up[i + 2] - up[i]) + (dn[i + 2] - dn[i]);
+            dy[i] = (dn[i + 1] - up[i + 1]) * 2 + (dn[i] - up[i]) + (dn[i + 2] - up[i + 2]);
+        }
+        dx[L - 1] = 0;
+        dy[L - 1] = 0;
+        for i in 0..L {
+            let (gx, gy) = (i32::from(dx[i]), i32::from(dy[i]));
+            sa[i] += gx * gx;
+            sb[i] += gy * gy;
+            sc[i] += gx * gy;
         }
     }
-    let (a, b, c) = (a as f32, b as f32, c as f32);
+    let (a, b, c) = (sa.iter().sum::<i32>() as f32, sb.iter().sum::<i32>() as f32, sc.iter().sum::<i32>() as f32);
     a * b - c * c - 0.04 * (a + b) * (a + b)
 }
 
@@ -870,24 +881,30 @@ fn resize_bilinear(src: &Level, dst: &mut Level) {
         return;
     }
     let (rx, ry) = (sw as f32 / dw as f32, sh as f32 / dh as f32);
-    let cols: Vec<(usize, u32)> = (0..dw)
-        .map(|x| {
-            let fx = ((x as f32 + 0.5) * rx - 0.5).clamp(0.0, (sw - 1) as f32);
-            let x0 = (fx as usize).min(sw.saturating_sub(2));
-            (x0, ((fx - x0 as f32) * 256.0).round().min(256.0) as u32)
-        })
-        .collect();
+    // Per output column: its left source column and the two weights (left, right).
+    let mut x0s = Vec::with_capacity(dw);
+    let mut w_left = Vec::with_capacity(dw);
+    let mut w_right = Vec::with_capacity(dw);
+    for x in 0..dw {
+        let fx = ((x as f32 + 0.5) * rx - 0.5).clamp(0.0, (sw - 1) as f32);
+        let x0 = (fx as usize).min(sw.saturating_sub(2));
+        let wx = ((fx - x0 as f32) * 256.0).round().min(256.0) as u32;
+        x0s.push(x0);
+        w_left.push(256 - wx);
+        w_right.push(wx);
+    }
     let mut tmp = vec![0u16; sw];
     // Each column's vertical blend and its right neighbour's in one word (low, high 16 bits), so
-    // that the horizontal pass reads one word per output pixel.
+    // that the horizontal pass gathers one word per output pixel.
     let mut pairs = vec![0u32; sw];
+    let mut gathered = vec![0u32; dw];
     for y in 0..dh {
         let fy = ((y as f32 + 0.5) * ry - 0.5).clamp(0.0, (sh - 1) as f32);
         let y0 = (fy as usize).min(sh.saturating_sub(2));
         let wy = ((fy - y0 as f32) * 256.0).round().min(256.0) as u16;
         let y1 = (y0 + 1).min(sh - 1);
         let (r0, r1) = (&src.image[y0 * sw..y0 * sw + sw], &src.image[y1 * sw..y1 * sw + sw]);
-        // Vertical blend (vectorisable), then horizontal gather.
+        // Vertical blend (vectorisable), the gather, then the horizontal blend (vectorisable).
         for ((t, &a), &b) in tmp.iter_mut().zip(r0).zip(r1) {
             *t = u16::from(a) * (256 - wy) + u16::from(b) * wy;
         }
@@ -897,10 +914,14 @@ fn resize_bilinear(src: &Level, dst: &mut Level) {
             pr[i] = u32::from(lo[i]) | (u32::from(hi[i]) << 16);
         }
         pairs[n] = u32::from(tmp[n]);
+        let pairs: &[u32] = &pairs;
+        for (g, &x0) in gathered.iter_mut().zip(&x0s) {
+            *g = pairs.get(x0).copied().unwrap_or(0);
+        }
         let out = &mut dst.image[y * dw..y * dw + dw];
-        for (o, &(x0, wx)) in out.iter_mut().zip(&cols) {
-            let p = pairs.get(x0).copied().unwrap_or(0);
-            *o = (((p & 0xFFFF) * (256 - wx) + (p >> 16) * wx + 32768) >> 16) as u8;
+        let (g, wl, wr) = (&gathered[..dw], &w_left[..dw], &w_right[..dw]);
+        for (i, o) in out.iter_mut().enumerate() {
+            *o = (((g[i] & 0xFFFF) * wl[i] + (g[i] >> 16) * wr[i] + 32768) >> 16) as u8;
         }
     }
 }
