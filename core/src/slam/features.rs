@@ -1,6 +1,10 @@
 //! ORB features: pyramid, FAST-9 with 3x3 non-maximum suppression, Harris ranking spread over a
 //! grid, intensity-centroid orientation, steered BRIEF with the learned 256-pair pattern on a
 //! Gaussian-smoothed level (Rublee et al. 2011, as in OpenCV and ORB-SLAM2).
+//!
+//! [`OrbExtractor::extract`] runs on the calling thread (the benchmark against OpenCV compares
+//! one thread each); [`OrbExtractor::extract_with_threads`] spreads the levels over two threads
+//! with the same output (the tracker uses it with `crate::worker_threads`).
 
 use std::sync::atomic::{AtomicUsize, Ordering};
 
