@@ -688,9 +688,14 @@ fn scan_fast(img: &[u8], area: &ScanArea, t: u8, scores: &mut [u8]) {
             let lanes = fast_lanes(img, row + x0, &offsets, t);
             // Lanes hold the score + 1 (0: no corner); only those inside the area are written.
             let (from, to) = (x0.max(x_from), (x0 + LANES).min(x_to));
-            if let (Some(dst), Some(src)) = (scores.get_mut(row + from..row + to), lanes.get(from - x0..to - x0)) {
-                for (d, &s) in dst.iter_mut().zip(src) {
-                    *d = s.saturating_sub(1);
+            if let Some(dst) = scores.get_mut(row + from..row + to) {
+                if let Ok(whole) = <&mut [u8; LANES]>::try_from(&mut *dst) {
+                    // The common case, a whole chunk inside the area: one 16-byte store.
+                    *whole = lanes.map(|s| s.saturating_sub(1));
+                } else if let Some(src) = lanes.get(from - x0..to - x0) {
+                    for (d, &s) in dst.iter_mut().zip(src) {
+                        *d = s.saturating_sub(1);
+                    }
                 }
             }
             done_to = (x0 + LANES).min(x_to);
