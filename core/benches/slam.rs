@@ -4,7 +4,10 @@
 //! refinement, keyframe insertion + local BA when due) on 640x480 frames ray-cast from
 //! `TabletopScene::tabletop(3)` along a smooth arc, played back and forth so the motion stays
 //! smooth; the map is warmed up over the first pass. Default `TrackerConfig` (1 cm / 1° prior
-//! bias per view of two frames).
+//! bias per view of two frames). The tracker uses the core's worker threads (two on a machine
+//! with two cores or more: ORB levels and projection searches in parallel).
+//!
+//! `orb_extract_640x480`: `OrbExtractor::extract`, one thread (as the OpenCV reference).
 //!
 //! `orb_extract_640x480` frames: `shapes_texture(640, 480, seed)` for seeds 0..N_FRAMES, the same frames
 //! `experiments/bench/slam_refs.py` feeds to `cv2.ORB_create(1000)` (it ports the generator

@@ -1,6 +1,12 @@
 //! ORB features: pyramid, FAST-9 with 3x3 non-maximum suppression, Harris ranking spread over a
 //! grid, intensity-centroid orientation, steered BRIEF with the learned 256-pair pattern on a
 //! Gaussian-smoothed level (Rublee et al. 2011, as in OpenCV and ORB-SLAM2).
+//!
+//! [`OrbExtractor::extract`] runs on the calling thread (the benchmark against OpenCV compares
+//! one thread each); [`OrbExtractor::extract_with_threads`] spreads the levels over two threads
+//! with the same output (the tracker uses it with `crate::worker_threads`).
+
+use std::sync::atomic::{AtomicUsize, Ordering};
 
 use serde::{Deserialize, Serialize};
 
@@ -177,13 +183,13 @@ impl Features {
     }
 }
 
+/// One pyramid level's image.
 #[derive(Debug, Clone, Default)]
 struct Level {
     width: usize,
     height: usize,
     scale: f32,
     image: Vec<u8>,
-    blurred: Vec<u8>,
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -220,20 +226,38 @@ const CIRCLE: [(isize, isize); 16] = [
     (-1, -3),
 ];
 
-/// ORB extractor with reusable buffers: build once, call [`OrbExtractor::extract`] per frame.
+/// ORB extractor with reusable buffers: build once, call [`OrbExtractor::extract`] (one thread)
+/// or [`OrbExtractor::extract_with_threads`] per frame.
 #[derive(Debug, Clone)]
 pub struct OrbExtractor {
-    config: OrbConfig,
+    tables: Tables,
     levels: Vec<Level>,
+    /// One per thread of the last extraction.
+    scratch: Vec<LevelScratch>,
+}
+
+/// What the detection and description of every level read: the configuration and its tables.
+#[derive(Debug, Clone)]
+struct Tables {
+    config: OrbConfig,
     /// The pattern rotated to each of `ANGLE_BINS` angles, rounded to pixels, as indices of the
     /// test's two pixels in a descriptor patch (see [`patch_index`]).
     rotated: Vec<[u16; 2]>,
     umax: [usize; HALF_PATCH_PX + 1],
+    features_per_level: Vec<usize>,
+}
+
+/// The buffers of one thread's level work, reused from level to level and frame to frame.
+#[derive(Debug, Clone, Default)]
+struct LevelScratch {
     /// FAST scores of the level being detected (row stride: the level's width; 0: no corner).
     score_buf: Vec<u8>,
     corners: Vec<Corner>,
+    /// Keep flags of one row of the non-maximum suppression.
+    keep_row: Vec<u8>,
+    /// The level smoothed for the binary tests ([`gaussian_blur`]).
+    blurred: Vec<u8>,
     blur_rows: Vec<u16>,
-    features_per_level: Vec<usize>,
 }
 
 impl OrbExtractor {
@@ -296,78 +320,156 @@ impl OrbExtractor {
             }
         }
         Ok(Self {
-            config,
+            tables: Tables { config, rotated, umax, features_per_level },
             levels: Vec::new(),
-            rotated,
-            umax,
-            score_buf: Vec::new(),
-            corners: Vec::new(),
-            blur_rows: Vec::new(),
-            features_per_level,
+            scratch: Vec::new(),
         })
     }
 
     /// The configuration.
     pub fn config(&self) -> &OrbConfig {
-        &self.config
+        &self.tables.config
     }
 
-    /// Detect and describe up to `n_features` keypoints. An image smaller than the patch gives an
-    /// empty set (not an error); a buffer of the wrong length is an error.
+    /// Detect and describe up to `n_features` keypoints on one thread. An image smaller than the
+    /// patch gives an empty set (not an error); a buffer of the wrong length is an error.
     pub fn extract(&mut self, image: &GreyImage) -> Result<Features, SlamError> {
+        self.extract_with_threads(image, 1)
+    }
+
+    /// [`OrbExtractor::extract`] on up to `threads` threads (1: the calling thread only; 2 or
+    /// more: two). The levels are independent once the pyramid is built: with two threads a
+    /// second one builds the pyramid while the calling thread works on level 0, then both take
+    /// the remaining levels, largest first, as they finish. The output is the same for any
+    /// `threads` (the levels' keypoints are concatenated in level order).
+    pub fn extract_with_threads(&mut self, image: &GreyImage, threads: usize) -> Result<Features, SlamError> {
         let (w, h) = (image.width as usize, image.height as usize);
         if image.data.len() != w * h {
             return Err(SlamError::BufferLength { field: "grey", expected: w * h, actual: image.data.len() });
         }
-        self.build_pyramid(image);
+        self.size_levels(w, h);
+        if let Some(l0) = self.levels.first_mut() {
+            l0.image.copy_from_slice(&image.data);
+        }
+        let threads = threads.clamp(1, 2);
+        if self.scratch.len() < threads {
+            self.scratch.resize_with(threads, LevelScratch::default);
+        }
+        let tables = &self.tables;
         let mut out = Features::default();
-        for l in 0..self.levels.len() {
-            let want = self.features_per_level.get(l).copied().unwrap_or(0);
-            if want == 0 {
-                continue;
+        let (Some((level0, rest)), [scratch_a, others @ ..]) = (self.levels.split_first_mut(), &mut self.scratch[..])
+        else {
+            return Ok(out);
+        };
+        let level0 = &*level0;
+        match others.first_mut() {
+            Some(scratch_b) if threads > 1 && !rest.is_empty() => {
+                let next = AtomicUsize::new(1);
+                let next = &next;
+                let (tx, rx) = std::sync::mpsc::sync_channel::<&[Level]>(1);
+                let (parts_a, parts_b) = std::thread::scope(|s| {
+                    let second = s.spawn(move || {
+                        build_pyramid(level0, rest);
+                        let rest: &[Level] = rest;
+                        // The receiver outlives this thread's send (it is dropped after the join).
+                        let _ = tx.send(rest);
+                        tables.take_levels(rest, next, scratch_b)
+                    });
+                    tables.level_features(0, level0, scratch_a, &mut out);
+                    let parts_a = match rx.recv() {
+                        Ok(rest) => tables.take_levels(rest, next, scratch_a),
+                        Err(_) => Vec::new(),
+                    };
+                    (parts_a, second.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
+                });
+                let mut parts: Vec<(usize, Features)> = parts_a.into_iter().chain(parts_b).collect();
+                parts.sort_unstable_by_key(|(l, _)| *l);
+                for (_, f) in parts {
+                    out.keypoints.extend(f.keypoints);
+                    out.descriptors.extend(f.descriptors);
+                }
             }
-            self.detect_level(l, want);
-            self.describe_level(l, &mut out);
+            _ => {
+                build_pyramid(level0, rest);
+                tables.level_features(0, level0, scratch_a, &mut out);
+                for (i, level) in rest.iter().enumerate() {
+                    tables.level_features(i + 1, level, scratch_a, &mut out);
+                }
+            }
         }
         Ok(out)
     }
 
-    fn build_pyramid(&mut self, image: &GreyImage) {
-        let (w0, h0) = (image.width as usize, image.height as usize);
-        let n = self.config.n_levels;
+    /// Size the levels for a `w0` x `h0` image (kept while the size stays the same).
+    fn size_levels(&mut self, w0: usize, h0: usize) {
+        let config = &self.tables.config;
+        let n = config.n_levels;
         let same = self.levels.len() == n && self.levels.first().is_some_and(|l| l.width == w0 && l.height == h0);
         if !same {
             self.levels = (0..n)
                 .map(|l| {
-                    let s = self.config.scale_factor.powi(l as i32);
+                    let s = config.scale_factor.powi(l as i32);
                     let (w, h) = (((w0 as f64) / s).round() as usize, ((h0 as f64) / s).round() as usize);
-                    Level { width: w, height: h, scale: s as f32, image: vec![0; w * h], blurred: vec![0; w * h] }
+                    Level { width: w, height: h, scale: s as f32, image: vec![0; w * h] }
                 })
                 .collect();
-            self.score_buf = vec![0; w0 * h0];
         }
-        if let Some(l0) = self.levels.first_mut() {
-            l0.image.copy_from_slice(&image.data);
+    }
+}
+
+/// Resample the levels after the first from the one before each ([`resize_bilinear`]).
+fn build_pyramid(first: &Level, rest: &mut [Level]) {
+    if let Some(l1) = rest.first_mut() {
+        resize_bilinear(first, l1);
+    }
+    for l in 1..rest.len() {
+        let (prev, next) = rest.split_at_mut(l);
+        if let (Some(src), Some(dst)) = (prev.last(), next.first_mut()) {
+            resize_bilinear(src, dst);
         }
-        for l in 1..n {
-            let (prev, rest) = self.levels.split_at_mut(l);
-            if let (Some(src), Some(dst)) = (prev.last(), rest.first_mut()) {
-                resize_bilinear(src, dst);
-            }
-        }
-        for level in &mut self.levels {
-            gaussian_blur(level, &mut self.blur_rows);
+    }
+}
+
+impl Tables {
+    /// Take levels `1 + i` of `rest` by the shared counter `next` (level numbers) until none is
+    /// left; their features, each with its level.
+    fn take_levels(&self, rest: &[Level], next: &AtomicUsize, scratch: &mut LevelScratch) -> Vec<(usize, Features)> {
+        let mut parts = Vec::new();
+        loop {
+            let l = next.fetch_add(1, Ordering::Relaxed);
+            let Some(level) = rest.get(l.wrapping_sub(1)) else {
+                return parts;
+            };
+            let mut f = Features::default();
+            self.level_features(l, level, scratch, &mut f);
+            parts.push((l, f));
         }
     }
 
-    fn detect_level(&mut self, l: usize, want: usize) {
-        self.corners.clear();
-        let Some(level) = self.levels.get(l) else {
+    /// Detect and describe the features of level `l` (image `level`), appended to `out`.
+    fn level_features(&self, l: usize, level: &Level, scratch: &mut LevelScratch, out: &mut Features) {
+        let want = self.features_per_level.get(l).copied().unwrap_or(0);
+        if want == 0 {
             return;
-        };
+        }
+        self.detect_level(level, want, scratch);
+        if scratch.corners.is_empty() {
+            return;
+        }
+        gaussian_blur(level, &mut scratch.blurred, &mut scratch.blur_rows);
+        self.describe_level(l, level, scratch, out);
+    }
+
+    /// The level's corners into `scratch.corners`: FAST, 3x3 suppression, selection of `want`
+    /// spread over the grid, in raster order.
+    fn detect_level(&self, level: &Level, want: usize, scratch: &mut LevelScratch) {
+        scratch.corners.clear();
         let (w, h) = (level.width, level.height);
         if w <= 2 * EDGE_PX || h <= 2 * EDGE_PX {
             return;
+        }
+        if scratch.score_buf.len() < w * h {
+            scratch.score_buf.resize(w * h, 0);
         }
         let cell = self.config.cell_size_px;
         let (nx, ny) = (w - 2 * EDGE_PX, h - 2 * EDGE_PX);
@@ -379,7 +481,7 @@ impl OrbExtractor {
         // one-pixel ring around the scanned area is cleared so that the suppression below reads
         // zeros there.
         let area = ScanArea { width: w, xs: (EDGE_PX, EDGE_PX + nx), ys: (EDGE_PX, EDGE_PX + ny) };
-        let map = &mut self.score_buf;
+        let map = &mut scratch.score_buf;
         let ring_rows = [(EDGE_PX - 1) * w, (EDGE_PX + ny) * w];
         for r in ring_rows {
             if let Some(row) = map.get_mut(r + EDGE_PX - 1..=r + EDGE_PX + nx) {
@@ -413,73 +515,75 @@ impl OrbExtractor {
                 scan_fast(&level.image, &cell_area, weak, map);
             }
         }
-        // 3x3 non-maximum suppression over the map (ties: the first in raster order wins); the
+        // 3x3 non-maximum suppression over the map (ties: the first in raster order wins): a row
+        // of keep flags lane-wise (a score beats the row above and its left neighbour, and is
+        // not beaten by its right neighbour and the row below; a zero never passes), then the
         // survivors become the level's corners, in raster order.
-        let map = &self.score_buf;
+        let map = &scratch.score_buf;
+        let keep = &mut scratch.keep_row;
+        keep.resize(nx, 0);
         for y in EDGE_PX..EDGE_PX + ny {
-            let row = y * w;
-            let cell_row = ((y - EDGE_PX) / cell) * ncx;
-            let Some(scores) = map.get(row + EDGE_PX..row + EDGE_PX + nx) else {
+            let band = |r: usize| map.get(r * w + EDGE_PX - 1..r * w + EDGE_PX + nx + 1);
+            let (Some(up), Some(mid), Some(dn)) = (band(y - 1), band(y), band(y + 1)) else {
                 continue;
             };
-            for (k, chunk) in scores.chunks(LANES).enumerate() {
-                if chunk.iter().all(|&v| v == 0) {
-                    continue;
-                }
-                for (j, &s) in chunk.iter().enumerate().filter(|(_, &v)| v != 0) {
-                    let x = EDGE_PX + k * LANES + j;
-                    let i = row + x;
-                    let keep =
-                        match (map.get(i - w - 1..i - w + 2), map.get(i - 1..i + 2), map.get(i + w - 1..i + w + 2)) {
-                            (Some(a), Some(m), Some(b)) => {
-                                // Raster order of the neighbours decides ties.
-                                a[0] < s
-                                    && a[1] < s
-                                    && a[2] < s
-                                    && m[0] < s
-                                    && m[2] <= s
-                                    && b[0] <= s
-                                    && b[1] <= s
-                                    && b[2] <= s
-                            }
-                            _ => false,
-                        };
-                    if keep {
-                        let score = u16::from(s);
-                        self.corners.push(Corner {
-                            x: x as u32,
-                            y: y as u32,
-                            score,
-                            strength: u32::from(score),
-                            cell: (cell_row + (x - EDGE_PX) / cell) as u32,
-                            round: 0,
-                        });
-                    }
+            let keep: &mut [u8] = keep;
+            let n = keep.len();
+            let (u0, u1, u2) = (&up[..n], &up[1..=n], &up[2..n + 2]);
+            let (m0, m1, m2) = (&mid[..n], &mid[1..=n], &mid[2..n + 2]);
+            let (d0, d1, d2) = (&dn[..n], &dn[1..=n], &dn[2..n + 2]);
+            for (i, k) in keep.iter_mut().enumerate() {
+                let s = m1[i];
+                let up_max = u0[i].max(u1[i]).max(u2[i]);
+                let dn_max = d0[i].max(d1[i]).max(d2[i]);
+                *k = u8::from((s > up_max) & (s > m0[i]) & (s >= m2[i]) & (s >= dn_max));
+            }
+            let cell_row = ((y - EDGE_PX) / cell) * ncx;
+            // Eight flags a word; the row's last flags (fewer than eight) in a zero-padded word.
+            let chunks = keep.chunks_exact(8);
+            let mut last = [0u8; 8];
+            if let Some(dst) = last.get_mut(..chunks.remainder().len()) {
+                dst.copy_from_slice(chunks.remainder());
+            }
+            let words = chunks.map(|c| <[u8; 8]>::try_from(c).unwrap_or_default()).chain(std::iter::once(last));
+            for (k, word) in words.enumerate() {
+                let mut bits = u64::from_le_bytes(word);
+                while bits != 0 {
+                    let x = EDGE_PX + k * 8 + (bits.trailing_zeros() / 8) as usize;
+                    bits &= bits - 1;
+                    let score = u16::from(mid[x - EDGE_PX + 1]);
+                    scratch.corners.push(Corner {
+                        x: x as u32,
+                        y: y as u32,
+                        score,
+                        strength: u32::from(score),
+                        cell: (cell_row + (x - EDGE_PX) / cell) as u32,
+                        round: 0,
+                    });
                 }
             }
         }
         let spread = (self.config.spread_share * want as f64).round() as usize;
         if self.config.ranking == Ranking::Harris {
             // Preselect by FAST score (spread over the grid as well), then rank by Harris.
-            select_spread(&mut self.corners, 2 * want, 2 * spread);
+            select_spread(&mut scratch.corners, 2 * want, 2 * spread);
             let img = &level.image;
-            for c in &mut self.corners {
+            for c in &mut scratch.corners {
                 let r = harris_response(img, w, c.x as usize, c.y as usize);
                 c.strength = ordered_bits(r);
             }
         }
-        select_spread(&mut self.corners, want, spread);
+        select_spread(&mut scratch.corners, want, spread);
         // Deterministic output order.
-        self.corners.sort_unstable_by_key(|c| (c.y, c.x));
+        scratch.corners.sort_unstable_by_key(|c| (c.y, c.x));
     }
 
-    fn describe_level(&self, l: usize, out: &mut Features) {
-        let Some(level) = self.levels.get(l) else {
-            return;
-        };
+    /// Orientation and descriptor of each of `scratch.corners` (on `scratch.blurred`), appended
+    /// to `out` as keypoints of level `l`.
+    fn describe_level(&self, l: usize, level: &Level, scratch: &LevelScratch, out: &mut Features) {
         let w = level.width;
         let mut patch = [0u8; PATCH_LEN];
-        for c in &self.corners {
+        for c in &scratch.corners {
             let (x, y) = (c.x as usize, c.y as usize);
             // Intensity centroid over the radius-15 disc, a row pair (±v) at a time on 31-wide
             // i16 rows zeroed outside the disc (multiply-adds of i16 pairs into i32).
@@ -522,7 +626,7 @@ impl OrbExtractor {
             let r = PATTERN_REACH_PX;
             for (k, dst) in patch.chunks_exact_mut(PATCH_STRIDE).take(2 * r + 1).enumerate() {
                 let s = (y + k - r) * w + x - r;
-                if let (Some(src), Some(dst)) = (level.blurred.get(s..=s + 2 * r), dst.get_mut(..=2 * r)) {
+                if let (Some(src), Some(dst)) = (scratch.blurred.get(s..=s + 2 * r), dst.get_mut(..=2 * r)) {
                     dst.copy_from_slice(src);
                 }
             }
@@ -584,9 +688,14 @@ fn scan_fast(img: &[u8], area: &ScanArea, t: u8, scores: &mut [u8]) {
             let lanes = fast_lanes(img, row + x0, &offsets, t);
             // Lanes hold the score + 1 (0: no corner); only those inside the area are written.
             let (from, to) = (x0.max(x_from), (x0 + LANES).min(x_to));
-            if let (Some(dst), Some(src)) = (scores.get_mut(row + from..row + to), lanes.get(from - x0..to - x0)) {
-                for (d, &s) in dst.iter_mut().zip(src) {
-                    *d = s.saturating_sub(1);
+            if let Some(dst) = scores.get_mut(row + from..row + to) {
+                if let Ok(whole) = <&mut [u8; LANES]>::try_from(&mut *dst) {
+                    // The common case, a whole chunk inside the area: one 16-byte store.
+                    *whole = lanes.map(|s| s.saturating_sub(1));
+                } else if let Some(src) = lanes.get(from - x0..to - x0) {
+                    for (d, &s) in dst.iter_mut().zip(src) {
+                        *d = s.saturating_sub(1);
+                    }
                 }
             }
             done_to = (x0 + LANES).min(x_to);
@@ -738,8 +847,10 @@ fn ordered_bits(v: f32) -> u32 {
 fn harris_response(img: &[u8], w: usize, x: usize, y: usize) -> f32 {
     const B: usize = HARRIS_BLOCK_PX;
     const R: usize = B / 2;
-    // The window's rows and the one above and below, B + 2 columns each, as i16.
-    let mut rows = [[0i16; B + 2]; B + 2];
+    /// Lanes of a window row's gradients (the window's B columns and a cleared lane).
+    const L: usize = B + 1;
+    // The window's rows and the one above and below, B + 2 columns each (and a zero pad), as i16.
+    let mut rows = [[0i16; L + 2]; B + 2];
     for (k, row) in rows.iter_mut().enumerate() {
         let start = (y + k - R - 1) * w + x - R - 1;
         if let Some(src) = img.get(start..start + B + 2) {
@@ -748,18 +859,27 @@ fn harris_response(img: &[u8], w: usize, x: usize, y: usize) -> f32 {
             }
         }
     }
-    let (mut a, mut b, mut c) = (0i32, 0i32, 0i32);
+    // Per lane sums of the structure tensor's entries over the window's rows (exact integers,
+    // so the lane-wise order gives the same sums).
+    let (mut sa, mut sb, mut sc) = ([0i32; L], [0i32; L], [0i32; L]);
     for k in 1..=B {
         let (up, mid, dn) = (&rows[k - 1], &rows[k], &rows[k + 1]);
-        for i in 1..=B {
-            let dx = i32::from((mid[i + 1] - mid[i - 1]) * 2 + (up[i + 1] - up[i - 1]) + (dn[i + 1] - dn[i - 1]));
-            let dy = i32::from((dn[i] - up[i]) * 2 + (dn[i - 1] - up[i - 1]) + (dn[i + 1] - up[i + 1]));
-            a += dx * dx;
-            b += dy * dy;
-            c += dx * dy;
+        let mut dx = [0i16; L];
+        let mut dy = [0i16; L];
+        for i in 0..L {
+            dx[i] = (mid[i + 2] - mid[i]) * 2 + (up[i + 2] - up[i]) + (dn[i + 2] - dn[i]);
+            dy[i] = (dn[i + 1] - up[i + 1]) * 2 + (dn[i] - up[i]) + (dn[i + 2] - up[i + 2]);
+        }
+        dx[L - 1] = 0;
+        dy[L - 1] = 0;
+        for i in 0..L {
+            let (gx, gy) = (i32::from(dx[i]), i32::from(dy[i]));
+            sa[i] += gx * gx;
+            sb[i] += gy * gy;
+            sc[i] += gx * gy;
         }
     }
-    let (a, b, c) = (a as f32, b as f32, c as f32);
+    let (a, b, c) = (sa.iter().sum::<i32>() as f32, sb.iter().sum::<i32>() as f32, sc.iter().sum::<i32>() as f32);
     a * b - c * c - 0.04 * (a + b) * (a + b)
 }
 
@@ -770,24 +890,30 @@ fn resize_bilinear(src: &Level, dst: &mut Level) {
         return;
     }
     let (rx, ry) = (sw as f32 / dw as f32, sh as f32 / dh as f32);
-    let cols: Vec<(usize, u32)> = (0..dw)
-        .map(|x| {
-            let fx = ((x as f32 + 0.5) * rx - 0.5).clamp(0.0, (sw - 1) as f32);
-            let x0 = (fx as usize).min(sw.saturating_sub(2));
-            (x0, ((fx - x0 as f32) * 256.0).round().min(256.0) as u32)
-        })
-        .collect();
+    // Per output column: its left source column and the two weights (left, right).
+    let mut x0s = Vec::with_capacity(dw);
+    let mut w_left = Vec::with_capacity(dw);
+    let mut w_right = Vec::with_capacity(dw);
+    for x in 0..dw {
+        let fx = ((x as f32 + 0.5) * rx - 0.5).clamp(0.0, (sw - 1) as f32);
+        let x0 = (fx as usize).min(sw.saturating_sub(2));
+        let wx = ((fx - x0 as f32) * 256.0).round().min(256.0) as u32;
+        x0s.push(x0);
+        w_left.push(256 - wx);
+        w_right.push(wx);
+    }
     let mut tmp = vec![0u16; sw];
     // Each column's vertical blend and its right neighbour's in one word (low, high 16 bits), so
-    // that the horizontal pass reads one word per output pixel.
+    // that the horizontal pass gathers one word per output pixel.
     let mut pairs = vec![0u32; sw];
+    let mut gathered = vec![0u32; dw];
     for y in 0..dh {
         let fy = ((y as f32 + 0.5) * ry - 0.5).clamp(0.0, (sh - 1) as f32);
         let y0 = (fy as usize).min(sh.saturating_sub(2));
         let wy = ((fy - y0 as f32) * 256.0).round().min(256.0) as u16;
         let y1 = (y0 + 1).min(sh - 1);
         let (r0, r1) = (&src.image[y0 * sw..y0 * sw + sw], &src.image[y1 * sw..y1 * sw + sw]);
-        // Vertical blend (vectorisable), then horizontal gather.
+        // Vertical blend (vectorisable), the gather, then the horizontal blend (vectorisable).
         for ((t, &a), &b) in tmp.iter_mut().zip(r0).zip(r1) {
             *t = u16::from(a) * (256 - wy) + u16::from(b) * wy;
         }
@@ -797,10 +923,14 @@ fn resize_bilinear(src: &Level, dst: &mut Level) {
             pr[i] = u32::from(lo[i]) | (u32::from(hi[i]) << 16);
         }
         pairs[n] = u32::from(tmp[n]);
+        let pairs: &[u32] = &pairs;
+        for (g, &x0) in gathered.iter_mut().zip(&x0s) {
+            *g = pairs.get(x0).copied().unwrap_or(0);
+        }
         let out = &mut dst.image[y * dw..y * dw + dw];
-        for (o, &(x0, wx)) in out.iter_mut().zip(&cols) {
-            let p = pairs.get(x0).copied().unwrap_or(0);
-            *o = (((p & 0xFFFF) * (256 - wx) + (p >> 16) * wx + 32768) >> 16) as u8;
+        let (g, wl, wr) = (&gathered[..dw], &w_left[..dw], &w_right[..dw]);
+        for (i, o) in out.iter_mut().enumerate() {
+            *o = (((g[i] & 0xFFFF) * wl[i] + (g[i] >> 16) * wr[i] + 32768) >> 16) as u8;
         }
     }
 }
@@ -808,14 +938,15 @@ fn resize_bilinear(src: &Level, dst: &mut Level) {
 /// Gaussian weights of the smoothing before the binary tests (σ = 2 px, 7 taps, sum 256).
 const GAUSS_7: [u16; 2 * BLUR_RADIUS_PX + 1] = [18, 33, 49, 56, 49, 33, 18];
 
-/// Separable Gaussian smoothing ([`GAUSS_7`]) of a level into its `blurred` buffer (fixed point;
-/// the `BLUR_RADIUS_PX` rows and columns along the border copied unsmoothed). `rows` holds the
-/// horizontal pass of the last `2 BLUR_RADIUS_PX + 1` rows (a ring).
-fn gaussian_blur(level: &mut Level, rows: &mut Vec<u16>) {
+/// Separable Gaussian smoothing ([`GAUSS_7`]) of a level into `blurred` (resized to the level;
+/// fixed point; the `BLUR_RADIUS_PX` rows and columns along the border copied unsmoothed).
+/// `rows` holds the horizontal pass of the last `2 BLUR_RADIUS_PX + 1` rows (a ring).
+fn gaussian_blur(level: &Level, blurred: &mut Vec<u8>, rows: &mut Vec<u16>) {
     const R: usize = BLUR_RADIUS_PX;
     const N: usize = 2 * R + 1;
     let (w, h) = (level.width, level.height);
-    level.blurred.copy_from_slice(&level.image);
+    blurred.clear();
+    blurred.extend_from_slice(&level.image);
     if w < N || h < N {
         return;
     }
@@ -846,7 +977,7 @@ fn gaussian_blur(level: &mut Level, rows: &mut Vec<u16>) {
             &rows[q * w..q * w + m]
         };
         let (r0, r1, r2, r3, r4, r5, r6) = (ring(0), ring(1), ring(2), ring(3), ring(4), ring(5), ring(6));
-        let out = &mut level.blurred[yc * w + R..yc * w + R + m];
+        let out = &mut blurred[yc * w + R..yc * w + R + m];
         let mh = |v: u16, g: u32| ((u32::from(v) * g) >> 16) as u16;
         for i in 0..m {
             let acc = mh(r0[i], gv[0])
@@ -999,6 +1130,40 @@ mod tests {
             assert!(recall >= 0.5, "warp {angle}° x{scale}: recall {recall}");
             assert!(precision >= 0.95, "warp {angle}° x{scale}: precision {precision}");
             assert!(n >= 200);
+        }
+    }
+
+    #[test]
+    fn two_threads_give_the_one_thread_features() {
+        // One extractor per thread count, each reused over frames of changing size and content
+        // (stale scratch must not leak into the next level or frame), with the weak threshold's
+        // second scan on and off, FAST and Harris ranking.
+        let frames = [
+            shapes_texture(640, 480, 5),
+            shapes_texture(640, 480, 6),
+            shapes_texture(333, 251, 7),
+            shapes_texture(640, 480, 8),
+            shapes_texture(45, 40, 9),
+        ];
+        let configs = [
+            OrbConfig::default(),
+            OrbConfig { fast_min_threshold: 7, spread_share: 0.5, ..OrbConfig::default() },
+            OrbConfig { ranking: Ranking::Fast, n_levels: 3, n_features: 500, ..OrbConfig::default() },
+        ];
+        for config in configs {
+            let mut one = OrbExtractor::new(config).unwrap();
+            let mut two = OrbExtractor::new(config).unwrap();
+            for (i, img) in frames.iter().enumerate() {
+                let a = one.extract(img).unwrap();
+                let b = two.extract_with_threads(img, 2).unwrap();
+                assert_eq!(a, b, "frame {i}, {config:?}");
+                if img.width == 640 {
+                    assert!(a.keypoints.len() >= config.n_features * 9 / 10, "frame {i}: {}", a.keypoints.len());
+                }
+            }
+            // More threads than levels, and than two.
+            let img = &frames[0];
+            assert_eq!(two.extract_with_threads(img, 8).unwrap(), one.extract(img).unwrap());
         }
     }
 

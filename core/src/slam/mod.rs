@@ -55,14 +55,16 @@
 //!    round-robin over 30-px grid cells (emptiest cells first); orientation by intensity
 //!    centroid (radius 15); 256-bit steered BRIEF with the learned pattern of ORB on a
 //!    Gaussian-smoothed level (7x7, σ = 2), pre-rotated to 256 angles. Depth is read at each
-//!    keypoint's (rounded) pixel.
+//!    keypoint's (rounded) pixel. On two worker threads (`crate::worker_threads`) the levels are
+//!    extracted in parallel ([`OrbExtractor::extract_with_threads`]; the same features as on one).
 //! 2. Empty map: the frame initialises it (map points from every keypoint with depth) at the
 //!    prior; it needs [`TrackerConfig::min_init_points`] keypoints with depth.
 //! 3. Seed: the last pose times the prior's motion since the last frame (nearly exact within a
 //!    view, where the calibration error changes little); if that fails, the prior expressed in the map frame.
 //! 4. Coarse projection search of every map point around the seed
 //!    ([`TrackerConfig::coarse_radius_px`] = 40 px, ratio test 0.9, Hamming ≤ 80, level within
-//!    ±2, each keypoint keeps its closest point), RANSAC over prior-seeded 3-point minimal sets ([`pnp`] explains the
+//!    ±2, each keypoint keeps its closest point; on two worker threads each searches half of the
+//!    map points, with the same matches), RANSAC over prior-seeded 3-point minimal sets ([`pnp`] explains the
 //!    choice: Gauss-Newton from the prior on 3 correspondences instead of P3P, since the prior is
 //!    always within a few cm / degrees), fine search around that pose
 //!    ([`TrackerConfig::fine_radius_px`]), then ORB-SLAM2-style motion-only refinement: 4 rounds of

@@ -525,7 +525,8 @@ impl Tracker {
         let frame_index = self.frame_index;
         self.frame_index += 1;
         let prior = input.world_from_camera_prior;
-        let features = self.orb.extract(input.grey)?;
+        // ORB on the threads one frame may use (the same features on any number of them).
+        let features = self.orb.extract_with_threads(input.grey, crate::worker_threads())?;
         let depth_m: Vec<Option<f64>> = features
             .keypoints
             .iter()

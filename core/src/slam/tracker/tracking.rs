@@ -1,6 +1,7 @@
 //! Per-frame pose: projection search of the map around seeds (the last tracked frame moved by the
 //! prior's motion, the prior through the gauge), PnP RANSAC and robust refinement.
 
+use super::local_map::MapPoint;
 use super::{LostReason, Tracker};
 use crate::frame::DepthImage;
 use crate::geometry::{PinholeCamera, Se3};
@@ -175,7 +176,9 @@ impl Tracker {
     }
 
     /// Project every map point with `camera_from_map` and match it to the best keypoint within
-    /// `radius_px × scale` (ratio test; each keypoint keeps its closest point).
+    /// `radius_px × scale` (ratio test; each keypoint keeps its closest point, the first in point
+    /// order among equals). With two worker threads and enough points, each searches half of
+    /// the points (in point order) and the halves' winners are merged: the same matches.
     pub(super) fn search_by_projection(
         &self,
         frame: &FrameData,
@@ -184,12 +187,52 @@ impl Tracker {
         radius_px: f64,
         scale_radius: bool,
     ) -> Vec<PointMatch> {
+        let search = Search { frame, camera, camera_from_map, radius_px, scale_radius };
+        let n = self.points.len();
+        let middle = (crate::worker_threads() > 1 && n >= PARALLEL_SEARCH_MIN_POINTS)
+            .then(|| self.points.keys().nth(n / 2).copied())
+            .flatten();
+        let best_for_kp = match middle {
+            Some(middle) => {
+                let (mut first, second) = std::thread::scope(|s| {
+                    let second = s.spawn(|| self.best_for_keypoints(&search, self.points.range(middle..)));
+                    let first = self.best_for_keypoints(&search, self.points.range(..middle));
+                    (first, second.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
+                });
+                // The second half's points come later: they win only when strictly closer.
+                for (a, b) in first.iter_mut().zip(second) {
+                    if let Some((d, _)) = b {
+                        if a.is_none_or(|(da, _)| d < da) {
+                            *a = b;
+                        }
+                    }
+                }
+                first
+            }
+            None => self.best_for_keypoints(&search, self.points.iter()),
+        };
+        best_for_kp
+            .iter()
+            .enumerate()
+            .filter_map(|(i, s)| s.map(|(_, id)| PointMatch { point_id: id, keypoint: i }))
+            .collect()
+    }
+
+    /// Per keypoint, the (distance, point id) of the closest of `points` that matched it in a
+    /// projection search (the first among equals).
+    fn best_for_keypoints<'a>(
+        &self,
+        search: &Search<'_>,
+        points: impl Iterator<Item = (&'a u64, &'a MapPoint)>,
+    ) -> Vec<Option<(u32, u64)>> {
+        let frame = search.frame;
+        let camera = search.camera;
         let kps = &frame.features.keypoints;
         let mut best_for_kp: Vec<Option<(u32, u64)>> = vec![None; kps.len()];
         let mut cand = Vec::new();
         let scale_factor = self.config.orb.scale_factor;
-        for (&id, p) in &self.points {
-            let x = camera_from_map * p.p_in_map;
+        for (&id, p) in points {
+            let x = search.camera_from_map * p.p_in_map;
             if x.z < self.config.min_depth_m {
                 continue;
             }
@@ -199,7 +242,11 @@ impl Tracker {
             if !camera.contains(uv) {
                 continue;
             }
-            let r = if scale_radius { radius_px * scale_factor.powi(i32::from(p.level)) } else { radius_px };
+            let r = if search.scale_radius {
+                search.radius_px * scale_factor.powi(i32::from(p.level))
+            } else {
+                search.radius_px
+            };
             // The grid holds keypoint indices (pixel centre at the index): image point − 0.5.
             frame.grid.within(kps, (uv[0] - 0.5) as f32, (uv[1] - 0.5) as f32, r as f32, &mut cand);
             let (mut best, mut second, mut best_i) = (u32::MAX, u32::MAX, usize::MAX);
@@ -232,9 +279,19 @@ impl Tracker {
             }
         }
         best_for_kp
-            .iter()
-            .enumerate()
-            .filter_map(|(i, s)| s.map(|(_, id)| PointMatch { point_id: id, keypoint: i }))
-            .collect()
     }
+}
+
+/// Map points below which a projection search stays on one thread (a second thread costs a
+/// spawn, some tens of microseconds).
+const PARALLEL_SEARCH_MIN_POINTS: usize = 400;
+
+/// One projection search: the frame, the camera at `camera_from_map`, the search radius
+/// (`radius_px`, times the point's level scale if `scale_radius`).
+struct Search<'a> {
+    frame: &'a FrameData,
+    camera: &'a PinholeCamera,
+    camera_from_map: &'a Se3,
+    radius_px: f64,
+    scale_radius: bool,
 }
