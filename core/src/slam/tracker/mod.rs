@@ -366,6 +366,8 @@ pub struct Tracker {
     /// `motion_disagreement`).
     lost_by_reason: BTreeMap<&'static str, usize>,
     records: Vec<FrameRecord>,
+    /// Threads a frame's tracking may use ([`Self::set_threads`]).
+    threads: usize,
 }
 
 impl Tracker {
@@ -432,12 +434,20 @@ impl Tracker {
             n_lost_hidden: 0,
             lost_by_reason: BTreeMap::new(),
             records: Vec::new(),
+            threads: crate::worker_threads(),
         })
     }
 
     /// The configuration.
     pub fn config(&self) -> &TrackerConfig {
         &self.config
+    }
+
+    /// Threads the following frames' tracking may use (ORB levels, projection search): at least
+    /// one, at most `crate::worker_threads()` (the default). The results do not depend on it; the
+    /// system lowers it to one on frames whose line segments take the second core.
+    pub fn set_threads(&mut self, threads: usize) {
+        self.threads = threads.clamp(1, crate::worker_threads());
     }
 
     /// Number of map points.
@@ -526,7 +536,7 @@ impl Tracker {
         self.frame_index += 1;
         let prior = input.world_from_camera_prior;
         // ORB on the threads one frame may use (the same features on any number of them).
-        let features = self.orb.extract_with_threads(input.grey, crate::worker_threads())?;
+        let features = self.orb.extract_with_threads(input.grey, self.threads)?;
         let depth_m: Vec<Option<f64>> = features
             .keypoints
             .iter()

@@ -177,7 +177,7 @@ impl Tracker {
 
     /// Project every map point with `camera_from_map` and match it to the best keypoint within
     /// `radius_px × scale` (ratio test; each keypoint keeps its closest point, the first in point
-    /// order among equals). With two worker threads and enough points, each searches half of
+    /// order among equals). With two threads ([`Tracker::set_threads`]) and enough points, each searches half of
     /// the points (in point order) and the halves' winners are merged: the same matches.
     pub(super) fn search_by_projection(
         &self,
@@ -189,7 +189,7 @@ impl Tracker {
     ) -> Vec<PointMatch> {
         let search = Search { frame, camera, camera_from_map, radius_px, scale_radius };
         let n = self.points.len();
-        let middle = (crate::worker_threads() > 1 && n >= PARALLEL_SEARCH_MIN_POINTS)
+        let middle = (self.threads > 1 && n >= PARALLEL_SEARCH_MIN_POINTS)
             .then(|| self.points.keys().nth(n / 2).copied())
             .flatten();
         let best_for_kp = match middle {
