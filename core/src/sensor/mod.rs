@@ -535,7 +535,7 @@ pub fn simulate_frame(
     let noise = colour::NoiseTable::new(&config.colour);
     let with_colour = !frame.rgb.is_empty();
     let mut rgb = vec![0u8; if with_colour { 3 * n } else { 0 }];
-    // Every value is written by the depth image pass (zeroed pages cost nothing until then).
+    // Every value is written by the depth image pass.
     let mut depth_m = vec![0.0f32; n];
     let part = |rows: std::ops::Range<usize>, scratch: &mut PartScratch, zbuf: &mut [f32], rgb: &mut [u8]| {
         // Steps 1-3 on the part's rows and, uncounted, on the mixed band's rows around them
