@@ -104,17 +104,13 @@ impl NoiseTable {
 
     /// Adds the noise of row `y` (its own stream) to `row`.
     fn apply(&self, row: &mut [u8], seed: u64, frame_index: u64, y: usize) {
-        // Eight 8-bit uniforms per 64-bit draw.
-        let mut rng = SplitMix64::new(seed, &[TAG_COLOUR, frame_index, y as u64]);
-        let mut chunks = row.chunks_exact_mut(8);
-        for chunk in &mut chunks {
+        self.apply_with(row, &mut SplitMix64::new(seed, &[TAG_COLOUR, frame_index, y as u64]));
+    }
+
+    /// The noise of `bytes` in place, eight 8-bit uniforms per 64-bit draw of `rng`.
+    fn apply_with(&self, bytes: &mut [u8], rng: &mut SplitMix64) {
+        for chunk in bytes.chunks_mut(8) {
             for (v, u) in chunk.iter_mut().zip(rng.next_u64().to_le_bytes()) {
-                *v = self.0[(*v as usize) << 8 | u as usize];
-            }
-        }
-        let rest = chunks.into_remainder();
-        if !rest.is_empty() {
-            for (v, u) in rest.iter_mut().zip(rng.next_u64().to_le_bytes()) {
                 *v = self.0[(*v as usize) << 8 | u as usize];
             }
         }
@@ -142,18 +138,7 @@ impl NoiseTable {
         for (o, p) in rest.chunks_exact_mut(3).zip(src.remainder().chunks_exact(4)) {
             o.copy_from_slice(&p[..3]);
         }
-        let mut tail = rest.chunks_exact_mut(8);
-        for chunk in &mut tail {
-            for (v, u) in chunk.iter_mut().zip(rng.next_u64().to_le_bytes()) {
-                *v = self.0[(*v as usize) << 8 | u as usize];
-            }
-        }
-        let tail = tail.into_remainder();
-        if !tail.is_empty() {
-            for (v, u) in tail.iter_mut().zip(rng.next_u64().to_le_bytes()) {
-                *v = self.0[(*v as usize) << 8 | u as usize];
-            }
-        }
+        self.apply_with(rest, &mut rng);
     }
 }
 
