@@ -485,10 +485,16 @@ impl ObjectPipeline {
                 actual_height: grey.height,
             });
         }
-        if !self.config.parameterize || frame.detections.is_empty() {
+        if !self.wants_segments(frame) {
             return Ok(None);
         }
         Ok(detect_segments(grey, &self.config.lsd).ok())
+    }
+
+    /// Whether [`Self::frame_segments`] looks for line segments on `frame` (parameterization on and
+    /// something detected).
+    pub fn wants_segments(&self, frame: &Frame) -> bool {
+        self.config.parameterize && !frame.detections.is_empty()
     }
 
     /// [`Self::update_with_map_points`] with the frame's line segments already detected

@@ -214,7 +214,7 @@ impl System {
                 // The line segments need only the grey image: on two cores they are found while
                 // the frame is tracked (the result does not depend on it), and the tracker keeps
                 // to one thread on such frames; on the others it may use both.
-                let segments_now = pipeline.config().parameterize && !frame_ref.detections.is_empty();
+                let segments_now = pipeline.wants_segments(frame_ref);
                 tracker.set_threads(if segments_now { 1 } else { crate::worker_threads() });
                 let (out, segments) = if crate::worker_threads() < 2 || !segments_now {
                     (tracker.track(&input), lsd())
