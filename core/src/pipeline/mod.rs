@@ -115,6 +115,7 @@ impl PipelineConfig {
         check_range("param.iforest.readmit_gap_factor", f.readmit_gap_factor, f64::MIN_POSITIVE, 1e6)?;
         check_range("param.support_snap_m", self.param.support_snap_m, 0.0, 1.0)?;
         check_range("param.refine.prior_px_per_m", self.param.refine.prior_px_per_m, 0.0, f64::MAX)?;
+        check_range("param.cylinder.bounding_trim", self.param.cylinder.bounding_trim, 0.0, 0.99)?;
         check_count("param.window_frames", self.param.window_frames, 1, 10_000)?;
         check_count("param.cylinder.consensus_iterations", self.param.cylinder.consensus_iterations, 0, 1_000_000)?;
         Ok(())
