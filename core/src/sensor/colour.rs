@@ -77,7 +77,7 @@ pub fn colour_image(
     let mut out = vec![0u8; 3 * frame.width * frame.height];
     let table = NoiseTable::new(cfg);
     let mut scratch = BlurScratch::default();
-    ColourRows::new(unit, frame, camera_end_from_start, table.as_ref(), seed, frame_index, &mut scratch)
+    ColourRows::new(unit, frame, None, camera_end_from_start, table.as_ref(), seed, frame_index, &mut scratch)
         .run(0, &mut out);
     out
 }
@@ -154,9 +154,14 @@ pub(crate) struct ColourRows<'a> {
 }
 
 impl<'a> ColourRows<'a> {
+    /// `true_depth`: the frame's true depth, one value a pixel (0 without a surface), as
+    /// [`super::depth::DepthFrame::surfaces`] makes it, on the rows that will be run; the motion
+    /// blur reads it in place of the points' z (the same values, contiguous). None: the points'.
+    #[allow(clippy::too_many_arguments)]
     pub(crate) fn new(
         unit: &SensorUnit,
         frame: &RenderedFrame<'a>,
+        true_depth: Option<&'a [f32]>,
         camera_end_from_start: Option<&Matrix4<f64>>,
         noise: Option<&'a NoiseTable>,
         seed: u64,
@@ -164,7 +169,9 @@ impl<'a> ColourRows<'a> {
         scratch: &'a mut BlurScratch,
     ) -> Self {
         let blur = match camera_end_from_start {
-            Some(m) if (m - Matrix4::identity()).abs().max() > 1e-9 => Some(MotionBlur::new(unit, frame, m, scratch)),
+            Some(m) if (m - Matrix4::identity()).abs().max() > 1e-9 => {
+                Some(MotionBlur::new(unit, frame, true_depth, m, scratch))
+            }
             _ => None,
         };
         Self { w: frame.width, src: frame.rgb, blur, noise, seed, frame_index }
@@ -332,6 +339,8 @@ struct MotionBlur<'a> {
     h: usize,
     src: &'a [u8],
     pts: &'a [f32],
+    /// The true depth of every pixel (0 without a surface), when given: read in place of `pts`.
+    true_depth: Option<&'a [f32]>,
     rows: &'a mut Prefix,
     cols: &'a mut Prefix,
     /// Whether `cols` is in use: from the first time a pixel's motion is steeper than 45°.
@@ -363,7 +372,13 @@ struct MotionBlur<'a> {
 }
 
 impl<'a> MotionBlur<'a> {
-    fn new(unit: &SensorUnit, frame: &RenderedFrame<'a>, m: &Matrix4<f64>, scratch: &'a mut BlurScratch) -> Self {
+    fn new(
+        unit: &SensorUnit,
+        frame: &RenderedFrame<'a>,
+        true_depth: Option<&'a [f32]>,
+        m: &Matrix4<f64>,
+        scratch: &'a mut BlurScratch,
+    ) -> Self {
         let (w, h) = (frame.width, frame.height);
         let k = &unit.colour_true;
         let (f, i) = (vec![0.0f32; w], vec![0u32; w]);
@@ -373,6 +388,7 @@ impl<'a> MotionBlur<'a> {
             h,
             src: frame.rgb,
             pts: frame.points_in_camera,
+            true_depth,
             rows: &mut scratch.rows,
             cols: &mut scratch.cols,
             cols_ready: false,
@@ -446,9 +462,15 @@ impl<'a> MotionBlur<'a> {
         let ay = (y as f32 + 0.5 - cy) / fy;
         // Rotated ray direction r · (ax, ay, 1) = ax · col0 + (ay · col1 + col2).
         let (px, py, pz) = (r01 * ay + r02, r11 * ay + r12, r21 * ay + r22);
-        // Depths of the row, contiguous (so that the loop below runs on several pixels at a time).
-        for (z, p) in self.du.iter_mut().zip(self.pts[3 * y * w..3 * (y + 1) * w].chunks_exact(3)) {
-            *z = p[2];
+        // Depths of the row, contiguous (so that the loop below runs on several pixels at a time);
+        // the true depth is the points' z where that is a surface, 0 elsewhere, so it gives the
+        // same motion.
+        if let Some(z) = self.true_depth {
+            self.du[..w].copy_from_slice(&z[y * w..(y + 1) * w]);
+        } else {
+            for (z, p) in self.du.iter_mut().zip(self.pts[3 * y * w..3 * (y + 1) * w].chunks_exact(3)) {
+                *z = p[2];
+            }
         }
         let mut steep = 0u32;
         for ((du, dv), &ax) in self.du[..w].iter_mut().zip(&mut self.dv[..w]).zip(&self.ax[..w]) {

@@ -553,6 +553,7 @@ pub fn simulate_frame(
             colour::ColourRows::new(
                 unit,
                 frame,
+                Some(&scratch.z[..n]),
                 camera_end_from_start,
                 noise.as_ref(),
                 seed,
