@@ -300,19 +300,56 @@ impl Prefix {
             }
             return;
         }
-        for r in lo..=hi.min(self.row_done.len().saturating_sub(1)) {
+        let h = self.row_done.len();
+        if h == 0 || (lo..=hi.min(h - 1)).all(|r| self.row_done[r]) {
+            return;
+        }
+        // A row missing: the next rows too (the following image rows need them), four at a time
+        // where four in a row are missing, so that four running sums advance side by side.
+        let end = (hi + AHEAD).min(h - 1);
+        let mut r = lo;
+        while r <= end {
             if self.row_done[r] {
+                r += 1;
                 continue;
             }
-            let s = &mut self.sums[r * (w + 1)..(r + 1) * (w + 1)];
-            let mut acc = [0.0f32; 4];
-            s[0] = acc;
-            for (o, p) in s[1..].iter_mut().zip(src[3 * r * w..3 * (r + 1) * w].chunks_exact(3)) {
-                acc = add4(acc, px4(p));
-                *o = acc;
+            let k = if r + 4 <= end + 1 && !self.row_done[r..r + 4].contains(&true) { 4 } else { 1 };
+            let sums = &mut self.sums[r * (w + 1)..(r + k) * (w + 1)];
+            let src = &src[3 * r * w..3 * (r + k) * w];
+            if k == 4 {
+                prefix_rows4(src, sums, w);
+            } else {
+                let mut acc = [0.0f32; 4];
+                sums[0] = acc;
+                for (o, p) in sums[1..].iter_mut().zip(src.chunks_exact(3)) {
+                    acc = add4(acc, px4(p));
+                    *o = acc;
+                }
             }
-            self.row_done[r] = true;
+            self.row_done[r..r + k].fill(true);
+            r += k;
         }
+    }
+}
+
+/// Rows of sums computed ahead of the rows asked for, when one is missing.
+const AHEAD: usize = 3;
+
+/// The prefix sums along four image rows (`src`, `3 w` bytes each) into `sums` (`w + 1` each).
+fn prefix_rows4(src: &[u8], sums: &mut [Px], w: usize) {
+    let (s0, rest) = sums.split_at_mut(w + 1);
+    let (s1, rest) = rest.split_at_mut(w + 1);
+    let (s2, s3) = rest.split_at_mut(w + 1);
+    let (p0, rest) = src.split_at(3 * w);
+    let (p1, rest) = rest.split_at(3 * w);
+    let (p2, p3) = rest.split_at(3 * w);
+    let mut acc = [[0.0f32; 4]; 4];
+    (s0[0], s1[0], s2[0], s3[0]) = (acc[0], acc[1], acc[2], acc[3]);
+    let outs = s0[1..].iter_mut().zip(&mut s1[1..]).zip(s2[1..].iter_mut().zip(&mut s3[1..]));
+    let ins = p0.chunks_exact(3).zip(p1.chunks_exact(3)).zip(p2.chunks_exact(3).zip(p3.chunks_exact(3)));
+    for (((o0, o1), (o2, o3)), ((a, b), (c, d))) in outs.zip(ins) {
+        acc = [add4(acc[0], px4(a)), add4(acc[1], px4(b)), add4(acc[2], px4(c)), add4(acc[3], px4(d))];
+        (*o0, *o1, *o2, *o3) = (acc[0], acc[1], acc[2], acc[3]);
     }
 }
 
@@ -662,11 +699,15 @@ mod tests {
     #[test]
     fn row_prefix_sums_are_running_sums() {
         for w in [1usize, 2, 7, 10] {
-            let h = 3;
+            let h = 9;
             let src: Vec<u8> = (0..3 * w * h).map(|i| (i * 53 % 256) as u8).collect();
             let mut prefix = Prefix::default();
             prefix.reset_rows(w, h);
-            prefix.ensure(&src, w, 0, h - 1);
+            // Rows four at a time (0-3, then 5-8) and one at a time (4).
+            for (lo, hi) in [(0, 0), (5, 5), (0, h - 1)] {
+                prefix.ensure(&src, w, lo, hi);
+            }
+            assert!(prefix.row_done.iter().all(|&d| d));
             for r in 0..h {
                 let mut want = [0.0f32; 4];
                 for k in 0..=w {
