@@ -373,11 +373,13 @@ impl Surfaces {
             for (x, (r, &zv)) in scratch.iter_mut().zip(z.iter()).enumerate() {
                 *r = x as i32 as f32 - self.fb / zv;
             }
-            let (mut least, mut shadow) = (f32::INFINITY, 0u32);
+            // `bound` is the least coordinate plus the 1e-3 px tolerance (added as each coordinate
+            // is taken, off the scan's dependency chain).
+            let (mut bound, mut shadow) = (f32::INFINITY, 0u32);
             for (st, &r) in state.iter_mut().zip(scratch.iter()).rev() {
                 let seen = *st != NONE;
-                let hidden = seen & (r > least + 1e-3);
-                least = if seen & !hidden { r } else { least };
+                let hidden = seen & (r > bound);
+                bound = if seen & !hidden { r + 1e-3 } else { bound };
                 let shadowed = hidden & (*st == OK);
                 *st = if shadowed { SHADOW } else { *st };
                 shadow += u32::from(shadowed);
