@@ -29,6 +29,7 @@ use super::{
 };
 use nalgebra::Matrix4;
 use serde::{Deserialize, Serialize};
+use std::sync::{Arc, Mutex};
 
 /// Colour model parameters (run configuration `[camera.colour]`).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -86,6 +87,22 @@ pub fn colour_image(
 pub(crate) struct NoiseTable(Box<[u8; 1 << 16]>);
 
 impl NoiseTable {
+    /// [`Self::new`], kept for the next call with the same noise settings (the same table).
+    pub(crate) fn shared(cfg: &ColourConfig) -> Option<Arc<Self>> {
+        type Last = Option<((u64, u64), Option<Arc<NoiseTable>>)>;
+        static LAST: Mutex<Last> = Mutex::new(None);
+        let key = (cfg.shot_gain.to_bits(), cfg.read_noise.to_bits());
+        let mut last = LAST.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some((k, table)) = &*last {
+            if *k == key {
+                return table.clone();
+            }
+        }
+        let table = Self::new(cfg).map(Arc::new);
+        *last = Some((key, table.clone()));
+        table
+    }
+
     /// The table of `cfg`'s noise; None without noise.
     pub(crate) fn new(cfg: &ColourConfig) -> Option<Self> {
         if cfg.shot_gain <= 0.0 && cfg.read_noise <= 0.0 {
