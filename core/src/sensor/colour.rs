@@ -15,8 +15,9 @@
 //!   a pixel costs one difference per row (column) its segment crosses, whatever its length.
 //! - **Noise**: Poissonian-Gaussian (Foi et al. 2008) on 8-bit values:
 //!   `σ²(I) = shot_gain · I + read_noise²`, one draw per channel, rounded and clipped to 0-255: a
-//!   256 × 256 table per frame maps (value, 8-bit uniform) to the value plus σ(value) times the
-//!   normal quantile of that uniform's midpoint (scaled to unit variance; tails cut at ±2.9 σ).
+//!   256 × 256 table (one per noise setting) maps (value, 8-bit uniform) to the value plus
+//!   σ(value) times the normal quantile of that uniform's midpoint (scaled to unit variance;
+//!   tails cut at ±2.9 σ).
 //!   Each row draws from its own stream of `(seed, frame index, row)`, so rows can be computed in
 //!   any order, by any thread, with the same result.
 //!
