@@ -15,8 +15,9 @@
 //!   a pixel costs one difference per row (column) its segment crosses, whatever its length.
 //! - **Noise**: Poissonian-Gaussian (Foi et al. 2008) on 8-bit values:
 //!   `σ²(I) = shot_gain · I + read_noise²`, one draw per channel, rounded and clipped to 0-255: a
-//!   256 × 256 table per frame maps (value, 8-bit uniform) to the value plus σ(value) times the
-//!   normal quantile of that uniform's midpoint (scaled to unit variance; tails cut at ±2.9 σ).
+//!   256 × 256 table (one per noise setting) maps (value, 8-bit uniform) to the value plus
+//!   σ(value) times the normal quantile of that uniform's midpoint (scaled to unit variance;
+//!   tails cut at ±2.9 σ).
 //!   Each row draws from its own stream of `(seed, frame index, row)`, so rows can be computed in
 //!   any order, by any thread, with the same result.
 //!
@@ -29,6 +30,7 @@ use super::{
 };
 use nalgebra::Matrix4;
 use serde::{Deserialize, Serialize};
+use std::sync::{Arc, Mutex};
 
 /// Colour model parameters (run configuration `[camera.colour]`).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -77,7 +79,7 @@ pub fn colour_image(
     let mut out = vec![0u8; 3 * frame.width * frame.height];
     let table = NoiseTable::new(cfg);
     let mut scratch = BlurScratch::default();
-    ColourRows::new(unit, frame, camera_end_from_start, table.as_ref(), seed, frame_index, &mut scratch)
+    ColourRows::new(unit, frame, None, camera_end_from_start, table.as_ref(), seed, frame_index, &mut scratch)
         .run(0, &mut out);
     out
 }
@@ -86,6 +88,22 @@ pub fn colour_image(
 pub(crate) struct NoiseTable(Box<[u8; 1 << 16]>);
 
 impl NoiseTable {
+    /// [`Self::new`], kept for the next call with the same noise settings (the same table).
+    pub(crate) fn shared(cfg: &ColourConfig) -> Option<Arc<Self>> {
+        type Last = Option<((u64, u64), Option<Arc<NoiseTable>>)>;
+        static LAST: Mutex<Last> = Mutex::new(None);
+        let key = (cfg.shot_gain.to_bits(), cfg.read_noise.to_bits());
+        let mut last = LAST.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some((k, table)) = &*last {
+            if *k == key {
+                return table.clone();
+            }
+        }
+        let table = Self::new(cfg).map(Arc::new);
+        *last = Some((key, table.clone()));
+        table
+    }
+
     /// The table of `cfg`'s noise; None without noise.
     pub(crate) fn new(cfg: &ColourConfig) -> Option<Self> {
         if cfg.shot_gain <= 0.0 && cfg.read_noise <= 0.0 {
@@ -154,9 +172,14 @@ pub(crate) struct ColourRows<'a> {
 }
 
 impl<'a> ColourRows<'a> {
+    /// `true_depth`: the frame's true depth, one value a pixel (0 without a surface), as
+    /// [`super::depth::DepthFrame::surfaces`] makes it, on the rows that will be run; the motion
+    /// blur reads it in place of the points' z (the same values, contiguous). None: the points'.
+    #[allow(clippy::too_many_arguments)]
     pub(crate) fn new(
         unit: &SensorUnit,
         frame: &RenderedFrame<'a>,
+        true_depth: Option<&'a [f32]>,
         camera_end_from_start: Option<&Matrix4<f64>>,
         noise: Option<&'a NoiseTable>,
         seed: u64,
@@ -164,7 +187,9 @@ impl<'a> ColourRows<'a> {
         scratch: &'a mut BlurScratch,
     ) -> Self {
         let blur = match camera_end_from_start {
-            Some(m) if (m - Matrix4::identity()).abs().max() > 1e-9 => Some(MotionBlur::new(unit, frame, m, scratch)),
+            Some(m) if (m - Matrix4::identity()).abs().max() > 1e-9 => {
+                Some(MotionBlur::new(unit, frame, true_depth, m, scratch))
+            }
             _ => None,
         };
         Self { w: frame.width, src: frame.rgb, blur, noise, seed, frame_index }
@@ -293,19 +318,56 @@ impl Prefix {
             }
             return;
         }
-        for r in lo..=hi.min(self.row_done.len().saturating_sub(1)) {
+        let h = self.row_done.len();
+        if h == 0 || (lo..=hi.min(h - 1)).all(|r| self.row_done[r]) {
+            return;
+        }
+        // A row missing: the next rows too (the following image rows need them), four at a time
+        // where four in a row are missing, so that four running sums advance side by side.
+        let end = (hi + AHEAD).min(h - 1);
+        let mut r = lo;
+        while r <= end {
             if self.row_done[r] {
+                r += 1;
                 continue;
             }
-            let s = &mut self.sums[r * (w + 1)..(r + 1) * (w + 1)];
-            let mut acc = [0.0f32; 4];
-            s[0] = acc;
-            for (o, p) in s[1..].iter_mut().zip(src[3 * r * w..3 * (r + 1) * w].chunks_exact(3)) {
-                acc = add4(acc, px4(p));
-                *o = acc;
+            let k = if r + 4 <= end + 1 && !self.row_done[r..r + 4].contains(&true) { 4 } else { 1 };
+            let sums = &mut self.sums[r * (w + 1)..(r + k) * (w + 1)];
+            let src = &src[3 * r * w..3 * (r + k) * w];
+            if k == 4 {
+                prefix_rows4(src, sums, w);
+            } else {
+                let mut acc = [0.0f32; 4];
+                sums[0] = acc;
+                for (o, p) in sums[1..].iter_mut().zip(src.chunks_exact(3)) {
+                    acc = add4(acc, px4(p));
+                    *o = acc;
+                }
             }
-            self.row_done[r] = true;
+            self.row_done[r..r + k].fill(true);
+            r += k;
         }
+    }
+}
+
+/// Rows of sums computed ahead of the rows asked for, when one is missing.
+const AHEAD: usize = 3;
+
+/// The prefix sums along four image rows (`src`, `3 w` bytes each) into `sums` (`w + 1` each).
+fn prefix_rows4(src: &[u8], sums: &mut [Px], w: usize) {
+    let (s0, rest) = sums.split_at_mut(w + 1);
+    let (s1, rest) = rest.split_at_mut(w + 1);
+    let (s2, s3) = rest.split_at_mut(w + 1);
+    let (p0, rest) = src.split_at(3 * w);
+    let (p1, rest) = rest.split_at(3 * w);
+    let (p2, p3) = rest.split_at(3 * w);
+    let mut acc = [[0.0f32; 4]; 4];
+    (s0[0], s1[0], s2[0], s3[0]) = (acc[0], acc[1], acc[2], acc[3]);
+    let outs = s0[1..].iter_mut().zip(&mut s1[1..]).zip(s2[1..].iter_mut().zip(&mut s3[1..]));
+    let ins = p0.chunks_exact(3).zip(p1.chunks_exact(3)).zip(p2.chunks_exact(3).zip(p3.chunks_exact(3)));
+    for (((o0, o1), (o2, o3)), ((a, b), (c, d))) in outs.zip(ins) {
+        acc = [add4(acc[0], px4(a)), add4(acc[1], px4(b)), add4(acc[2], px4(c)), add4(acc[3], px4(d))];
+        (*o0, *o1, *o2, *o3) = (acc[0], acc[1], acc[2], acc[3]);
     }
 }
 
@@ -332,6 +394,8 @@ struct MotionBlur<'a> {
     h: usize,
     src: &'a [u8],
     pts: &'a [f32],
+    /// The true depth of every pixel (0 without a surface), when given: read in place of `pts`.
+    true_depth: Option<&'a [f32]>,
     rows: &'a mut Prefix,
     cols: &'a mut Prefix,
     /// Whether `cols` is in use: from the first time a pixel's motion is steeper than 45°.
@@ -363,7 +427,13 @@ struct MotionBlur<'a> {
 }
 
 impl<'a> MotionBlur<'a> {
-    fn new(unit: &SensorUnit, frame: &RenderedFrame<'a>, m: &Matrix4<f64>, scratch: &'a mut BlurScratch) -> Self {
+    fn new(
+        unit: &SensorUnit,
+        frame: &RenderedFrame<'a>,
+        true_depth: Option<&'a [f32]>,
+        m: &Matrix4<f64>,
+        scratch: &'a mut BlurScratch,
+    ) -> Self {
         let (w, h) = (frame.width, frame.height);
         let k = &unit.colour_true;
         let (f, i) = (vec![0.0f32; w], vec![0u32; w]);
@@ -373,6 +443,7 @@ impl<'a> MotionBlur<'a> {
             h,
             src: frame.rgb,
             pts: frame.points_in_camera,
+            true_depth,
             rows: &mut scratch.rows,
             cols: &mut scratch.cols,
             cols_ready: false,
@@ -446,9 +517,15 @@ impl<'a> MotionBlur<'a> {
         let ay = (y as f32 + 0.5 - cy) / fy;
         // Rotated ray direction r · (ax, ay, 1) = ax · col0 + (ay · col1 + col2).
         let (px, py, pz) = (r01 * ay + r02, r11 * ay + r12, r21 * ay + r22);
-        // Depths of the row, contiguous (so that the loop below runs on several pixels at a time).
-        for (z, p) in self.du.iter_mut().zip(self.pts[3 * y * w..3 * (y + 1) * w].chunks_exact(3)) {
-            *z = p[2];
+        // Depths of the row, contiguous (so that the loop below runs on several pixels at a time);
+        // the true depth is the points' z where that is a surface, 0 elsewhere, so it gives the
+        // same motion.
+        if let Some(z) = self.true_depth {
+            self.du[..w].copy_from_slice(&z[y * w..(y + 1) * w]);
+        } else {
+            for (z, p) in self.du.iter_mut().zip(self.pts[3 * y * w..3 * (y + 1) * w].chunks_exact(3)) {
+                *z = p[2];
+            }
         }
         let mut steep = 0u32;
         for ((du, dv), &ax) in self.du[..w].iter_mut().zip(&mut self.dv[..w]).zip(&self.ax[..w]) {
@@ -640,11 +717,15 @@ mod tests {
     #[test]
     fn row_prefix_sums_are_running_sums() {
         for w in [1usize, 2, 7, 10] {
-            let h = 3;
+            let h = 9;
             let src: Vec<u8> = (0..3 * w * h).map(|i| (i * 53 % 256) as u8).collect();
             let mut prefix = Prefix::default();
             prefix.reset_rows(w, h);
-            prefix.ensure(&src, w, 0, h - 1);
+            // Rows four at a time (0-3, then 5-8) and one at a time (4).
+            for (lo, hi) in [(0, 0), (5, 5), (0, h - 1)] {
+                prefix.ensure(&src, w, lo, hi);
+            }
+            assert!(prefix.row_done.iter().all(|&d| d));
             for r in 0..h {
                 let mut want = [0.0f32; 4];
                 for k in 0..=w {

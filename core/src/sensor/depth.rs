@@ -373,11 +373,13 @@ impl Surfaces {
             for (x, (r, &zv)) in scratch.iter_mut().zip(z.iter()).enumerate() {
                 *r = x as i32 as f32 - self.fb / zv;
             }
-            let (mut least, mut shadow) = (f32::INFINITY, 0u32);
+            // `bound` is the least coordinate plus the 1e-3 px tolerance (added as each coordinate
+            // is taken, off the scan's dependency chain).
+            let (mut bound, mut shadow) = (f32::INFINITY, 0u32);
             for (st, &r) in state.iter_mut().zip(scratch.iter()).rev() {
                 let seen = *st != NONE;
-                let hidden = seen & (r > least + 1e-3);
-                least = if seen & !hidden { r } else { least };
+                let hidden = seen & (r > bound);
+                bound = if seen & !hidden { r + 1e-3 } else { bound };
                 let shadowed = hidden & (*st == OK);
                 *st = if shadowed { SHADOW } else { *st };
                 shadow += u32::from(shadowed);
@@ -465,14 +467,23 @@ impl Silhouettes {
                 *hi = max_f(v, *hi);
             }
         }
-        self.lo.copy_from_slice(&self.col_lo[..w]);
-        self.hi.copy_from_slice(&self.col_hi[..w]);
-        for k in 1..=2 * band {
-            for ((lo, hi), (&l, &u)) in
-                self.lo.iter_mut().zip(self.hi.iter_mut()).zip(self.col_lo[k..k + w].iter().zip(&self.col_hi[k..k + w]))
-            {
-                *lo = min_f(l, *lo);
-                *hi = max_f(u, *hi);
+        if band == 1 {
+            // The default band: the three columns in one pass.
+            let (cl, ch) = (&self.col_lo[..w + 2], &self.col_hi[..w + 2]);
+            let windows = cl.windows(3).zip(ch.windows(3));
+            for ((lo, hi), (l, u)) in self.lo.iter_mut().zip(self.hi.iter_mut()).zip(windows) {
+                *lo = min_f(min_f(l[0], l[1]), l[2]);
+                *hi = max_f(max_f(u[0], u[1]), u[2]);
+            }
+        } else {
+            self.lo.copy_from_slice(&self.col_lo[..w]);
+            self.hi.copy_from_slice(&self.col_hi[..w]);
+            for k in 1..=2 * band {
+                let (cl, ch) = (&self.col_lo[k..k + w], &self.col_hi[k..k + w]);
+                for ((lo, hi), (&l, &u)) in self.lo.iter_mut().zip(self.hi.iter_mut()).zip(cl.iter().zip(ch)) {
+                    *lo = min_f(l, *lo);
+                    *hi = max_f(u, *hi);
+                }
             }
         }
         let (jump_m, jump_rel) = (self.jump_m, self.jump_rel);
@@ -845,21 +856,30 @@ mod tests {
 
     #[test]
     fn mixed_pixels_only_at_silhouettes() {
-        let cfg = StereoDepthConfig { subpixel_rms_px: 0.0, shadow: false, mixed_fraction: 1.0, ..Default::default() };
-        let (p, n) = scene(0.6, Some((0.4, 250..400)));
-        let (d, stats) = run(&cfg, &p, &n, 1, 0);
-        let y = 240;
-        // Mixed values lie between the two surfaces, only within one pixel of the edge.
-        for x in 0..W {
-            let v = d[y * W + x];
-            let near_edge = (248..=251).contains(&x) || (398..=401).contains(&x);
-            if !near_edge {
-                assert!((v - 0.6).abs() < 1e-3 || (v - 0.4).abs() < 1e-3, "x {x}: {v}");
-            } else {
-                assert!((0.399..=0.601).contains(&v), "x {x}: {v}");
+        // The default band of one pixel and a wider one.
+        for band in [1usize, 2] {
+            let cfg = StereoDepthConfig {
+                subpixel_rms_px: 0.0,
+                shadow: false,
+                mixed_fraction: 1.0,
+                mixed_band_px: band,
+                ..Default::default()
+            };
+            let (p, n) = scene(0.6, Some((0.4, 250..400)));
+            let (d, stats) = run(&cfg, &p, &n, 1, 0);
+            let y = 240;
+            // Mixed values lie between the two surfaces, only within the band of the edge.
+            for x in 0..W {
+                let v = d[y * W + x];
+                let near_edge = (249 - band..=250 + band).contains(&x) || (399 - band..=400 + band).contains(&x);
+                if !near_edge {
+                    assert!((v - 0.6).abs() < 1e-3 || (v - 0.4).abs() < 1e-3, "band {band} x {x}: {v}");
+                } else {
+                    assert!((0.399..=0.601).contains(&v), "band {band} x {x}: {v}");
+                }
             }
+            assert!(stats.mixed > 0);
         }
-        assert!(stats.mixed > 0);
     }
 
     #[test]

@@ -532,7 +532,7 @@ pub fn simulate_frame(
     }
     let (w, h) = (frame.width, frame.height);
     let depth = depth::DepthFrame::new(&config.stereo, unit, frame, seed, frame_index);
-    let noise = colour::NoiseTable::new(&config.colour);
+    let noise = colour::NoiseTable::shared(&config.colour);
     let with_colour = !frame.rgb.is_empty();
     let mut rgb = vec![0u8; if with_colour { 3 * n } else { 0 }];
     // Every value is written by the depth image pass.
@@ -553,8 +553,9 @@ pub fn simulate_frame(
             colour::ColourRows::new(
                 unit,
                 frame,
+                Some(&scratch.z[..n]),
                 camera_end_from_start,
-                noise.as_ref(),
+                noise.as_deref(),
                 seed,
                 frame_index,
                 &mut scratch.blur,
