@@ -106,12 +106,13 @@ impl BundleProblem {
                 .collect()
         };
         let n_var = var_index.iter().flatten().count();
-        let mut obs_by_point: Vec<Vec<usize>> = vec![Vec::new(); self.points.len()];
+        // Per point, its observations by variable poses (observation, variable), in observation
+        // order: only they enter the reduced system and the back-substitution (a point seen by
+        // many fixed keyframes has few of them).
+        let mut var_obs_by_point: Vec<Vec<(usize, usize)>> = vec![Vec::new(); self.points.len()];
         for (i, o) in self.observations.iter().enumerate() {
-            if o.pose < n_poses {
-                if let Some(list) = obs_by_point.get_mut(o.point) {
-                    list.push(i);
-                }
+            if let (Some(Some(v)), Some(list)) = (var_index.get(o.pose), var_obs_by_point.get_mut(o.point)) {
+                list.push((i, *v));
             }
         }
         let mut lambda = config.initial_lambda;
@@ -148,7 +149,7 @@ impl BundleProblem {
                 rhs.fixed_rows_mut::<6>(6 * v).copy_from(&bc);
             }
             let mut hpp_inv = vec![Matrix3::<f64>::zeros(); self.points.len()];
-            for (pi, list) in obs_by_point.iter().enumerate() {
+            for (pi, list) in var_obs_by_point.iter().enumerate() {
                 let mut h = hpp[pi];
                 for k in 0..3 {
                     h[(k, k)] += lambda * (1.0 + h[(k, k)]);
@@ -156,23 +157,17 @@ impl BundleProblem {
                 let Some(inv) = h.try_inverse() else { continue };
                 hpp_inv[pi] = inv;
                 // The symmetric reduced system: each pair of the point's observations once.
-                for (a, &oa) in list.iter().enumerate() {
-                    let Some(Some(va)) = self.observations.get(oa).and_then(|o| var_index.get(o.pose)) else {
-                        continue;
-                    };
+                for (a, &(oa, va)) in list.iter().enumerate() {
                     let wa = hcp[oa] * inv;
                     let r = wa * bp[pi];
                     let mut seg = rhs.fixed_rows_mut::<6>(6 * va);
                     seg -= r;
-                    for (b, &ob) in list.iter().enumerate().skip(a) {
-                        let Some(Some(vb)) = self.observations.get(ob).and_then(|o| var_index.get(o.pose)) else {
-                            continue;
-                        };
+                    for &(ob, vb) in &list[a..] {
                         let blk = wa * hcp[ob].transpose();
-                        let mut view = s.fixed_view_mut::<6, 6>(6 * va, 6 * *vb);
+                        let mut view = s.fixed_view_mut::<6, 6>(6 * va, 6 * vb);
                         view -= blk;
-                        if b != a {
-                            let mut mirror = s.fixed_view_mut::<6, 6>(6 * *vb, 6 * va);
+                        if ob != oa {
+                            let mut mirror = s.fixed_view_mut::<6, 6>(6 * vb, 6 * va);
                             mirror -= blk.transpose();
                         }
                     }
@@ -198,13 +193,11 @@ impl BundleProblem {
                     self.camera_from_world[i] = apply_increment(&self.camera_from_world[i], &d);
                 }
             }
-            for (pi, list) in obs_by_point.iter().enumerate() {
+            for (pi, list) in var_obs_by_point.iter().enumerate() {
                 let mut r = bp[pi];
-                for &oa in list {
-                    if let Some(Some(va)) = self.observations.get(oa).and_then(|o| var_index.get(o.pose)) {
-                        let d = Vector6::from_iterator(dx.rows(6 * va, 6).iter().copied());
-                        r -= hcp[oa].transpose() * d;
-                    }
+                for &(oa, va) in list {
+                    let d = Vector6::from_iterator(dx.rows(6 * va, 6).iter().copied());
+                    r -= hcp[oa].transpose() * d;
                 }
                 let dp = hpp_inv[pi] * r;
                 if dp.iter().all(|v| v.is_finite()) {
