@@ -49,8 +49,8 @@ pub mod system;
 pub mod topo;
 
 /// Threads one frame's work may use (the sensor model's row parts, line segments beside
-/// tracking, the ORB pyramid levels and the projection searches inside tracking): two where the
-/// machine has two cores or more, else one.
+/// tracking, the ORB pyramid levels, the projection searches and the local bundle adjustment
+/// inside tracking): two where the machine has two cores or more, else one.
 pub(crate) fn worker_threads() -> usize {
     static THREADS: std::sync::OnceLock<usize> = std::sync::OnceLock::new();
     *THREADS.get_or_init(|| std::thread::available_parallelism().map_or(1, |n| n.get()).min(2))
