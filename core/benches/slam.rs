@@ -5,7 +5,11 @@
 //! `TabletopScene::tabletop(3)` along a smooth arc, played back and forth so the motion stays
 //! smooth; the map is warmed up over the first pass. Default `TrackerConfig` (1 cm / 1° prior
 //! bias per view of two frames). The tracker uses the core's worker threads (two on a machine
-//! with two cores or more: ORB levels and projection searches in parallel).
+//! with two cores or more: ORB levels, projection searches and the local bundle adjustment's
+//! linearisation and cost in parallel). The frames are played back and forth, so keyframes keep
+//! adding observations of the same points: a later frame's bundle adjustment holds more fixed
+//! keyframes, and the entry grows with the run's length (criterion's default run ends near
+//! frame 1200).
 //!
 //! `orb_extract_640x480`: `OrbExtractor::extract`, one thread (as the OpenCV reference).
 //!

@@ -49,9 +49,68 @@ pub mod system;
 pub mod topo;
 
 /// Threads one frame's work may use (the sensor model's row parts, line segments beside
-/// tracking, the ORB pyramid levels and the projection searches inside tracking): two where the
-/// machine has two cores or more, else one.
+/// tracking, the ORB pyramid levels, the projection searches and the local bundle adjustment
+/// inside tracking): two where the machine has two cores or more, else one.
 pub(crate) fn worker_threads() -> usize {
     static THREADS: std::sync::OnceLock<usize> = std::sync::OnceLock::new();
     *THREADS.get_or_init(|| std::thread::available_parallelism().map_or(1, |n| n.get()).min(2))
+}
+
+/// `work(i)` for every `i` in `0..n` on up to `threads` threads, the results in index order: the
+/// same as `(0..n).map(work).collect()` for any `threads`. With two or more, the calling thread
+/// and one scoped helper take the next index from a shared counter until none is left, so a
+/// helper that starts late takes fewer. A panic in either reaches the caller once both stopped.
+pub(crate) fn map_indices<T: Send>(threads: usize, n: usize, work: impl Fn(usize) -> T + Sync) -> Vec<T> {
+    if threads < 2 || n < 2 {
+        return (0..n).map(work).collect();
+    }
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    let take = || {
+        let mut done = Vec::new();
+        loop {
+            let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            if i >= n {
+                return done;
+            }
+            done.push((i, work(i)));
+        }
+    };
+    let (mut done, helper_done) = std::thread::scope(|s| {
+        let helper = s.spawn(take);
+        let done = take();
+        (done, helper.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
+    });
+    done.extend(helper_done);
+    done.sort_unstable_by_key(|(i, _)| *i);
+    done.into_iter().map(|(_, t)| t).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::map_indices;
+
+    #[test]
+    fn map_indices_keeps_the_order_on_any_thread_count() {
+        let want: Vec<usize> = (0..100).map(|i| i * i).collect();
+        for threads in [0, 1, 2, 3] {
+            assert_eq!(map_indices(threads, 100, |i| i * i), want);
+        }
+        assert!(map_indices(2, 0, |i| i).is_empty());
+    }
+
+    #[test]
+    fn a_panic_in_either_thread_reaches_the_caller() {
+        // Index 0 is taken first, by either thread; every index panics in the second case.
+        for bad in [0usize, usize::MAX] {
+            let r = std::panic::catch_unwind(|| {
+                map_indices(2, 64, |i| {
+                    assert!(bad != usize::MAX && i != bad, "work {i} failed");
+                    i
+                })
+            });
+            assert!(r.is_err());
+        }
+        // The threads are gone: the next call works.
+        assert_eq!(map_indices(2, 3, |i| i), vec![0, 1, 2]);
+    }
 }

@@ -692,3 +692,20 @@ fn the_motion_gate_outvotes_a_single_off_reference() {
         other => panic!("expected a config error, got {:?}", other.err()),
     }
 }
+
+#[test]
+fn one_or_two_threads_track_the_same() {
+    // The bench's sequence played forth and back twice: keyframes of the second pass bring fixed
+    // keyframes of the first into the local bundle adjustment.
+    let seq = objslam_core::slam::synthetic::TrackSequence::new().unwrap();
+    let run = |threads: usize| {
+        let mut tracker = Tracker::new(TrackerConfig::default()).unwrap();
+        tracker.set_threads(threads);
+        let out: Vec<_> = (0..2 * seq.order.len()).map(|step| tracker.track(&seq.input(step)).unwrap()).collect();
+        (out, tracker.trajectory(), tracker.map_points_in_world(), tracker.n_keyframes())
+    };
+    let one = run(1);
+    assert!(one.3 > 5, "{} keyframes", one.3);
+    assert!(one.0.iter().all(|o| o.state == TrackingState::Ok));
+    assert_eq!(run(2), one);
+}

@@ -2,6 +2,8 @@
 //! points eliminated by the Schur complement (dense reduced camera system; fine for the ~5–10
 //! keyframes of a local window). Same residuals and Huber widths as [`super::pnp`].
 
+use std::ops::Range;
+
 use nalgebra::{DMatrix, DVector, Matrix3, Matrix6x3, Point3, Vector3, Vector6};
 use serde::{Deserialize, Serialize};
 
@@ -58,17 +60,29 @@ pub struct BundleProblem {
 impl BundleProblem {
     /// Total robust cost (Huber on whitened χ²).
     pub fn cost(&self, camera: &PinholeCamera, config: &BundleConfig) -> f64 {
+        self.cost_with_threads(camera, config, 1)
+    }
+
+    /// [`Self::cost`] with the observations' terms found on up to `threads` threads (chunks of
+    /// observations) and summed in observation order: the same sum for any `threads`.
+    fn cost_with_threads(&self, camera: &PinholeCamera, config: &BundleConfig, threads: usize) -> f64 {
         let bf = camera.fx * config.depth_baseline_m;
-        self.observations
-            .iter()
-            .filter_map(|o| {
-                let pose = self.camera_from_world.get(o.pose)?;
-                let p = self.points.get(o.point)?;
-                let x = pose * p;
-                let (e, _, d) = residual(camera, bf, &x.coords, o.pixel, o.depth_m, o.sigma_px)?;
-                Some(huber_cost(e.norm_squared(), chi2_threshold(d)))
-            })
-            .sum()
+        let term = |o: &BundleObservation| {
+            let pose = self.camera_from_world.get(o.pose)?;
+            let p = self.points.get(o.point)?;
+            let x = pose * p;
+            let (e, _, d) = residual(camera, bf, &x.coords, o.pixel, o.depth_m, o.sigma_px)?;
+            Some(huber_cost(e.norm_squared(), chi2_threshold(d)))
+        };
+        if threads < 2 {
+            return self.observations.iter().filter_map(term).sum();
+        }
+        let chunk = self.observations.len().div_ceil(PARALLEL_CHUNKS).max(1);
+        let chunks: Vec<&[BundleObservation]> = self.observations.chunks(chunk).collect();
+        let terms = crate::map_indices(threads, chunks.len(), |i| {
+            chunks.get(i).map_or_else(Vec::new, |c| c.iter().filter_map(term).collect::<Vec<f64>>())
+        });
+        terms.into_iter().flatten().sum()
     }
 
     /// Whether each observation passes its χ² test at the current estimate.
@@ -90,6 +104,13 @@ impl BundleProblem {
     /// Run LM; returns the number of accepted steps. Leaves the problem unchanged if nothing
     /// improves.
     pub fn optimize(&mut self, camera: &PinholeCamera, config: &BundleConfig) -> usize {
+        self.optimize_with_threads(camera, config, 1)
+    }
+
+    /// [`Self::optimize`] with the linearisation (by chunks of points) and the cost (by chunks
+    /// of observations) on up to `threads` threads; every sum keeps its order, so the result is
+    /// the same for any `threads`.
+    pub fn optimize_with_threads(&mut self, camera: &PinholeCamera, config: &BundleConfig, threads: usize) -> usize {
         let bf = camera.fx * config.depth_baseline_m;
         let n_poses = self.camera_from_world.len();
         let var_index: Vec<Option<usize>> = {
@@ -106,34 +127,70 @@ impl BundleProblem {
                 .collect()
         };
         let n_var = var_index.iter().flatten().count();
-        let mut obs_by_point: Vec<Vec<usize>> = vec![Vec::new(); self.points.len()];
+        // Per point, its observations in observation order, each with (its rank among the
+        // observations by variable poses, the variable) if its pose is variable; and per point
+        // only those (rank, variable): they alone enter the reduced system and the
+        // back-substitution (a point seen by many fixed keyframes has few of them).
+        let n_points = self.points.len();
+        let mut obs_by_point: Vec<Vec<PointObservation>> = vec![Vec::new(); n_points];
+        let mut var_obs_by_point: Vec<Vec<(usize, usize)>> = vec![Vec::new(); n_points];
+        let mut n_var_obs = 0;
         for (i, o) in self.observations.iter().enumerate() {
-            if o.pose < n_poses {
-                if let Some(list) = obs_by_point.get_mut(o.point) {
-                    list.push(i);
-                }
+            let (Some(var), Some(list)) = (var_index.get(o.pose), obs_by_point.get_mut(o.point)) else {
+                continue;
+            };
+            let ranked = var.map(|v| {
+                n_var_obs += 1;
+                (n_var_obs - 1, v)
+            });
+            list.push(PointObservation { obs: i, ranked });
+            if let (Some(r), Some(vl)) = (ranked, var_obs_by_point.get_mut(o.point)) {
+                vl.push(r);
             }
         }
+        // Chunks of points with about equal numbers of observations for the linearisation.
+        let point_chunks = point_chunks(&obs_by_point, if threads > 1 { PARALLEL_CHUNKS } else { 1 });
         let mut lambda = config.initial_lambda;
-        let mut cost = self.cost(camera, config);
+        let mut cost = self.cost_with_threads(camera, config, threads);
         let mut accepted = 0;
-        let n_points = self.points.len();
-        let n_obs = self.observations.len();
         let mut hcc = vec![NormalEquations6::new(); n_var];
         let mut hpp = vec![Matrix3::<f64>::zeros(); n_points];
         let mut bp = vec![Vector3::<f64>::zeros(); n_points];
-        let mut hcp = vec![Matrix6x3::<f64>::zeros(); n_obs];
+        // Camera-point blocks by rank of the observation among those by variable poses.
+        let mut hcp = vec![Matrix6x3::<f64>::zeros(); n_var_obs];
         // The linearisation holds until a step is accepted (a rejected step only raises the damping).
         let mut linearised = false;
         for _ in 0..config.iterations {
             if !linearised {
-                hcc.iter_mut().for_each(|m| *m = NormalEquations6::new());
-                hpp.iter_mut().for_each(|m| *m = Matrix3::zeros());
-                bp.iter_mut().for_each(|m| *m = Vector3::zeros());
-                hcp.iter_mut().for_each(|m| *m = Matrix6x3::zeros());
                 let rotations: Vec<Matrix3<f64>> =
                     self.camera_from_world.iter().map(|p| *p.rotation.to_rotation_matrix().matrix()).collect();
-                self.linearise(camera, bf, &var_index, &rotations, (&mut hcc, &mut hpp, &mut bp, &mut hcp));
+                let ctx = Linearisation { camera, bf, rotations: &rotations, obs_by_point: &obs_by_point };
+                let parts = crate::map_indices(threads, point_chunks.len(), |c| {
+                    point_chunks
+                        .get(c)
+                        .map_or_else(PointsLinearised::default, |r| self.linearise_points(&ctx, r.clone()))
+                });
+                hcc.iter_mut().for_each(|m| *m = NormalEquations6::new());
+                hcp.iter_mut().for_each(|m| *m = Matrix6x3::zeros());
+                let mut pose_terms: Vec<Option<PoseTerm>> = vec![None; n_var_obs];
+                for (range, part) in point_chunks.iter().zip(parts) {
+                    if let (Some(h), Some(b)) = (hpp.get_mut(range.clone()), bp.get_mut(range.clone())) {
+                        h.copy_from_slice(&part.hpp);
+                        b.copy_from_slice(&part.bp);
+                    }
+                    for (rank, term, block) in part.pose_terms {
+                        if let (Some(t), Some(c)) = (pose_terms.get_mut(rank), hcp.get_mut(rank)) {
+                            *t = Some(term);
+                            *c = block;
+                        }
+                    }
+                }
+                // Each pose's normal equations summed in observation order.
+                for t in pose_terms.iter().flatten() {
+                    if let Some(n) = hcc.get_mut(t.var) {
+                        n.add(&t.rows, &t.e, t.w, t.n_rows);
+                    }
+                }
                 linearised = true;
             }
             // Damped Schur complement.
@@ -148,7 +205,7 @@ impl BundleProblem {
                 rhs.fixed_rows_mut::<6>(6 * v).copy_from(&bc);
             }
             let mut hpp_inv = vec![Matrix3::<f64>::zeros(); self.points.len()];
-            for (pi, list) in obs_by_point.iter().enumerate() {
+            for (pi, list) in var_obs_by_point.iter().enumerate() {
                 let mut h = hpp[pi];
                 for k in 0..3 {
                     h[(k, k)] += lambda * (1.0 + h[(k, k)]);
@@ -156,23 +213,17 @@ impl BundleProblem {
                 let Some(inv) = h.try_inverse() else { continue };
                 hpp_inv[pi] = inv;
                 // The symmetric reduced system: each pair of the point's observations once.
-                for (a, &oa) in list.iter().enumerate() {
-                    let Some(Some(va)) = self.observations.get(oa).and_then(|o| var_index.get(o.pose)) else {
-                        continue;
-                    };
+                for (a, &(oa, va)) in list.iter().enumerate() {
                     let wa = hcp[oa] * inv;
                     let r = wa * bp[pi];
                     let mut seg = rhs.fixed_rows_mut::<6>(6 * va);
                     seg -= r;
-                    for (b, &ob) in list.iter().enumerate().skip(a) {
-                        let Some(Some(vb)) = self.observations.get(ob).and_then(|o| var_index.get(o.pose)) else {
-                            continue;
-                        };
+                    for &(ob, vb) in &list[a..] {
                         let blk = wa * hcp[ob].transpose();
-                        let mut view = s.fixed_view_mut::<6, 6>(6 * va, 6 * *vb);
+                        let mut view = s.fixed_view_mut::<6, 6>(6 * va, 6 * vb);
                         view -= blk;
-                        if b != a {
-                            let mut mirror = s.fixed_view_mut::<6, 6>(6 * *vb, 6 * va);
+                        if ob != oa {
+                            let mut mirror = s.fixed_view_mut::<6, 6>(6 * vb, 6 * va);
                             mirror -= blk.transpose();
                         }
                     }
@@ -198,20 +249,18 @@ impl BundleProblem {
                     self.camera_from_world[i] = apply_increment(&self.camera_from_world[i], &d);
                 }
             }
-            for (pi, list) in obs_by_point.iter().enumerate() {
+            for (pi, list) in var_obs_by_point.iter().enumerate() {
                 let mut r = bp[pi];
-                for &oa in list {
-                    if let Some(Some(va)) = self.observations.get(oa).and_then(|o| var_index.get(o.pose)) {
-                        let d = Vector6::from_iterator(dx.rows(6 * va, 6).iter().copied());
-                        r -= hcp[oa].transpose() * d;
-                    }
+                for &(oa, va) in list {
+                    let d = Vector6::from_iterator(dx.rows(6 * va, 6).iter().copied());
+                    r -= hcp[oa].transpose() * d;
                 }
                 let dp = hpp_inv[pi] * r;
                 if dp.iter().all(|v| v.is_finite()) {
                     self.points[pi] += dp;
                 }
             }
-            let new_cost = self.cost(camera, config);
+            let new_cost = self.cost_with_threads(camera, config, threads);
             if new_cost.is_finite() && new_cost < cost {
                 let converged = cost - new_cost <= CONVERGED_RELATIVE_DECREASE * cost;
                 cost = new_cost;
@@ -230,50 +279,104 @@ impl BundleProblem {
         accepted
     }
 
-    /// Gauss-Newton blocks at the current estimate, added into the zeroed `blocks` (camera
-    /// Hessians and gradients by variable pose, point Hessians and gradients, camera-point blocks
-    /// by observation); `rotations[i]` is pose `i`'s rotation matrix.
-    fn linearise(
-        &self,
-        camera: &PinholeCamera,
-        bf: f64,
-        var_index: &[Option<usize>],
-        rotations: &[Matrix3<f64>],
-        blocks: LinearBlocks<'_>,
-    ) {
-        let (hcc, hpp, bp, hcp) = blocks;
-        for (oi, o) in self.observations.iter().enumerate() {
-            let (Some(pose), Some(rot), Some(p)) =
-                (self.camera_from_world.get(o.pose), rotations.get(o.pose), self.points.get(o.point))
-            else {
-                continue;
-            };
-            let x = rot * p.coords + pose.translation.vector;
-            let Some((e, j, d)) = residual(camera, bf, &x, o.pixel, o.depth_m, o.sigma_px) else {
-                continue;
-            };
-            let w = huber_weight(e.norm_squared(), chi2_threshold(d));
-            let jp: Matrix3<f64> = j * rot;
-            if let (Some(h), Some(b)) = (hpp.get_mut(o.point), bp.get_mut(o.point)) {
+    /// Gauss-Newton blocks at the current estimate of the points `range`: their Hessians and
+    /// gradients (each point's observations summed in observation order) and, for each of
+    /// their observations by a variable pose, its pose term and camera-point block.
+    fn linearise_points(&self, ctx: &Linearisation<'_>, range: Range<usize>) -> PointsLinearised {
+        let n = range.len();
+        let mut out =
+            PointsLinearised { hpp: vec![Matrix3::zeros(); n], bp: vec![Vector3::zeros(); n], pose_terms: Vec::new() };
+        let lists = ctx.obs_by_point.get(range.clone()).unwrap_or_default();
+        let points = self.points.get(range).unwrap_or_default();
+        for ((list, p), (h, b)) in lists.iter().zip(points).zip(out.hpp.iter_mut().zip(out.bp.iter_mut())) {
+            for po in list {
+                let Some(o) = self.observations.get(po.obs) else {
+                    continue;
+                };
+                let (Some(pose), Some(rot)) = (self.camera_from_world.get(o.pose), ctx.rotations.get(o.pose)) else {
+                    continue;
+                };
+                let x = rot * p.coords + pose.translation.vector;
+                let Some((e, j, d)) = residual(ctx.camera, ctx.bf, &x, o.pixel, o.depth_m, o.sigma_px) else {
+                    continue;
+                };
+                let w = huber_weight(e.norm_squared(), chi2_threshold(d));
+                let jp: Matrix3<f64> = j * rot;
                 *h += jp.transpose() * jp * w;
                 *b -= jp.transpose() * e * w;
-            }
-            if let Some(&Some(v)) = var_index.get(o.pose) {
-                let rows = pose_jacobian_rows(&j, &x);
-                let n_rows = if d { 3 } else { 2 };
-                if let (Some(n), Some(c)) = (hcc.get_mut(v), hcp.get_mut(oi)) {
-                    n.add(&rows, &e, w, n_rows);
-                    *c = Matrix6x3::from_fn(|i, k| (0..n_rows).map(|r| rows[r][i] * jp[(r, k)]).sum::<f64>() * w);
+                if let Some((rank, var)) = po.ranked {
+                    let rows = pose_jacobian_rows(&j, &x);
+                    let n_rows = if d { 3 } else { 2 };
+                    let block =
+                        Matrix6x3::from_fn(|i, k| (0..n_rows).map(|r| rows[r][i] * jp[(r, k)]).sum::<f64>() * w);
+                    out.pose_terms.push((rank, PoseTerm { var, rows, e, w, n_rows }, block));
                 }
             }
         }
+        out
     }
 }
 
-/// The blocks [`BundleProblem::linearise`] fills: camera normal equations, point Hessians,
-/// point gradients, camera-point blocks.
-type LinearBlocks<'a> =
-    (&'a mut [NormalEquations6], &'a mut [Matrix3<f64>], &'a mut [Vector3<f64>], &'a mut [Matrix6x3<f64>]);
+/// Chunks of the observations (cost) and of the points (linearisation) a bundle problem is
+/// split into on two threads (taken in turn from a shared counter, so a helper thread that
+/// starts late takes fewer).
+const PARALLEL_CHUNKS: usize = 8;
+
+/// An observation of a point: its index, and (its rank among the observations by variable
+/// poses, the variable) if its pose is variable.
+#[derive(Debug, Clone, Copy)]
+struct PointObservation {
+    obs: usize,
+    ranked: Option<(usize, usize)>,
+}
+
+/// What the linearisation of every chunk of points reads.
+struct Linearisation<'a> {
+    camera: &'a PinholeCamera,
+    bf: f64,
+    /// Each pose's rotation matrix.
+    rotations: &'a [Matrix3<f64>],
+    obs_by_point: &'a [Vec<PointObservation>],
+}
+
+/// An observation's term in its variable pose's normal equations: `w Jᵀ J` and `−w Jᵀ e` over
+/// the first `n_rows` of `rows` (J) and `e`.
+#[derive(Debug, Clone, Copy)]
+struct PoseTerm {
+    var: usize,
+    rows: [[f64; 6]; 3],
+    e: Vector3<f64>,
+    w: f64,
+    n_rows: usize,
+}
+
+/// The linearisation of a chunk of points: their Hessians and gradients, and (rank, pose term,
+/// camera-point block) of each of their observations by a variable pose.
+#[derive(Debug, Default)]
+struct PointsLinearised {
+    hpp: Vec<Matrix3<f64>>,
+    bp: Vec<Vector3<f64>>,
+    pose_terms: Vec<(usize, PoseTerm, Matrix6x3<f64>)>,
+}
+
+/// Split the points into at most `n` consecutive ranges of about equal observation counts.
+fn point_chunks(obs_by_point: &[Vec<PointObservation>], n: usize) -> Vec<Range<usize>> {
+    let total: usize = obs_by_point.iter().map(Vec::len).sum();
+    let per_chunk = total.div_ceil(n.max(1)).max(1);
+    let mut chunks = Vec::with_capacity(n + 1);
+    let (mut start, mut count) = (0, 0);
+    for (i, list) in obs_by_point.iter().enumerate() {
+        count += list.len();
+        if count >= per_chunk {
+            chunks.push(start..i + 1);
+            (start, count) = (i + 1, 0);
+        }
+    }
+    if start < obs_by_point.len() {
+        chunks.push(start..obs_by_point.len());
+    }
+    chunks
+}
 
 /// LM stops once an accepted step lowers the robust cost by less than this fraction of it.
 const CONVERGED_RELATIVE_DECREASE: f64 = 1e-4;
@@ -293,8 +396,9 @@ mod tests {
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
 
-    #[test]
-    fn bundle_adjustment_recovers_perturbed_poses_and_points() {
+    /// Three cameras 10 cm apart looking down +z at 150 points 0.5–1 m away, the first fixed,
+    /// the others and the points perturbed; and the true poses and points.
+    fn perturbed_problem() -> (BundleProblem, Vec<Se3>, Vec<Point3<f64>>) {
         let cam = PinholeCamera::from_fovy(640, 480, 50f64.to_radians()).unwrap();
         let mut rng = ChaCha8Rng::seed_from_u64(3);
         // Three cameras 10 cm apart looking down +z at points 0.5–1 m away.
@@ -321,12 +425,19 @@ mod tests {
             Translation3::new(0.01, -0.005, 0.008),
             UnitQuaternion::from_euler_angles(0.01, -0.01, 0.005),
         );
-        let mut problem = BundleProblem {
+        let problem = BundleProblem {
             camera_from_world: vec![truth[0], perturb * truth[1], perturb.inverse() * truth[2]],
             fixed: vec![true, false, false],
             points: points.iter().map(|p| p + nalgebra::Vector3::new(0.003, -0.003, 0.004)).collect(),
             observations,
         };
+        (problem, truth, points)
+    }
+
+    #[test]
+    fn bundle_adjustment_recovers_perturbed_poses_and_points() {
+        let cam = PinholeCamera::from_fovy(640, 480, 50f64.to_radians()).unwrap();
+        let (mut problem, truth, points) = perturbed_problem();
         let cfg = BundleConfig { iterations: 20, ..BundleConfig::default() };
         let before = problem.cost(&cam, &cfg);
         assert!(problem.optimize(&cam, &cfg) > 0);
@@ -340,5 +451,25 @@ mod tests {
             assert!((est - t).norm() < 1e-5);
         }
         assert!(problem.inlier_flags(&cam, &cfg).iter().all(|&k| k));
+    }
+
+    #[test]
+    fn two_threads_give_the_one_thread_result() {
+        let cam = PinholeCamera::from_fovy(640, 480, 50f64.to_radians()).unwrap();
+        // A second fixed pose, and observations without depth, as in the tracker's windows.
+        let (mut problem, _, _) = perturbed_problem();
+        problem.fixed[2] = true;
+        for o in problem.observations.iter_mut().step_by(3) {
+            o.depth_m = None;
+        }
+        let cfg = BundleConfig::default();
+        let mut one = problem.clone();
+        let steps = one.optimize(&cam, &cfg);
+        for threads in [2, 3] {
+            let mut two = problem.clone();
+            assert_eq!(two.optimize_with_threads(&cam, &cfg, threads), steps);
+            assert_eq!(two, one);
+            assert_eq!(two.cost_with_threads(&cam, &cfg, threads).to_bits(), one.cost(&cam, &cfg).to_bits());
+        }
     }
 }

@@ -443,9 +443,10 @@ impl Tracker {
         &self.config
     }
 
-    /// Threads the following frames' tracking may use (ORB levels, projection search): at least
-    /// one, at most `crate::worker_threads()` (the default). The results do not depend on it; the
-    /// system lowers it to one on frames whose line segments take the second core.
+    /// Threads the following frames' tracking may use (ORB levels, projection search, local
+    /// bundle adjustment): at least one, at most `crate::worker_threads()` (the default). The
+    /// results do not depend on it; the system lowers it to one on frames whose line segments
+    /// take the second core.
     pub fn set_threads(&mut self, threads: usize) {
         self.threads = threads.clamp(1, crate::worker_threads());
     }
