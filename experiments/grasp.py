@@ -31,12 +31,25 @@ from collections import Counter
 from pathlib import Path
 from typing import Any
 
+import tomllib
 from objslam.provenance import provenance, report_files
+from objslam.reloc import wilson
 
 REPO = Path(__file__).resolve().parents[1]
 SOURCES = ("estimated", "ground_truth", "init_only")
-CAUSES = ("no_ik", "no_path", "too_wide", "collided", "missed", "slipped", "wrong_object", "phantom", "not_found", "not_in_map",
-          "wrongly_skipped")
+CAUSES = (
+    "no_ik",
+    "no_path",
+    "too_wide",
+    "collided",
+    "missed",
+    "slipped",
+    "wrong_object",
+    "phantom",
+    "not_found",
+    "not_in_map",
+    "wrongly_skipped",
+)
 
 
 def perturb_centres(map_objects: list[dict], error_mm: float, seed: int) -> list[dict]:
@@ -55,14 +68,27 @@ def perturb_centres(map_objects: list[dict], error_mm: float, seed: int) -> list
     return out
 
 
-def _session(scene: Any, cfg: Any, map_objects: list[dict], source: str, run_dir: Path, gcfg: Any, tag: str, centre_error_mm: float = 0.0) -> Path:
+def _session(
+    scene: Any,
+    cfg: Any,
+    map_objects: list[dict],
+    source: str,
+    run_dir: Path,
+    gcfg: Any,
+    tag: str,
+    centre_error_mm: float = 0.0,
+) -> Path:
     from objslam import _native
     from objslam.grasp import config_dict, run_grasp_session
 
     if centre_error_mm:
         map_objects = perturb_centres(map_objects, centre_error_mm, cfg.seed)
     t0 = time.perf_counter()
-    rec = _native.Recorder(str(run_dir / f"grasp_{source}{tag}.rrd"), "objslam-grasp") if cfg.record.enabled else None
+    rec = (
+        _native.Recorder(str(run_dir / f"grasp_{source}{tag}.rrd"), "objslam-grasp")
+        if cfg.record.enabled
+        else None
+    )
     try:
         rows = run_grasp_session(scene, cfg, map_objects, gcfg, rec)
     finally:
@@ -131,21 +157,37 @@ def regrasp(a: argparse.Namespace, command: str) -> list[str]:
         cfg = load_run_config(overlays=a.config, overrides=overrides, strategy="object-driven")
         scene = load_scene(REPO / rel)
         objs = _map_objects(d["map_source"], scene, run_dir)
-        path = _session(scene, cfg, objs, d["map_source"], run_dir, _grasp_config(a, d["map_source"], cfg), a.tag, a.centre_error_mm)
+        path = _session(
+            scene,
+            cfg,
+            objs,
+            d["map_source"],
+            run_dir,
+            _grasp_config(a, d["map_source"], cfg),
+            a.tag,
+            a.centre_error_mm,
+        )
         sessions.append(str(path))
         _print_session(path, "reused map, ")
         _write_manifest(sessions, command, Path(a.manifest))
     return sessions
 
 
-def _grasp_on(a: argparse.Namespace, scene: Any, cfg: Any, source: str, run_dir: Path, note: str) -> str | None:
+def _grasp_on(
+    a: argparse.Namespace, scene: Any, cfg: Any, source: str, run_dir: Path, note: str
+) -> str | None:
     """One grasp session of ``source`` on the map in ``run_dir``; its file, or None when it failed
     (said on stderr: one failed session never stops the sweep)."""
     try:
         objs = _map_objects(source, scene, run_dir)
-        path = _session(scene, cfg, objs, source, run_dir, _grasp_config(a, source, cfg), a.tag, a.centre_error_mm)
+        path = _session(
+            scene, cfg, objs, source, run_dir, _grasp_config(a, source, cfg), a.tag, a.centre_error_mm
+        )
     except Exception as e:  # noqa: BLE001 - one failed session never stops the sweep
-        print(f"{scene.name} seed {cfg.seed} {source}: grasp session failed: {type(e).__name__}: {e}", file=sys.stderr)
+        print(
+            f"{scene.name} seed {cfg.seed} {source}: grasp session failed: {type(e).__name__}: {e}",
+            file=sys.stderr,
+        )
         return None
     _print_session(path, note)
     return str(path)
@@ -177,11 +219,19 @@ def grasp_benchmark_maps(a: argparse.Namespace, command: str) -> list[str]:
             for source in a.sources:
                 run_dir = runs["estimated" if source == "ground_truth" else source]
                 if run_dir is None or not (run_dir / "map.json").exists():
-                    print(f"{scene.name} seed {seed} {source}: no map in {a.maps_from_benchmark}", file=sys.stderr)
+                    print(
+                        f"{scene.name} seed {seed} {source}: no map in {a.maps_from_benchmark}",
+                        file=sys.stderr,
+                    )
                     continue
-                cfg = load_run_config(overlays=[run_dir / "config.toml"], overrides=a.set, strategy="object-driven")
+                cfg = load_run_config(
+                    overlays=[run_dir / "config.toml"], overrides=a.set, strategy="object-driven"
+                )
                 if cfg.seed != seed or Path(cfg.scene).stem != scene.name:
-                    print(f"{run_dir}: its config is {cfg.scene} seed {cfg.seed}, not {scene.name} seed {seed}", file=sys.stderr)
+                    print(
+                        f"{run_dir}: its config is {cfg.scene} seed {cfg.seed}, not {scene.name} seed {seed}",
+                        file=sys.stderr,
+                    )
                     continue
                 path = _grasp_on(a, scene, cfg, source, run_dir, "benchmark map, ")
                 if path is not None:
@@ -207,13 +257,22 @@ def run_sweep(a: argparse.Namespace, command: str) -> list[str]:
                 if "estimated" in a.sources or "ground_truth" in a.sources:
                     runs["estimated"] = run_episode(cfg, progress=False).run_dir
                 if "init_only" in a.sources:
-                    runs["init_only"] = run_episode(dataclasses.replace(cfg, strategy="init"), progress=False).run_dir
+                    runs["init_only"] = run_episode(
+                        dataclasses.replace(cfg, strategy="init"), progress=False
+                    ).run_dir
             except Exception as e:  # noqa: BLE001 - the run folder records it; the sweep goes on
                 print(f"{scene.name} seed {seed}: mapping failed: {type(e).__name__}: {e}", file=sys.stderr)
                 continue
             t_map = time.perf_counter() - t0
             for source in a.sources:
-                path = _grasp_on(a, scene, cfg, source, runs["estimated" if source == "ground_truth" else source], f"mapping {t_map:.0f} s, ")
+                path = _grasp_on(
+                    a,
+                    scene,
+                    cfg,
+                    source,
+                    runs["estimated" if source == "ground_truth" else source],
+                    f"mapping {t_map:.0f} s, ",
+                )
                 if path is not None:
                     sessions.append(path)
             _write_manifest(sessions, command, Path(a.manifest))
@@ -234,14 +293,23 @@ def _centre_errors_mm(d: dict[str, Any]) -> dict[Any, tuple[float, float]]:
         return {}
     from objslam.scene import gt_objects, load_scene, scene_file
 
-    truth = {g["id"]: g["geometry"]["center"] for g in gt_objects(load_scene(REPO / scene_file(d["scene"], REPO)))}
-    mapped = {o["id"]: o["geometry"]["center"] for o in _map_objects(d["map_source"], None, Path(d["map_run"]))} if d["map_source"] != "ground_truth" else truth
+    truth = {
+        g["id"]: g["geometry"]["center"] for g in gt_objects(load_scene(REPO / scene_file(d["scene"], REPO)))
+    }
+    mapped = (
+        {o["id"]: o["geometry"]["center"] for o in _map_objects(d["map_source"], None, Path(d["map_run"]))}
+        if d["map_source"] != "ground_truth"
+        else truth
+    )
     out = {}
     for r in d["rows"]:
         gt, mid = r.get("gt_id"), r.get("map_id")
         if "target_geometry" in r and gt in truth and mid in mapped:
             t = truth[gt]
-            out[mid] = (1000.0 * math.dist(r["target_geometry"]["center"][:2], t[:2]), 1000.0 * math.dist(mapped[mid][:2], t[:2]))
+            out[mid] = (
+                1000.0 * math.dist(r["target_geometry"]["center"][:2], t[:2]),
+                1000.0 * math.dist(mapped[mid][:2], t[:2]),
+            )
     return out
 
 
@@ -291,8 +359,42 @@ def _rows(sessions: list[str]) -> list[dict[str, Any]]:
     return rows
 
 
+def _run_preset(run_dir: Path) -> str | None:
+    """The world preset of the run folder a session grasped on (its resolved ``config.toml``)."""
+    try:
+        return tomllib.loads((run_dir / "config.toml").read_text()).get("preset")
+    except (OSError, tomllib.TOMLDecodeError):
+        return None
+
+
+def _summary(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Per map source (plain attempts: no re-observation, no added centre error): attempts,
+    successes, rate and its Wilson 95 % interval."""
+    out = []
+    for src in SOURCES:
+        sel = [r for r in rows if r["map_source"] == src and not r["reobserve"] and not r["centre_error_mm"]]
+        if sel:
+            k = sum(bool(r["success"]) for r in sel)
+            lo, hi = wilson(k, len(sel))
+            out.append(
+                {
+                    "map_source": src,
+                    "attempts": len(sel),
+                    "successes": k,
+                    "success_rate": k / len(sel),
+                    "ci_low": lo,
+                    "ci_high": hi,
+                }
+            )
+    return out
+
+
 def write_reports(
-    sessions: list[str], out: Path, command: str, comparison: list[str] | None = None, comparison_note: str = ""
+    sessions: list[str],
+    out: Path,
+    command: str,
+    comparison: list[str] | None = None,
+    comparison_note: str = "",
 ) -> dict[str, Any]:
     """grasping.json / grasping.md from session files (``comparison``: sessions of another variant,
     reported apart in ``comparison_rows`` and their own table)."""
@@ -302,17 +404,32 @@ def write_reports(
     session_configs = [json.loads(Path(s).read_text()).get("config") for s in sessions]
     grasp_configs = {json.dumps(c, sort_keys=True) for c in session_configs}
     prov = provenance(command, {"grasp": [json.loads(c) for c in sorted(grasp_configs)]})
-    report = {**prov, "sessions": sessions, "rows": rows}
+    presets = sorted({_run_preset(Path(x).parent) for x in sessions} - {None})
+    report = {
+        **prov,
+        "preset": presets[0] if len(presets) == 1 else presets,
+        "sessions": sessions,
+        "summary": _summary(rows),
+        "rows": rows,
+    }
     if comp:
         report.update(comparison_sessions=comparison, comparison_rows=comp, comparison_note=comparison_note)
     (report_files(out, "grasping")[0]).write_text(json.dumps(report, indent=2) + "\n")
+
     def variant(r: dict[str, Any]) -> str:
         blind = " (blind approach)" if r["contact_retries"] == 0 else ""
         if r["centre_error_mm"]:
             blind = f" + {r['centre_error_mm']:g} mm centre error" + blind
         if not r["reobserve"]:
             return r["map_source"] + blind
-        how = [w for w, on in (("registered", r["reobserve_register"]), ("from the close view", not r["reobserve_return_ready"])) if on]
+        how = [
+            w
+            for w, on in (
+                ("registered", r["reobserve_register"]),
+                ("from the close view", not r["reobserve_return_ready"]),
+            )
+            if on
+        ]
         return r["map_source"] + " + re-observation" + (f" ({', '.join(how)})" if how else "") + blind
 
     def variant_key(v: str) -> tuple[int, str]:
@@ -346,18 +463,44 @@ def write_reports(
         "",
         "## Overall",
         "",
-        "| map source | attempts | success |",
-        "|---|---:|---:|",
+        f"World preset: {', '.join(presets) or 'unknown'}. Intervals: Wilson 95 % over the attempts (taken",
+        "as independent).",
+        "",
+        "| map source | attempts | success | 95 % interval |",
+        "|---|---:|---:|---:|",
     ]
     for s in sources:
-        lines.append(f"| {s} | {len(by[s])} | {_rate(by[s])} |")
-    lines += ["", "## Per class", "", "| class | " + " | ".join(sources) + " |", "|---|" + "---:|" * len(sources)]
+        lo, hi = wilson(sum(r["success"] for r in by[s]), len(by[s]))
+        lines.append(f"| {s} | {len(by[s])} | {_rate(by[s])} | {100 * lo:.1f}-{100 * hi:.1f} % |")
+    lines += [
+        "",
+        "## Per class",
+        "",
+        "| class | " + " | ".join(sources) + " |",
+        "|---|" + "---:|" * len(sources),
+    ]
     for c in classes:
-        lines.append(f"| {c} | " + " | ".join(_rate([r for r in by[s] if r["class"] == c]) for s in sources) + " |")
-    lines += ["", "## Per scene", "", "| scene | " + " | ".join(sources) + " |", "|---|" + "---:|" * len(sources)]
+        lines.append(
+            f"| {c} | " + " | ".join(_rate([r for r in by[s] if r["class"] == c]) for s in sources) + " |"
+        )
+    lines += [
+        "",
+        "## Per scene",
+        "",
+        "| scene | " + " | ".join(sources) + " |",
+        "|---|" + "---:|" * len(sources),
+    ]
     for sc in scenes:
-        lines.append(f"| {sc} | " + " | ".join(_rate([r for r in by[s] if r["scene"] == sc]) for s in sources) + " |")
-    lines += ["", "## Failure causes", "", "| cause | " + " | ".join(sources) + " |", "|---|" + "---:|" * len(sources)]
+        lines.append(
+            f"| {sc} | " + " | ".join(_rate([r for r in by[s] if r["scene"] == sc]) for s in sources) + " |"
+        )
+    lines += [
+        "",
+        "## Failure causes",
+        "",
+        "| cause | " + " | ".join(sources) + " |",
+        "|---|" + "---:|" * len(sources),
+    ]
     counts = {s: Counter(r["cause"] for r in by[s] if not r["success"]) for s in sources}
     for c in CAUSES:
         if any(counts[s][c] for s in sources):
@@ -388,9 +531,15 @@ def write_reports(
         for src in sorted({variant(r) for r in comp}, key=variant_key):
             rs = [r for r in comp if variant(r) == src]
             cs = Counter(r["cause"] for r in rs if not r["success"])
-            lines.append(f"| {src} | {len(rs)} | {_rate(rs)} | " + ", ".join(f"{c} {n}" for c, n in cs.most_common()) + " |")
+            lines.append(
+                f"| {src} | {len(rs)} | {_rate(rs)} | "
+                + ", ".join(f"{c} {n}" for c, n in cs.most_common())
+                + " |"
+            )
         lines.append("")
-    comp_by = {f"comparison: {v}": [r for r in comp if variant(r) == v] for v in sorted({variant(r) for r in comp})}
+    comp_by = {
+        f"comparison: {v}": [r for r in comp if variant(r) == v] for v in sorted({variant(r) for r in comp})
+    }
     failed = [(name, r) for name, rs in [*by.items(), *comp_by.items()] for r in rs if not r["success"]]
     if failed:
         lines += [
@@ -402,9 +551,13 @@ def write_reports(
         for name, r in failed:
             w = r["expected_closed_width_m"]
             width = f"{100.0 * w:.1f}" if w is not None else "-"
-            lines.append(f"| {name} | {r['scene']} | {r['seed']} | {r['object']} | {r['class']} | {width} | {r['cause']} | {r['touches']} |")
+            lines.append(
+                f"| {name} | {r['scene']} | {r['seed']} | {r['object']} | {r['class']} | {width} | {r['cause']} | {r['touches']} |"
+            )
         lines.append("")
-    touched = [(name, rs) for name, rs in [*by.items(), *comp_by.items()] if rs and rs[0]["contact_retries"] > 0]
+    touched = [
+        (name, rs) for name, rs in [*by.items(), *comp_by.items()] if rs and rs[0]["contact_retries"] > 0
+    ]
     if touched:
         lines += [
             "## Touches during the approach",
@@ -418,9 +571,15 @@ def write_reports(
         ]
         for name, rs in touched:
             t = [r for r in rs if r["touches"]]
-            lines.append(f"| {name} | {len(rs)} | {len(t)} | {sum(r['success'] for r in t)} | {sum(r['touches'] for r in t)} |")
+            lines.append(
+                f"| {name} | {len(rs)} | {len(t)} | {sum(r['success'] for r in t)} | {sum(r['touches'] for r in t)} |"
+            )
         lines.append("")
-    measured = [(name, rs) for name, rs in [*by.items(), *comp_by.items()] if any(r["grasped_xy_err_mm"] is not None for r in rs)]
+    measured = [
+        (name, rs)
+        for name, rs in [*by.items(), *comp_by.items()]
+        if any(r["grasped_xy_err_mm"] is not None for r in rs)
+    ]
     if measured:
         lines += [
             "## Grasped centre after re-observation",
@@ -460,38 +619,62 @@ def build_parser() -> argparse.ArgumentParser:
         "--sources", nargs="+", default=list(SOURCES), choices=SOURCES, help="maps the grasps are planned on"
     )
     ap.add_argument("--config", action="append", default=[], help="run-config overlay (repeatable)")
-    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a config key (repeatable)")
+    ap.add_argument(
+        "--set", action="append", default=[], metavar="KEY=VALUE", help="override a config key (repeatable)"
+    )
     ap.add_argument("--out", default="reports", help="report folder")
     ap.add_argument(
-        "--reobserve", nargs="*", default=[], choices=SOURCES,
+        "--reobserve",
+        nargs="*",
+        default=[],
+        choices=SOURCES,
         help=(
             "map sources whose grasps re-observe the target from close views first (default: none; "
             "the grasp settings themselves: --set grasp.<key>=<value>, [grasp] in the run config)"
         ),
     )
     ap.add_argument(
-        "--centre-error-mm", type=float, default=0.0, metavar="D",
+        "--centre-error-mm",
+        type=float,
+        default=0.0,
+        metavar="D",
         help="move every map object's centre D mm in a seeded horizontal direction before grasping (robustness to map error)",
     )
     ap.add_argument("--tag", default="", help="suffix of the session files (grasp_<source><tag>.json)")
-    ap.add_argument("--manifest", default=str(REPO / "runs" / "grasp_sweep.json"), help="the sweep's list of session files")
-    ap.add_argument("--maps-from", default=str(REPO / "runs" / "grasp_sweep.json"), help="manifest whose maps --reuse-maps grasps on")
+    ap.add_argument(
+        "--manifest",
+        default=str(REPO / "runs" / "grasp_sweep.json"),
+        help="the sweep's list of session files",
+    )
+    ap.add_argument(
+        "--maps-from",
+        default=str(REPO / "runs" / "grasp_sweep.json"),
+        help="manifest whose maps --reuse-maps grasps on",
+    )
     ap.add_argument("--report-only", action="store_true", help="rebuild the reports from the manifest")
     ap.add_argument(
-        "--also", action="append", default=[], metavar="MANIFEST[=SRC,SRC]",
+        "--also",
+        action="append",
+        default=[],
+        metavar="MANIFEST[=SRC,SRC]",
         help="with --report-only: more sessions for the main tables (optionally only these sources)",
     )
     ap.add_argument(
-        "--compare", action="append", default=[], metavar="MANIFEST[=SRC,SRC]",
+        "--compare",
+        action="append",
+        default=[],
+        metavar="MANIFEST[=SRC,SRC]",
         help="with --report-only: sessions of another variant, reported apart (comparison_rows)",
     )
     ap.add_argument("--compare-note", default="", help="title of the comparison table (default: none)")
     ap.add_argument(
-        "--reuse-maps", action="store_true",
+        "--reuse-maps",
+        action="store_true",
         help="grasp again on the maps of the sweep in runs/grasp_sweep.json instead of mapping anew",
     )
     ap.add_argument(
-        "--maps-from-benchmark", metavar="EXPLORATION_JSON",
+        "--maps-from-benchmark",
+        metavar="EXPLORATION_JSON",
         help=(
             "grasp on the maps of an exploration benchmark sweep (its object-driven and init run "
             "folders) instead of mapping anew"
@@ -502,7 +685,10 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     a = build_parser().parse_args(argv)
-    command = ("python experiments/grasp.py " + " ".join(shlex.quote(x) for x in (argv if argv is not None else sys.argv[1:]))).strip()
+    command = (
+        "python experiments/grasp.py "
+        + " ".join(shlex.quote(x) for x in (argv if argv is not None else sys.argv[1:]))
+    ).strip()
     comparison: list[str] = []
     if a.report_only:
         manifest = json.loads(Path(a.manifest).read_text())

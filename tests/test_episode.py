@@ -157,13 +157,9 @@ def test_object_evidence_maps_the_object_seen_only_at_the_border(tmp_path, ci_ov
     Init views of scene06 (seed 1) see an object only truncated at the image border; without object
     evidence its returns count as table and the budget goes elsewhere, so it is never mapped. With
     ``explore.discovery_evidence_height_m`` its cells stay unexplained and draw a view centred on
-    it: every object mapped (seeds 1 and 2 both show the effect). It was found with the cylinders'
-    wall circles, which the test keeps (``map.param.cylinder.bounding`` off: the bounding circles
-    change the views, and the plain run then happens to map the object), to test the evidence
-    rather than the estimator."""
+    it: every object mapped (seeds 1 and 2 both show the effect)."""
     common = {
         "preset": '"ideal"',  # the scenario was found in the ideal world
-        "map.param.cylinder.bounding": "false",
         "scene": '"scenes/scene06.toml"',
         "camera.fovy_deg": 35.0,
         "seed": 1,

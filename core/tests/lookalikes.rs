@@ -239,7 +239,7 @@ fn a_row_of_ten_cans_3_mm_apart_is_ten_objects() {
     let mut config = PipelineConfig::default();
     config.param.iforest.passes = 4;
     config.param.iforest.readmit_rings = 0;
-    let map = map_of(&scene, &views, config.clone());
+    let map = map_of(&scene, &views, config);
     let ious = report("row", &scene, &map);
     // Without the detector's per-object boxes as evidence (no look-alike split of the local
     // clouds, no co-observation guard), consolidation folds neighbours: 4 objects for 10.
@@ -249,12 +249,6 @@ fn a_row_of_ten_cans_3_mm_apart_is_ten_objects() {
     report("row, co-observation guard off", &scene, &merged);
     assert!(merged.len() < 10);
     assert_eq!(map.len(), 10);
-    // A few of a neighbour's points stay in one can's cloud; the bounding cylinder
-    // (`param.cylinder.bounding`) holds them (that can at IoU 0.50, the wall fit alone 0.93).
-    assert!(ious.iter().filter(|v| **v >= 0.7).count() >= 9 && ious.iter().all(|v| *v >= 0.45), "{ious:?}");
-    let mut wall = config;
-    wall.param.cylinder.bounding = false;
-    let ious = report("row, wall circles", &scene, &map_of(&scene, &views, wall));
     assert!(ious.iter().all(|v| *v >= 0.7), "{ious:?}");
 }
 
