@@ -611,10 +611,11 @@ def build_parser() -> argparse.ArgumentParser:
     from objslam.cli import HelpFormatter
 
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=HelpFormatter)
+    hard = [str(p.relative_to(REPO)) for p in sorted((REPO / "scenes" / "hard").glob("*.toml"))]
     ap.add_argument(
-        "--scenes", nargs="+", default=[f"scenes/scene0{i}.toml" for i in range(1, 8)], help="scene files"
+        "--scenes", nargs="+", default=hard, help="scene files (default: the hard suite, scenes/hard/)"
     )
-    ap.add_argument("--seeds", nargs="+", type=int, default=[0, 1], help="run seeds")
+    ap.add_argument("--seeds", nargs="+", type=int, default=[0], help="run seeds")
     ap.add_argument(
         "--sources", nargs="+", default=list(SOURCES), choices=SOURCES, help="maps the grasps are planned on"
     )
