@@ -472,28 +472,18 @@ def write_reports(
     for s in sources:
         lo, hi = wilson(sum(r["success"] for r in by[s]), len(by[s]))
         lines.append(f"| {s} | {len(by[s])} | {_rate(by[s])} | {100 * lo:.1f}-{100 * hi:.1f} % |")
-    lines += [
-        "",
-        "## Per class",
-        "",
-        "| class | " + " | ".join(sources) + " |",
-        "|---|" + "---:|" * len(sources),
-    ]
-    for c in classes:
-        lines.append(
-            f"| {c} | " + " | ".join(_rate([r for r in by[s] if r["class"] == c]) for s in sources) + " |"
-        )
-    lines += [
-        "",
-        "## Per scene",
-        "",
-        "| scene | " + " | ".join(sources) + " |",
-        "|---|" + "---:|" * len(sources),
-    ]
-    for sc in scenes:
-        lines.append(
-            f"| {sc} | " + " | ".join(_rate([r for r in by[s] if r["scene"] == sc]) for s in sources) + " |"
-        )
+    for title, key, values in (("Per class", "class", classes), ("Per scene", "scene", scenes)):
+        lines += [
+            "",
+            f"## {title}",
+            "",
+            f"| {key} | " + " | ".join(sources) + " |",
+            "|---|" + "---:|" * len(sources),
+        ]
+        for v in values:
+            lines.append(
+                f"| {v} | " + " | ".join(_rate([r for r in by[s] if r[key] == v]) for s in sources) + " |"
+            )
     lines += [
         "",
         "## Failure causes",
