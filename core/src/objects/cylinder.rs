@@ -390,9 +390,11 @@ fn bounding_circle(points: &[Point3<f64>], center: [f64; 2], radius: f64, trim: 
         d.clear();
         d.extend(all.iter().map(dist));
         d.sort_by(f64::total_cmp);
-        let Some(&last) = d.last() else { return out };
+        if d.is_empty() {
+            return out;
+        }
         let keep = ((1.0 - trim.clamp(0.0, 1.0)) * d.len() as f64).ceil() as usize;
-        let limit = if keep == 0 { -1.0 } else { d[keep.min(d.len()) - 1].min(last) };
+        let limit = if keep == 0 { -1.0 } else { d[keep.min(d.len()) - 1] };
         let mut xy: Vec<[f64; 2]> = all.iter().filter(|p| dist(p) <= limit).copied().collect();
         xy.extend_from_slice(&wall);
         out = min_enclosing_circle(&convex_hull(xy));
