@@ -225,6 +225,15 @@ fn report(name: &str, scene: &[Truth], map: &ObjectMap) -> Vec<f64> {
     ious
 }
 
+/// The row test's pipeline: the size estimate with four iForest passes (a single pass, the
+/// default, leaves one can's cloud with its neighbours' points: IoU 0.22).
+fn config_row() -> PipelineConfig {
+    let mut config = PipelineConfig::default();
+    config.param.iforest.passes = 4;
+    config.param.iforest.readmit_rings = 0;
+    config
+}
+
 fn row_of_cans(gap_m: f64) -> Vec<Truth> {
     let r = 0.033;
     (0..10).map(|i| can(0.45, (f64::from(i) - 4.5) * (2.0 * r + gap_m), r, 0.11)).collect()
@@ -234,12 +243,8 @@ fn row_of_cans(gap_m: f64) -> Vec<Truth> {
 fn a_row_of_ten_cans_3_mm_apart_is_ten_objects() {
     let scene = row_of_cans(0.003);
     let views = views_around(Vector3::new(0.45, 0.0, 0.05));
-    // The look-alike separation under test; the size estimate with four iForest passes (a single
-    // pass, the default, leaves one can's cloud with its neighbours' points: IoU 0.22).
-    let mut config = PipelineConfig::default();
-    config.param.iforest.passes = 4;
-    config.param.iforest.readmit_rings = 0;
-    let map = map_of(&scene, &views, config);
+    // The look-alike separation under test.
+    let map = map_of(&scene, &views, config_row());
     let ious = report("row", &scene, &map);
     // Without the detector's per-object boxes as evidence (no look-alike split of the local
     // clouds, no co-observation guard), consolidation folds neighbours: 4 objects for 10.
@@ -249,6 +254,10 @@ fn a_row_of_ten_cans_3_mm_apart_is_ten_objects() {
     report("row, co-observation guard off", &scene, &merged);
     assert!(merged.len() < 10);
     assert_eq!(map.len(), 10);
+    // Every can is boxed in the frames that see it whole (hidden ones do not count against it).
+    let mut evidence = config_row();
+    evidence.existence_ratio = 0.3;
+    assert_eq!(map_of(&scene, &views, evidence).len(), 10);
     assert!(ious.iter().all(|v| *v >= 0.7), "{ious:?}");
 }
 
@@ -378,6 +387,16 @@ fn a_false_positive_over_a_bottle_stays_out_of_the_map() {
         phantom,
     );
     report("same, covered-phantom fold off", &scene, &kept);
+    // Existence evidence instead of the fold: boxed in 3 of the 11 frames that saw its place.
+    let evidence = map_with(
+        &scene,
+        &views,
+        PipelineConfig { consolidate_covered_share: 2.0, existence_ratio: 0.3, ..PipelineConfig::default() },
+        phantom,
+    );
+    report("same, existence ratio 0.3", &scene, &evidence);
+    assert_eq!(evidence.len(), 1);
+    assert_eq!(evidence.objects[0].label, Label::Bottle);
     assert_eq!(kept.len(), 2);
     assert_eq!(map.len(), 1);
     assert_eq!(map.objects[0].label, Label::Bottle);

@@ -96,6 +96,7 @@ impl PipelineConfig {
         check_range("consolidate_distance_m", self.consolidate_distance_m, 0.0, 1.0)?;
         check_range("consolidate_cloud_radius_m", self.consolidate_cloud_radius_m, 0.0, 1.0)?;
         check_range("relabel_co_observed_share", self.relabel_co_observed_share, 0.0, 1.0)?;
+        check_range("existence_ratio", self.existence_ratio, 0.0, 1.0)?;
         check_range("consolidate_covered_share", self.consolidate_covered_share, 0.0, f64::MAX)?;
         check_range("consolidate_overlap_iou", self.consolidate_overlap_iou, 0.0, f64::MAX)?;
         check_range("support_snap_free_m", self.support_snap_free_m, 0.0, 1.0)?;
@@ -127,6 +128,15 @@ impl PipelineConfig {
 const UNDER_TOLERANCE_M: f64 = 0.01;
 /// ... and its top-view footprint overlaps this share of the smaller of the two footprints.
 const UNDER_FOOTPRINT_SHARE: f64 = 0.2;
+/// An object's place counts as seen by a frame ([`PipelineConfig::existence_ratio`]) when the
+/// depth at its projected centre is at most this much nearer than its near side (horizontal
+/// radius of its estimate), metres: the depth noise at 0.7 m plus a margin for the estimate.
+pub const EXISTENCE_DEPTH_TOLERANCE_M: f64 = 0.02;
+/// ... with its projected estimate at least this far inside the image border, pixels (a box cut
+/// by the border may go undetected).
+const EXISTENCE_BORDER_PX: f64 = 8.0;
+/// ... and the median depth of this square window around the projected centre, pixels.
+const EXISTENCE_WINDOW_PX: u32 = 5;
 
 /// Configuration of the pipeline.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -241,6 +251,17 @@ pub struct PipelineConfig {
     /// Objects with fewer observations are kept internally but left out of the map (filters
     /// false positives and label confusions; 1 keeps everything).
     pub min_observations: usize,
+    /// Beyond the paper, existence evidence: an object is left out of the map while its
+    /// observations are fewer than this share of the frames that should have shown it, that is
+    /// its observations plus the frames in which its estimate lay whole inside the image, in front
+    /// of the camera and not hidden (the depth at its projected centre at most
+    /// [`EXISTENCE_DEPTH_TOLERANCE_M`] nearer than its near side), yet no detection was assigned to
+    /// it. A detector's false positive (a stray box on a bottle's top, a duplicate beside the
+    /// object it copies) is boxed in a few frames of the many that see its place; a real object
+    /// is boxed in most frames that see it, and frames that do not see it (hidden, cut by the
+    /// image border) do not count. Frames count from the object's first estimate (the test needs
+    /// `parameterize`). Fraction in [0, 1]; 0 disables (the paper: no such test).
+    pub existence_ratio: f64,
     /// With a SLAM pose source: when the tracker re-fits its world ← map gauge (every view's
     /// kinematic prior moves it by millimetres), move the whole map with it
     /// ([`ObjectPipeline::transform_world`]) so points fused under different gauges stay one rigid
@@ -275,6 +296,7 @@ impl Default for PipelineConfig {
             consolidate_overlap_co_observed_share: 0.5,
             consolidate_covered_share: 2.0,
             min_observations: 3,
+            existence_ratio: 0.0,
             follow_slam_gauge: true,
         }
     }
@@ -400,6 +422,9 @@ pub struct ObjectPipeline {
     /// Objects folded as label confusions: their observations vote for the label, their points
     /// are left out (the majority object's own clouds describe the surface).
     relabelled: BTreeSet<u32>,
+    /// Per object (the surviving id when counted): frames that saw its place without a detection
+    /// assigned to it ([`PipelineConfig::existence_ratio`]).
+    unseen: BTreeMap<u32, u32>,
 }
 
 impl ObjectPipeline {
@@ -428,6 +453,7 @@ impl ObjectPipeline {
             dirty: BTreeSet::new(),
             merged_into: BTreeMap::new(),
             relabelled: BTreeSet::new(),
+            unseen: BTreeMap::new(),
         })
     }
 
@@ -558,6 +584,9 @@ impl ObjectPipeline {
         let observed = std::mem::take(&mut out.observed);
         for (id, pts) in observed {
             out.observed.entry(self.resolve_id(id)).or_default().extend(pts);
+        }
+        if self.config.existence_ratio > 0.0 {
+            self.count_unseen(frame, &out.assigned);
         }
         if self.config.parameterize {
             let map = self.raw_map_with(false);
@@ -912,9 +941,32 @@ impl ObjectPipeline {
         ObjectMap { objects, next_id }
     }
 
+    /// Count the frame's misses for [`PipelineConfig::existence_ratio`]: every estimated object
+    /// no detection went to whose place the frame saw (see [`place_seen`]).
+    fn count_unseen(&mut self, frame: &Frame, assigned: &[Option<u32>]) {
+        let detected: BTreeSet<u32> = assigned.iter().flatten().copied().collect();
+        let camera_from_world = frame.world_from_camera.inverse();
+        for (id, e) in &self.estimates {
+            if !detected.contains(id) && place_seen(&e.geometry, frame, &camera_from_world) {
+                *self.unseen.entry(*id).or_default() += 1;
+            }
+        }
+    }
+
     fn confirmed(&self, map: &mut ObjectMap) {
         let min = self.config.min_observations.max(1);
         map.objects.retain(|o| o.observations.len() >= min);
+        let ratio = self.config.existence_ratio;
+        if ratio > 0.0 && !self.unseen.is_empty() {
+            let mut unseen: BTreeMap<u32, u32> = BTreeMap::new();
+            for (id, n) in &self.unseen {
+                *unseen.entry(self.resolve_id(*id)).or_default() += n;
+            }
+            map.objects.retain(|o| {
+                let n = o.observations.len() as f64;
+                n >= ratio * (n + f64::from(unseen.get(&o.id).copied().unwrap_or(0)))
+            });
+        }
     }
 
     fn with_geometry(obj: &mut MapObject, g: &ObjectGeometry, stage: EstimateStage) {
@@ -993,6 +1045,46 @@ impl ObjectPipeline {
     }
 }
 
+/// Whether a frame saw the place of an estimate: its corners all in front of the camera and
+/// projected at least [`EXISTENCE_BORDER_PX`] inside the image, and the median depth around its
+/// projected centre not nearer than its near side by more than [`EXISTENCE_DEPTH_TOLERANCE_M`]
+/// (a nearer surface hides it; a farther one, or its own surface, is its place seen). No valid
+/// depth there: not seen.
+pub fn place_seen(g: &ObjectGeometry, frame: &Frame, camera_from_world: &Se3) -> bool {
+    let cam = &frame.camera;
+    let (w, h) = (f64::from(cam.width), f64::from(cam.height));
+    let b = EXISTENCE_BORDER_PX;
+    for c in g.corners() {
+        match cam.project(&(camera_from_world * c)) {
+            Some([u, v]) if u >= b && v >= b && u <= w - b && v <= h - b => {}
+            _ => return false,
+        }
+    }
+    let centre = camera_from_world * Point3::from(g.center);
+    let Some([u, v]) = cam.project(&centre) else { return false };
+    let (u, v) = (u.floor() as i64, v.floor() as i64);
+    let r = i64::from(EXISTENCE_WINDOW_PX / 2);
+    let mut depths: Vec<f32> = Vec::with_capacity((EXISTENCE_WINDOW_PX * EXISTENCE_WINDOW_PX) as usize);
+    for dv in -r..=r {
+        for du in -r..=r {
+            let (x, y) = (u + du, v + dv);
+            if x < 0 || y < 0 {
+                continue;
+            }
+            if let Some(d) = frame.depth.at(x as u32, y as u32) {
+                depths.push(d);
+            }
+        }
+    }
+    if depths.is_empty() {
+        return false;
+    }
+    let mid = depths.len() / 2;
+    let (_, d, _) = depths.select_nth_unstable_by(mid, f32::total_cmp);
+    let near_side = centre.z - g.half_extents.x.max(g.half_extents.y);
+    f64::from(*d) >= near_side - EXISTENCE_DEPTH_TOLERANCE_M
+}
+
 /// Share of `query` points with a point of `reference` within `radius` (0 for an empty query).
 /// A hash grid of `radius` cells over `reference`; each query point checks its 27 cells.
 pub fn cloud_share_within(query: &[Point3<f64>], reference: &[Point3<f64>], radius: f64) -> f64 {
@@ -1016,6 +1108,55 @@ mod tests {
     use crate::geometry::{Box2, PinholeCamera, Se3};
     use crate::map::Label;
     use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+
+    #[test]
+    fn place_seen_needs_the_whole_estimate_in_view_and_no_nearer_surface() {
+        // The top-down camera at 0.5 m over the 10 cm block (top at 0.1): depth 0.4 on the block.
+        let f = frame(0, 0.0);
+        let camera_from_world = f.world_from_camera.inverse();
+        let cuboid = |x: f64, y: f64, z: f64, h: f64| ObjectGeometry {
+            shape: crate::geometry::Shape::Cuboid,
+            center: Vector3::new(x, y, z),
+            yaw_rad: 0.0,
+            half_extents: Vector3::new(h, h, h),
+        };
+        // The block itself: its own surface at its near side.
+        assert!(place_seen(&cuboid(0.0, 0.0, 0.05, 0.05), &f, &camera_from_world));
+        // A phantom floating above the block: the depth there (the block's top, farther) shows
+        // its place empty, which counts as seen.
+        assert!(place_seen(&cuboid(0.0, 0.0, 0.2, 0.02), &f, &camera_from_world));
+        // Inside the block, 3 cm below its top beyond the tolerance: hidden.
+        assert!(!place_seen(&cuboid(0.0, 0.0, 0.05, 0.01), &f, &camera_from_world));
+        // Cut by the image border: not seen.
+        assert!(!place_seen(&cuboid(0.3, 0.0, 0.02, 0.02), &f, &camera_from_world));
+        // Behind the camera: not seen.
+        assert!(!place_seen(&cuboid(0.0, 0.0, 0.7, 0.02), &f, &camera_from_world));
+        // No depth at its centre: not seen.
+        let mut blank = f.clone();
+        blank.depth.data.iter_mut().for_each(|d| *d = 0.0);
+        assert!(!place_seen(&cuboid(0.0, 0.0, 0.05, 0.05), &blank, &camera_from_world));
+    }
+
+    #[test]
+    fn existence_ratio_leaves_out_an_object_boxed_in_few_of_the_frames_that_see_it() {
+        // The block boxed in frames 0-2, then seen in 7 more frames with no box: 3 of 10 frames.
+        let run = |ratio: f64| {
+            let config = PipelineConfig { existence_ratio: ratio, ..PipelineConfig::default() };
+            let mut p = ObjectPipeline::new(config).unwrap();
+            for i in 0..10 {
+                let mut f = frame(i, 0.0);
+                if i >= 3 {
+                    f.detections.clear();
+                }
+                p.update(&f, None).unwrap();
+                p.refresh_estimates();
+            }
+            p.map().len()
+        };
+        assert_eq!(run(0.0), 1);
+        assert_eq!(run(0.25), 1);
+        assert_eq!(run(0.35), 0);
+    }
 
     /// Top-down camera over a 10 cm block (top at z = 0.1) on the table, depth rendered exactly.
     fn frame(index: u32, x: f64) -> Frame {
