@@ -135,6 +135,8 @@ pub const EXISTENCE_DEPTH_TOLERANCE_M: f64 = 0.02;
 /// ... with its projected estimate at least this far inside the image border, pixels (a box cut
 /// by the border may go undetected).
 const EXISTENCE_BORDER_PX: f64 = 8.0;
+/// ... and no detection of another label boxes it with at least this 2D IoU.
+pub const EXISTENCE_OTHER_LABEL_IOU: f64 = 0.5;
 /// ... and the median depth of this square window around the projected centre, pixels.
 const EXISTENCE_WINDOW_PX: u32 = 5;
 
@@ -256,7 +258,9 @@ pub struct PipelineConfig {
     /// its observations plus the frames in which its estimate lay whole inside the image, in front
     /// of the camera and not hidden (the depth at its projected centre at most
     /// [`EXISTENCE_DEPTH_TOLERANCE_M`] nearer than its near side), yet no detection was assigned to
-    /// it. A detector's false positive (a stray box on a bottle's top, a duplicate beside the
+    /// it and no detection of another label boxed it ([`EXISTENCE_OTHER_LABEL_IOU`]: a look-alike's
+    /// name on the same object is a label confusion). A detector's false positive (a stray box on
+    /// a bottle's top, a duplicate beside the
     /// object it copies) is boxed in a few frames of the many that see its place; a real object
     /// is boxed in most frames that see it, and frames that do not see it (hidden, cut by the
     /// image border) do not count. Frames count from the object's first estimate (the test needs
@@ -942,12 +946,25 @@ impl ObjectPipeline {
     }
 
     /// Count the frame's misses for [`PipelineConfig::existence_ratio`]: every estimated object
-    /// no detection went to whose place the frame saw (see [`place_seen`]).
+    /// no detection went to whose place the frame saw (see [`place_seen`]), unless a detection of
+    /// another label boxes it (its projected estimate's box and the detection's overlap by 2D IoU
+    /// ≥ [`EXISTENCE_OTHER_LABEL_IOU`]): the detector saw something there and called it by a
+    /// look-alike's name, which is a label confusion, not an absence.
     fn count_unseen(&mut self, frame: &Frame, assigned: &[Option<u32>]) {
         let detected: BTreeSet<u32> = assigned.iter().flatten().copied().collect();
+        let labels: BTreeMap<u32, crate::map::Label> =
+            self.raw_map_with(false).objects.iter().map(|o| (o.id, o.label)).collect();
         let camera_from_world = frame.world_from_camera.inverse();
         for (id, e) in &self.estimates {
-            if !detected.contains(id) && place_seen(&e.geometry, frame, &camera_from_world) {
+            if detected.contains(id) || !place_seen(&e.geometry, frame, &camera_from_world) {
+                continue;
+            }
+            let Some(label) = labels.get(id) else { continue };
+            let confused = crate::geometry::project_geometry(&e.geometry, &frame.camera, &frame.world_from_camera)
+                .is_some_and(|b| {
+                    frame.detections.iter().any(|d| d.label != *label && d.bbox.iou(&b) >= EXISTENCE_OTHER_LABEL_IOU)
+                });
+            if !confused {
                 *self.unseen.entry(*id).or_default() += 1;
             }
         }
@@ -1156,6 +1173,17 @@ mod tests {
         assert_eq!(run(0.0), 1);
         assert_eq!(run(0.25), 1);
         assert_eq!(run(0.35), 0);
+        // The same frames boxing it under a look-alike's label: a confusion, not an absence.
+        let mut p = ObjectPipeline::new(PipelineConfig { existence_ratio: 0.35, ..PipelineConfig::default() }).unwrap();
+        for i in 0..10 {
+            let mut f = frame(i, 0.0);
+            if i >= 3 {
+                f.detections[0].label = Label::Book;
+            }
+            p.update(&f, None).unwrap();
+            p.refresh_estimates();
+        }
+        assert!(p.map().objects.iter().any(|o| o.label == Label::Block), "{:?}", p.map().objects);
     }
 
     /// Top-down camera over a 10 cm block (top at z = 0.1) on the table, depth rendered exactly.
