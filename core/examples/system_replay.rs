@@ -4,18 +4,21 @@
 //! `cargo run --release -p objslam-core --example system_replay -- <capture dir> [repeats]`
 //!
 //! Replays the capture `repeats` times (default 3), each time on a fresh system, timing every
-//! `process_frame` (the core's per-frame work; loading the frame's images is not timed) and every
-//! `view_done` (the per-view refresh of the estimates). Prints the median, mean and 90th percentile
-//! of each over all repeats, and the map's object count and mean 3D IoU against the capture's
-//! ground truth (so a faster variant that changes the map shows it).
+//! `process_frame` (the core's per-frame work; loading the frame's images is not timed), the
+//! `last_pose` query the simulator's loop asks after each frame, and every `view_done` (the
+//! per-view refresh of the estimates). Prints the median, mean and 90th percentile of each over
+//! all repeats, and the map's object count and mean 3D IoU against the capture's ground truth (so
+//! a faster variant that changes the map shows it).
 
 use std::path::Path;
 use std::time::Instant;
 
 use anyhow::{anyhow, Result};
 use objslam_core::eval::{estimates_from_map, evaluate, EvalConfig};
+use objslam_core::explore::AlwaysReachable;
+use objslam_core::geometry::Se3;
 use objslam_core::system::capture::{Capture, CaptureEvent};
-use objslam_core::system::FrameInput;
+use objslam_core::system::{FrameInput, Query, StepContext};
 
 /// (median, mean, 90th percentile) of `v`, ms.
 fn summary(v: &mut [f64]) -> (f64, f64, f64) {
@@ -35,7 +38,9 @@ fn main() -> Result<()> {
         None => 3,
     };
     let capture = Capture::open(dir)?;
-    let (mut frame_ms, mut view_ms) = (Vec::new(), Vec::new());
+    let (mut frame_ms, mut pose_ms, mut view_ms) = (Vec::new(), Vec::new(), Vec::new());
+    let current = Se3::identity();
+    let step = StepContext { camera: None, world_from_camera: &current, views: &[], reachable: &AlwaysReachable };
     let mut last = None;
     for _ in 0..repeats {
         let mut system = capture.system()?;
@@ -52,6 +57,9 @@ fn main() -> Result<()> {
                         world_from_camera_gt: Some(gt),
                     })?;
                     frame_ms.push(t.elapsed().as_secs_f64() * 1e3);
+                    let t = Instant::now();
+                    system.query(&Query::LastPose, &step)?;
+                    pose_ms.push(t.elapsed().as_secs_f64() * 1e3);
                 }
                 CaptureEvent::ViewDone { counts_as_view } => {
                     let t = Instant::now();
@@ -63,8 +71,10 @@ fn main() -> Result<()> {
         last = Some(system);
     }
     let (fm, fa, f90) = summary(&mut frame_ms);
+    let (pm, pa, p90) = summary(&mut pose_ms);
     let (vm, va, v90) = summary(&mut view_ms);
     println!("process_frame: {} frames, median {fm:.2} ms, mean {fa:.2} ms, p90 {f90:.2} ms", frame_ms.len());
+    println!("last_pose:     {} queries, median {pm:.3} ms, mean {pa:.3} ms, p90 {p90:.3} ms", pose_ms.len());
     println!("view_done:     {} views, median {vm:.2} ms, mean {va:.2} ms, p90 {v90:.2} ms", view_ms.len());
     if let Some(system) = last {
         let ev = evaluate(&capture.header.ground_truth, &estimates_from_map(&system.map()), &EvalConfig::default());
