@@ -173,12 +173,15 @@ pub struct System {
 
 impl System {
     /// A system from its subsystems' configs; `tracker` None maps every frame at its prior pose.
+    /// The first one in a process keeps per-frame buffers from being unmapped between frames
+    /// ([`crate::keep_frame_buffers`]).
     pub fn new(
         pipeline: PipelineConfig,
         active: ActiveConfig,
         tracker: Option<TrackerConfig>,
         table: TableRect,
     ) -> Result<Self, SystemError> {
+        crate::keep_frame_buffers();
         Ok(Self {
             pipeline: ObjectPipeline::new(pipeline)?,
             session: ActiveSession::new(active, table)?,
