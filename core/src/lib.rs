@@ -56,6 +56,33 @@ pub(crate) fn worker_threads() -> usize {
     *THREADS.get_or_init(|| std::thread::available_parallelism().map_or(1, |n| n.get()).min(2))
 }
 
+/// The threads a frame's stages may use now, shared between them: a stage that runs beside
+/// tracking (the line segments) holds the second core and hands it back when it ends; the
+/// tracker's parallel stages (ORB levels, projection search, each bundle-adjustment pass) read
+/// the budget when they start. Every such stage gives the same result on any thread count, so
+/// when the budget changes changes only the time.
+#[derive(Debug)]
+pub struct ThreadBudget {
+    now: std::sync::atomic::AtomicUsize,
+}
+
+impl ThreadBudget {
+    /// A budget of `threads`, clamped to `1..=worker_threads()`.
+    pub fn new(threads: usize) -> Self {
+        Self { now: std::sync::atomic::AtomicUsize::new(threads.clamp(1, worker_threads())) }
+    }
+
+    /// The threads a stage starting now may use.
+    pub fn get(&self) -> usize {
+        self.now.load(std::sync::atomic::Ordering::Relaxed)
+    }
+
+    /// Set the budget (clamped to `1..=worker_threads()`).
+    pub fn set(&self, threads: usize) {
+        self.now.store(threads.clamp(1, worker_threads()), std::sync::atomic::Ordering::Relaxed);
+    }
+}
+
 /// Size of the block [`keep_frame_buffers`] allocates and frees: above every per-frame buffer (the
 /// largest, LSD's gradient field of a 640 x 480 frame, is 2.4 MB), at most glibc's cap on the
 /// dynamic mmap threshold (32 MiB on 64-bit).

@@ -272,7 +272,7 @@ impl Tracker {
         if problem.camera_from_world.len() != kf_list.len() {
             return;
         }
-        problem.optimize_with_threads(camera, &self.config.bundle, self.threads);
+        problem.optimize_with_budget(camera, &self.config.bundle, &self.threads);
         for (pi, &k) in kf_list.iter().enumerate() {
             if !problem.fixed[pi] {
                 if let (Some(kf), Some(p)) = (self.keyframes.get_mut(k), problem.camera_from_world.get(pi)) {
