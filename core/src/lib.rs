@@ -94,7 +94,7 @@ const FRAME_BUFFER_THRESHOLD_BYTES: usize = 16 << 20;
 /// would fault the pages of every such buffer in again (a sixth of a frame's CPU on scene01);
 /// freeing one mmapped block of size S raises the threshold to S and the heap's trim threshold to
 /// 2 S (mallopt(3), dynamic mmap threshold). This allocates and frees one block of
-/// [`FRAME_BUFFER_THRESHOLD_BYTES`], once per process ([`system::System::new`] calls it). Other
+/// `FRAME_BUFFER_THRESHOLD_BYTES` (16 MiB), once per process ([`system::System::new`] calls it). Other
 /// allocators merely see one allocation.
 pub fn keep_frame_buffers() {
     static ONCE: std::sync::Once = std::sync::Once::new();

@@ -4,7 +4,9 @@
 //! Entry point: [`ObjectPipeline`], built from a [`PipelineConfig`]. Per frame,
 //! [`ObjectPipeline::update`] takes a validated [`Frame`] (and the grey image when parameterization
 //! uses line segments) and returns which map object each detection went to plus this frame's
-//! points per object (the surface grids consume them). [`ObjectPipeline::refresh_estimates`]
+//! points per object (the surface grids consume them); [`ObjectPipeline::associate`] then
+//! [`ObjectPipeline::add_line_frames`] are the same update in two halves, for a caller that finds
+//! the frame's line segments ([`frame_segments`]) meanwhile. [`ObjectPipeline::refresh_estimates`]
 //! re-runs parameterization (iForest → line-alignment yaw → refinement, paper Algorithms 1-2) for
 //! the objects observed since the last refresh; the runner calls it after each view, since the
 //! estimator's cost grows with an object's cloud. [`ObjectPipeline::map`] gives the map with the
