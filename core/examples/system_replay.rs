@@ -4,18 +4,39 @@
 //! `cargo run --release -p objslam-core --example system_replay -- <capture dir> [repeats]`
 //!
 //! Replays the capture `repeats` times (default 3), each time on a fresh system, timing every
-//! `process_frame` (the core's per-frame work; loading the frame's images is not timed) and every
-//! `view_done` (the per-view refresh of the estimates). Prints the median, mean and 90th percentile
-//! of each over all repeats, and the map's object count and mean 3D IoU against the capture's
-//! ground truth (so a faster variant that changes the map shows it).
+//! `process_frame` (the core's per-frame work; loading the frame's images is not timed), the
+//! `last_pose` query the simulator's loop asks after each frame, and every `view_done` (the
+//! per-view refresh of the estimates). Prints the median, mean and 90th percentile of each over
+//! all repeats, and the map's object count and mean 3D IoU against the capture's ground truth (so
+//! a faster variant that changes the map shows it), and a digest of everything the system gave
+//! out: each frame's object ids and pose, each view's progress, the final map file, grid cells and
+//! pose metrics (two builds that print the same digest produced the same outputs bit for bit).
 
 use std::path::Path;
 use std::time::Instant;
 
 use anyhow::{anyhow, Result};
 use objslam_core::eval::{estimates_from_map, evaluate, EvalConfig};
+use objslam_core::explore::AlwaysReachable;
+use objslam_core::geometry::Se3;
 use objslam_core::system::capture::{Capture, CaptureEvent};
-use objslam_core::system::FrameInput;
+use objslam_core::system::{FrameInput, Query, StepContext};
+
+/// FNV-1a over the bytes of each output, in order.
+struct Digest(u64);
+
+impl Digest {
+    fn add(&mut self, bytes: &[u8]) {
+        for b in bytes {
+            self.0 = (self.0 ^ u64::from(*b)).wrapping_mul(0x0100_0000_01b3);
+        }
+    }
+
+    fn add_json(&mut self, value: &impl serde::Serialize) -> Result<()> {
+        self.add(serde_json::to_string(value)?.as_bytes());
+        Ok(())
+    }
+}
 
 /// (median, mean, 90th percentile) of `v`, ms.
 fn summary(v: &mut [f64]) -> (f64, f64, f64) {
@@ -35,37 +56,58 @@ fn main() -> Result<()> {
         None => 3,
     };
     let capture = Capture::open(dir)?;
-    let (mut frame_ms, mut view_ms) = (Vec::new(), Vec::new());
+    let (mut frame_ms, mut pose_ms, mut view_ms) = (Vec::new(), Vec::new(), Vec::new());
+    let current = Se3::identity();
+    let step = StepContext { camera: None, world_from_camera: &current, views: &[], reachable: &AlwaysReachable };
     let mut last = None;
+    let mut digests = Vec::new();
     for _ in 0..repeats {
         let mut system = capture.system()?;
+        let mut digest = Digest(0xcbf2_9ce4_8422_2325);
         for event in &capture.events {
             match event {
                 CaptureEvent::Frame(f) => {
                     let (frame, grey) = capture.load_frame(f)?;
                     let gt = f.true_pose()?;
                     let t = Instant::now();
-                    system.process_frame(FrameInput {
+                    let ids = system.process_frame(FrameInput {
                         frame,
                         grey: Some(&grey),
                         view_index: f.view_index,
                         world_from_camera_gt: Some(gt),
                     })?;
                     frame_ms.push(t.elapsed().as_secs_f64() * 1e3);
+                    let t = Instant::now();
+                    let pose = system.query(&Query::LastPose, &step)?;
+                    pose_ms.push(t.elapsed().as_secs_f64() * 1e3);
+                    digest.add_json(&ids)?;
+                    digest.add_json(&pose)?;
                 }
                 CaptureEvent::ViewDone { counts_as_view } => {
                     let t = Instant::now();
                     system.view_done(*counts_as_view);
                     view_ms.push(t.elapsed().as_secs_f64() * 1e3);
+                    digest.add_json(&system.progress())?;
                 }
             }
         }
+        digest.add(system.map().to_json().as_bytes());
+        let cells = system.grid_cells();
+        digest.add_json(&cells.p_in_world)?;
+        digest.add(&cells.state_codes());
+        digest.add_json(&system.pose_metrics()?)?;
+        digests.push(digest.0);
         last = Some(system);
     }
     let (fm, fa, f90) = summary(&mut frame_ms);
+    let (pm, pa, p90) = summary(&mut pose_ms);
     let (vm, va, v90) = summary(&mut view_ms);
     println!("process_frame: {} frames, median {fm:.2} ms, mean {fa:.2} ms, p90 {f90:.2} ms", frame_ms.len());
+    println!("last_pose:     {} queries, median {pm:.3} ms, mean {pa:.3} ms, p90 {p90:.3} ms", pose_ms.len());
     println!("view_done:     {} views, median {vm:.2} ms, mean {va:.2} ms, p90 {v90:.2} ms", view_ms.len());
+    let same = digests.windows(2).all(|w| w[0] == w[1]);
+    let digests: Vec<String> = digests.iter().map(|d| format!("{d:016x}")).collect();
+    println!("digest: {} ({})", digests.join(" "), if same { "every repeat the same" } else { "REPEATS DIFFER" });
     if let Some(system) = last {
         let ev = evaluate(&capture.header.ground_truth, &estimates_from_map(&system.map()), &EvalConfig::default());
         println!("map: {} objects for {} true, mean 3D IoU {:.3}", ev.n_objects_est, ev.n_objects_gt, ev.mean.iou3d);

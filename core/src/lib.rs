@@ -56,6 +56,54 @@ pub(crate) fn worker_threads() -> usize {
     *THREADS.get_or_init(|| std::thread::available_parallelism().map_or(1, |n| n.get()).min(2))
 }
 
+/// The threads a frame's stages may use now, shared between them: a stage that runs beside
+/// tracking (the line segments) holds the second core and hands it back when it ends; the
+/// tracker's parallel stages (ORB levels, projection search, each bundle-adjustment pass) read
+/// the budget when they start. Every such stage gives the same result on any thread count, so
+/// when the budget changes changes only the time.
+#[derive(Debug)]
+pub struct ThreadBudget {
+    now: std::sync::atomic::AtomicUsize,
+}
+
+impl ThreadBudget {
+    /// A budget of `threads`, clamped to `1..=worker_threads()`.
+    pub fn new(threads: usize) -> Self {
+        Self { now: std::sync::atomic::AtomicUsize::new(threads.clamp(1, worker_threads())) }
+    }
+
+    /// The threads a stage starting now may use.
+    pub fn get(&self) -> usize {
+        self.now.load(std::sync::atomic::Ordering::Relaxed)
+    }
+
+    /// Set the budget (clamped to `1..=worker_threads()`).
+    pub fn set(&self, threads: usize) {
+        self.now.store(threads.clamp(1, worker_threads()), std::sync::atomic::Ordering::Relaxed);
+    }
+}
+
+/// Size of the block [`keep_frame_buffers`] allocates and frees: above every per-frame buffer (the
+/// largest, LSD's gradient field of a 640 x 480 frame, is 2.4 MB), at most glibc's cap on the
+/// dynamic mmap threshold (32 MiB on 64-bit).
+const FRAME_BUFFER_THRESHOLD_BYTES: usize = 16 << 20;
+
+/// Keeps the per-frame buffers of a few megabytes (the line detector's gradient field and image
+/// copies, the bundle adjustment's blocks) in the process between frames. glibc serves a block
+/// above its mmap threshold (128 KiB at start) by `mmap` and unmaps it when freed, so each frame
+/// would fault the pages of every such buffer in again (a sixth of a frame's CPU on scene01);
+/// freeing one mmapped block of size S raises the threshold to S and the heap's trim threshold to
+/// 2 S (mallopt(3), dynamic mmap threshold). This allocates and frees one block of
+/// `FRAME_BUFFER_THRESHOLD_BYTES` (16 MiB), once per process ([`system::System::new`] calls it). Other
+/// allocators merely see one allocation.
+pub fn keep_frame_buffers() {
+    static ONCE: std::sync::Once = std::sync::Once::new();
+    ONCE.call_once(|| {
+        let block = vec![1u8; FRAME_BUFFER_THRESHOLD_BYTES];
+        drop(std::hint::black_box(block));
+    });
+}
+
 /// `work(i)` for every `i` in `0..n` on up to `threads` threads, the results in index order: the
 /// same as `(0..n).map(work).collect()` for any `threads`. With two or more, the calling thread
 /// and one scoped helper take the next index from a shared counter until none is left, so a

@@ -56,6 +56,51 @@ fn a_replay_is_deterministic() {
     assert_eq!(a.map().to_json(), b.map().to_json());
 }
 
+/// Every output of a replay: each frame's object ids and pose, each view's progress, the final
+/// map file, grid cells and pose metrics.
+fn replay_outputs(capture: &Capture, threads: usize) -> Vec<String> {
+    use objslam_core::system::{FrameInput, Query, StepContext};
+    let mut system = capture.system().unwrap();
+    system.set_threads(threads);
+    let current = objslam_core::geometry::Se3::identity();
+    let reachable = objslam_core::explore::AlwaysReachable;
+    let step = StepContext { camera: None, world_from_camera: &current, views: &[], reachable: &reachable };
+    let mut out = Vec::new();
+    for event in &capture.events {
+        match event {
+            CaptureEvent::Frame(f) => {
+                let (frame, grey) = capture.load_frame(f).unwrap();
+                let input = FrameInput {
+                    frame,
+                    grey: Some(&grey),
+                    view_index: f.view_index,
+                    world_from_camera_gt: f.true_pose().ok(),
+                };
+                out.push(format!("{:?}", system.process_frame(input).unwrap()));
+                out.push(serde_json::to_string(&system.query(&Query::LastPose, &step).unwrap()).unwrap());
+            }
+            CaptureEvent::ViewDone { counts_as_view } => {
+                system.view_done(*counts_as_view);
+                out.push(serde_json::to_string(&system.progress()).unwrap());
+            }
+        }
+    }
+    out.push(system.map().to_json());
+    let cells = system.grid_cells();
+    out.push(format!("{:?} {:?}", cells.p_in_world, cells.state_codes()));
+    out.push(serde_json::to_string(&system.pose_metrics().unwrap()).unwrap());
+    out
+}
+
+#[test]
+fn one_and_two_threads_give_the_same_outputs() {
+    // Two threads: each frame's line segments beside tracking, association and the grids, the
+    // tracker on one thread until they are done.
+    let capture = fixture();
+    let one = replay_outputs(&capture, 1);
+    assert_eq!(replay_outputs(&capture, 2), one);
+}
+
 #[test]
 fn a_tracked_frame_without_a_grey_image_is_a_typed_error() {
     let capture = fixture();

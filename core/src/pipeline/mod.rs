@@ -4,7 +4,9 @@
 //! Entry point: [`ObjectPipeline`], built from a [`PipelineConfig`]. Per frame,
 //! [`ObjectPipeline::update`] takes a validated [`Frame`] (and the grey image when parameterization
 //! uses line segments) and returns which map object each detection went to plus this frame's
-//! points per object (the surface grids consume them). [`ObjectPipeline::refresh_estimates`]
+//! points per object (the surface grids consume them); [`ObjectPipeline::associate`] then
+//! [`ObjectPipeline::add_line_frames`] are the same update in two halves, for a caller that finds
+//! the frame's line segments ([`frame_segments`]) meanwhile. [`ObjectPipeline::refresh_estimates`]
 //! re-runs parameterization (iForest → line-alignment yaw → refinement, paper Algorithms 1-2) for
 //! the objects observed since the last refresh; the runner calls it after each view, since the
 //! estimator's cost grows with an object's cloud. [`ObjectPipeline::map`] gives the map with the
@@ -508,18 +510,7 @@ impl ObjectPipeline {
     /// caller may run it beside other work (the system runs it beside tracking) and pass the
     /// result to [`Self::update_with_segments`].
     pub fn frame_segments(&self, frame: &Frame, grey: &GreyImage) -> Result<Option<Vec<LineSegment>>, PipelineError> {
-        if grey.width != frame.camera.width || grey.height != frame.camera.height {
-            return Err(PipelineError::GreySize {
-                width: frame.camera.width,
-                height: frame.camera.height,
-                actual_width: grey.width,
-                actual_height: grey.height,
-            });
-        }
-        if !self.wants_segments(frame) {
-            return Ok(None);
-        }
-        Ok(detect_segments(grey, &self.config.lsd).ok())
+        frame_segments(&self.config.lsd, self.wants_segments(frame), &frame.camera, grey)
     }
 
     /// Whether [`Self::frame_segments`] looks for line segments on `frame` (parameterization on and
@@ -545,6 +536,31 @@ impl ObjectPipeline {
         &mut self,
         frame: &Frame,
         segments: Option<&[LineSegment]>,
+        map_points: Option<&[MapPointObservation]>,
+    ) -> Result<PipelineUpdate, PipelineError> {
+        let out = self.associate_valid(frame, map_points)?;
+        self.add_line_frames(frame, &out.assigned, segments);
+        Ok(out)
+    }
+
+    /// The first half of [`Self::update_with_segments`]: associate the frame's detections and
+    /// update the association's objects, without the line segments. [`Self::add_line_frames`]
+    /// with the returned assignments completes the update; the map ([`Self::map`],
+    /// [`Self::map_without_clouds`]) is the same before and after it, so a caller may read the
+    /// map in between while the segments are still being found.
+    pub fn associate(
+        &mut self,
+        frame: &Frame,
+        map_points: Option<&[MapPointObservation]>,
+    ) -> Result<PipelineUpdate, PipelineError> {
+        frame.validate()?;
+        self.associate_valid(frame, map_points)
+    }
+
+    /// [`Self::associate`] of a validated frame.
+    fn associate_valid(
+        &mut self,
+        frame: &Frame,
         map_points: Option<&[MapPointObservation]>,
     ) -> Result<PipelineUpdate, PipelineError> {
         let mut out = PipelineUpdate::default();
@@ -592,9 +608,16 @@ impl ObjectPipeline {
         if self.config.existence_ratio > 0.0 {
             self.count_unseen(frame, &out.assigned);
         }
+        Ok(out)
+    }
+
+    /// The second half of [`Self::update_with_segments`] (after [`Self::associate`] of the same
+    /// frame, with its `assigned` ids): each assigned object's estimator takes the frame's
+    /// segments in its box, and the object is marked for the next refresh.
+    pub fn add_line_frames(&mut self, frame: &Frame, assigned: &[Option<u32>], segments: Option<&[LineSegment]>) {
         if self.config.parameterize {
             let map = self.raw_map_with(false);
-            for (di, id) in out.assigned.iter().enumerate() {
+            for (di, id) in assigned.iter().enumerate() {
                 let (Some(id), Some(det)) = (id, frame.detections.get(di)) else { continue };
                 let Some(obj) = map.get(*id) else { continue };
                 let shape = obj.label.shape();
@@ -611,7 +634,6 @@ impl ObjectPipeline {
                 self.dirty.insert(*id);
             }
         }
-        Ok(out)
     }
 
     /// Re-express the map in a world frame moved by the rigid `delta` (`new_world ← old_world`):
@@ -1100,6 +1122,29 @@ pub fn place_seen(g: &ObjectGeometry, frame: &Frame, camera_from_world: &Se3) ->
     let (_, d, _) = depths.select_nth_unstable_by(mid, f32::total_cmp);
     let near_side = centre.z - g.half_extents.x.max(g.half_extents.y);
     f64::from(*d) >= near_side - EXISTENCE_DEPTH_TOLERANCE_M
+}
+
+/// [`ObjectPipeline::frame_segments`] from the pipeline's LSD settings, its
+/// [`ObjectPipeline::wants_segments`] answer for a frame and the frame's camera: a caller may run
+/// it on another thread while the pipeline itself changes.
+pub fn frame_segments(
+    lsd: &LsdConfig,
+    wanted: bool,
+    camera: &crate::geometry::PinholeCamera,
+    grey: &GreyImage,
+) -> Result<Option<Vec<LineSegment>>, PipelineError> {
+    if grey.width != camera.width || grey.height != camera.height {
+        return Err(PipelineError::GreySize {
+            width: camera.width,
+            height: camera.height,
+            actual_width: grey.width,
+            actual_height: grey.height,
+        });
+    }
+    if !wanted {
+        return Ok(None);
+    }
+    Ok(detect_segments(grey, lsd).ok())
 }
 
 /// Share of `query` points with a point of `reference` within `radius` (0 for an empty query).

@@ -111,6 +111,17 @@ impl BundleProblem {
     /// of observations) on up to `threads` threads; every sum keeps its order, so the result is
     /// the same for any `threads`.
     pub fn optimize_with_threads(&mut self, camera: &PinholeCamera, config: &BundleConfig, threads: usize) -> usize {
+        self.optimize_with_budget(camera, config, &crate::ThreadBudget::new(threads))
+    }
+
+    /// [`Self::optimize_with_threads`] on the threads `budget` grants when each pass (a
+    /// linearisation, a cost) starts: the same result whatever it grants when.
+    pub fn optimize_with_budget(
+        &mut self,
+        camera: &PinholeCamera,
+        config: &BundleConfig,
+        budget: &crate::ThreadBudget,
+    ) -> usize {
         let bf = camera.fx * config.depth_baseline_m;
         let n_poses = self.camera_from_world.len();
         let var_index: Vec<Option<usize>> = {
@@ -149,9 +160,9 @@ impl BundleProblem {
             }
         }
         // Chunks of points with about equal numbers of observations for the linearisation.
-        let point_chunks = point_chunks(&obs_by_point, if threads > 1 { PARALLEL_CHUNKS } else { 1 });
+        let point_chunks = point_chunks(&obs_by_point, if crate::worker_threads() > 1 { PARALLEL_CHUNKS } else { 1 });
         let mut lambda = config.initial_lambda;
-        let mut cost = self.cost_with_threads(camera, config, threads);
+        let mut cost = self.cost_with_threads(camera, config, budget.get());
         let mut accepted = 0;
         let mut hcc = vec![NormalEquations6::new(); n_var];
         let mut hpp = vec![Matrix3::<f64>::zeros(); n_points];
@@ -165,7 +176,7 @@ impl BundleProblem {
                 let rotations: Vec<Matrix3<f64>> =
                     self.camera_from_world.iter().map(|p| *p.rotation.to_rotation_matrix().matrix()).collect();
                 let ctx = Linearisation { camera, bf, rotations: &rotations, obs_by_point: &obs_by_point };
-                let parts = crate::map_indices(threads, point_chunks.len(), |c| {
+                let parts = crate::map_indices(budget.get(), point_chunks.len(), |c| {
                     point_chunks
                         .get(c)
                         .map_or_else(PointsLinearised::default, |r| self.linearise_points(&ctx, r.clone()))
@@ -260,7 +271,7 @@ impl BundleProblem {
                     self.points[pi] += dp;
                 }
             }
-            let new_cost = self.cost_with_threads(camera, config, threads);
+            let new_cost = self.cost_with_threads(camera, config, budget.get());
             if new_cost.is_finite() && new_cost < cost {
                 let converged = cost - new_cost <= CONVERGED_RELATIVE_DECREASE * cost;
                 cost = new_cost;

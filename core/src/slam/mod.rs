@@ -55,8 +55,9 @@
 //!    round-robin over 30-px grid cells (emptiest cells first); orientation by intensity
 //!    centroid (radius 15); 256-bit steered BRIEF with the learned pattern of ORB on a
 //!    Gaussian-smoothed level (7x7, σ = 2), pre-rotated to 256 angles. Depth is read at each
-//!    keypoint's (rounded) pixel. On two worker threads (`crate::worker_threads`) the levels are
-//!    extracted in parallel ([`OrbExtractor::extract_with_threads`]; the same features as on one).
+//!    keypoint's (rounded) pixel. On two threads (the tracker's [`crate::ThreadBudget`], at most
+//!    `crate::worker_threads`) the levels are extracted in parallel
+//!    ([`OrbExtractor::extract_with_threads`]; the same features as on one).
 //! 2. Empty map: the frame initialises it (map points from every keypoint with depth) at the
 //!    prior; it needs [`TrackerConfig::min_init_points`] keypoints with depth.
 //! 3. Seed: the last pose times the prior's motion since the last frame (nearly exact within a

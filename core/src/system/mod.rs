@@ -17,8 +17,10 @@
 //! One frame (`process_frame`):
 //! 1. With a tracker, the frame's camera pose is tracked from the grey image and depth, starting
 //!    from the kinematic prior the frame carries (used as given: its error is the robot's); the
-//!    tracked pose replaces it. On two cores the frame's line segments (LSD, for the
-//!    parameterization) are found on a second thread meanwhile; they depend on the image alone.
+//!    tracked pose replaces it. On two cores ([`System::set_threads`]) the frame's line segments
+//!    (LSD, for the parameterization; they depend on the image alone) are found on a second
+//!    thread meanwhile and through steps 2-4; the tracker takes the second core back when they
+//!    are done ([`crate::ThreadBudget`]). They enter the estimators' line windows last.
 //! 2. When the tracker's world ← map gauge moved since the last frame and
 //!    `PipelineConfig::follow_slam_gauge` is set, the object map is moved with it (a change of
 //!    world frame, not of the objects).
@@ -48,8 +50,9 @@ use crate::explore::{CellState, ExploreError, ObservedPoints, Reachability, Tabl
 use crate::frame::{Frame, GreyImage};
 use crate::geometry::{PinholeCamera, Se3};
 use crate::map::ObjectMap;
-use crate::pipeline::{MapPointObservation, ObjectPipeline, PipelineConfig, PipelineError};
-use crate::slam::{ate_rmse_m, rpe, PoseSource, SlamError, TrackInput, Tracker, TrackerConfig};
+use crate::objects::lsd::LineSegment;
+use crate::pipeline::{frame_segments, MapPointObservation, ObjectPipeline, PipelineConfig, PipelineError};
+use crate::slam::{ate_rmse_m, rpe, PoseSource, SlamError, TrackInput, TrackOutput, Tracker, TrackerConfig};
 
 /// Errors of the system loop, by the subsystem that raised them.
 #[derive(Debug, Error)]
@@ -169,16 +172,21 @@ pub struct System {
     last_pose: Option<Se3>,
     /// The tracker's world ← map gauge when the object map was last moved with it.
     gauge: Option<Se3>,
+    /// Threads one frame may use ([`Self::set_threads`]).
+    threads: usize,
 }
 
 impl System {
     /// A system from its subsystems' configs; `tracker` None maps every frame at its prior pose.
+    /// The first one in a process keeps per-frame buffers from being unmapped between frames
+    /// ([`crate::keep_frame_buffers`]).
     pub fn new(
         pipeline: PipelineConfig,
         active: ActiveConfig,
         tracker: Option<TrackerConfig>,
         table: TableRect,
     ) -> Result<Self, SystemError> {
+        crate::keep_frame_buffers();
         Ok(Self {
             pipeline: ObjectPipeline::new(pipeline)?,
             session: ActiveSession::new(active, table)?,
@@ -187,50 +195,93 @@ impl System {
             poses_true: Vec::new(),
             last_pose: None,
             gauge: None,
+            threads: crate::worker_threads(),
         })
+    }
+
+    /// Threads one frame may use: at least one, at most `crate::worker_threads()` (the default,
+    /// two on two cores or more). With two, the frame's line segments are found beside tracking.
+    /// The outputs do not depend on it.
+    pub fn set_threads(&mut self, threads: usize) {
+        self.threads = threads.clamp(1, crate::worker_threads());
     }
 
     /// Track, move the map with the gauge, associate and update the objects, integrate the grids.
     /// Returns each detection's map object id (None: not assigned).
     pub fn process_frame(&mut self, input: FrameInput<'_>) -> Result<Vec<Option<u32>>, SystemError> {
-        let FrameInput { mut frame, grey, view_index, world_from_camera_gt } = input;
-        let pipeline = &self.pipeline;
-        let frame_ref = &frame;
-        let lsd = || grey.map(|g| pipeline.frame_segments(frame_ref, g)).transpose();
-        let (tracked, segments) = match self.tracker.as_mut() {
-            None => (None, lsd()?.flatten()),
-            Some(tracker) => {
-                let g = grey.ok_or(SystemError::MissingGrey)?;
-                // The true pose reaches the tracker only as the oracle of the `ground_truth` ablation.
-                let oracle = world_from_camera_gt.filter(|_| tracker.config().pose_source == PoseSource::GroundTruth);
-                let input = TrackInput {
-                    grey: g,
-                    depth: &frame.depth,
-                    camera: &frame.camera,
-                    world_from_camera_prior: frame.world_from_camera,
-                    view_index,
-                    world_from_camera_oracle: oracle,
-                };
-                // The line segments need only the grey image: on two cores they are found while
-                // the frame is tracked (the result does not depend on it), and the tracker keeps
-                // to one thread on such frames; on the others it may use both.
-                let segments_now = pipeline.wants_segments(frame_ref);
-                tracker.set_threads(if segments_now { 1 } else { crate::worker_threads() });
-                let (out, segments) = if crate::worker_threads() < 2 || !segments_now {
-                    (tracker.track(&input), lsd())
-                } else {
-                    std::thread::scope(|s| {
-                        let second = s.spawn(lsd);
-                        let out = tracker.track(&input);
-                        (out, second.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
-                    })
-                };
-                let out = out?;
-                let segments = segments?.flatten();
-                let world_from_map = tracker.world_from_map();
-                (Some((out, world_from_map)), segments)
-            }
+        let FrameInput { frame, grey, view_index, world_from_camera_gt } = input;
+        let wanted = self.pipeline.wants_segments(&frame);
+        let (lsd_config, camera) = (self.pipeline.config().lsd, frame.camera);
+        let lsd = move || grey.map(|g| frame_segments(&lsd_config, wanted, &camera, g)).transpose();
+        let Some(tracker) = self.tracker.as_mut() else {
+            let segments = lsd()?.flatten();
+            return self.map_frame(frame, None, world_from_camera_gt, segments.as_deref());
         };
+        let grey = grey.ok_or(SystemError::MissingGrey)?;
+        // The true pose reaches the tracker only as the oracle of the `ground_truth` ablation.
+        let oracle = world_from_camera_gt.filter(|_| tracker.config().pose_source == PoseSource::GroundTruth);
+        let track = |tracker: &mut Tracker, frame: &Frame| {
+            let out = tracker.track(&TrackInput {
+                grey,
+                depth: &frame.depth,
+                camera: &frame.camera,
+                world_from_camera_prior: frame.world_from_camera,
+                view_index,
+                world_from_camera_oracle: oracle,
+            })?;
+            Ok::<_, SystemError>((out, tracker.world_from_map()))
+        };
+        let threads = self.threads;
+        if threads < 2 || !wanted {
+            tracker.set_threads(threads);
+            let tracked = track(tracker, &frame)?;
+            let segments = lsd()?.flatten();
+            return self.map_frame(frame, Some(tracked), world_from_camera_gt, segments.as_deref());
+        }
+        // The line segments need only the grey image: on two cores they are found on the second
+        // one while the frame is tracked, associated and integrated into the grids (the segments
+        // enter only the estimators' line windows, last). The tracker starts on one thread and
+        // takes the second core back when the segments are done (its results do not depend on
+        // its threads).
+        tracker.set_threads(1);
+        let budget = tracker.thread_budget();
+        std::thread::scope(|s| {
+            let second = s.spawn(move || {
+                let segments = lsd();
+                budget.set(threads);
+                segments
+            });
+            // (An early return joins the second thread too: the scope waits for it.)
+            let tracked = self.tracker.as_mut().map(|t| track(t, &frame)).transpose()?;
+            let (mapped_frame, assigned) = self.associate_frame(frame, tracked, world_from_camera_gt)?;
+            let segments = second.join().unwrap_or_else(|e| std::panic::resume_unwind(e))?.flatten();
+            self.pipeline.add_line_frames(&mapped_frame, &assigned, segments.as_deref());
+            Ok(assigned)
+        })
+    }
+
+    /// The frame after tracking: poses, gauge, association, grids, then the line frames.
+    fn map_frame(
+        &mut self,
+        frame: Frame,
+        tracked: Option<(TrackOutput, Se3)>,
+        world_from_camera_gt: Option<Se3>,
+        segments: Option<&[LineSegment]>,
+    ) -> Result<Vec<Option<u32>>, SystemError> {
+        let (frame, assigned) = self.associate_frame(frame, tracked, world_from_camera_gt)?;
+        self.pipeline.add_line_frames(&frame, &assigned, segments);
+        Ok(assigned)
+    }
+
+    /// Steps 2-4 of the module docs but the line frames: the frame at its tracked pose, the map
+    /// moved with the gauge, the detections associated, the grids integrated. Returns the frame
+    /// as mapped and each detection's object id.
+    fn associate_frame(
+        &mut self,
+        mut frame: Frame,
+        tracked: Option<(TrackOutput, Se3)>,
+        world_from_camera_gt: Option<Se3>,
+    ) -> Result<(Frame, Vec<Option<u32>>), SystemError> {
         let mut map_points: Option<Vec<MapPointObservation>> = None;
         if let Some((out, now)) = tracked {
             frame.world_from_camera = out.world_from_camera;
@@ -252,7 +303,7 @@ impl System {
             self.poses_used.push(frame.world_from_camera);
             self.poses_true.push(g);
         }
-        let summary = self.pipeline.update_with_segments(&frame, segments.as_deref(), map_points.as_deref())?;
+        let summary = self.pipeline.associate(&frame, map_points.as_deref())?;
         // The grids need the objects' geometry, not their clouds.
         let map = self.pipeline.map_without_clouds();
         let observed: Vec<ObservedPoints> = summary
@@ -262,7 +313,7 @@ impl System {
             .map(|(object_id, points_in_world)| ObservedPoints { object_id, points_in_world })
             .collect();
         self.session.integrate_frame(&map, &frame, &observed)?;
-        Ok(summary.assigned)
+        Ok((frame, summary.assigned))
     }
 
     /// A view was reached and its frames fused (`counts_as_view` false for Init views): refresh the

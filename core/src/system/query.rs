@@ -162,7 +162,9 @@ pub struct StepContext<'a> {
 impl System {
     /// Answers `query` at this decision step; errors name the bad value.
     pub fn query(&self, query: &Query, step: &StepContext<'_>) -> Result<Answer, SystemError> {
-        let (s, map) = (&self.session, &self.pipeline.map());
+        let s = &self.session;
+        // The map is built only for the questions that read it (`last_pose` is asked every frame).
+        let map = || self.pipeline.map();
         let camera = || step.camera.ok_or(SystemError::MissingCamera);
         let views = |v: Vec<crate::explore::CandidateView>| {
             let targeted = |c: &crate::explore::CandidateView| TargetedView {
@@ -183,21 +185,28 @@ impl System {
             Query::Progress => Answer::Progress(self.progress()),
             Query::LastPose => Answer::Pose { world_from_camera: self.last_pose.map(|p| rows(&p.to_homogeneous())) },
             Query::PoseMetrics => Answer::PoseMetrics(self.pose_metrics()?),
-            Query::ObjectFeatures => Answer::Features(s.object_features(map, camera()?)?),
-            Query::CandidateViews { around } => views(s.candidate_views(map, around.as_deref())?),
+            Query::ObjectFeatures => Answer::Features(s.object_features(&map(), camera()?)?),
+            Query::CandidateViews { around } => views(s.candidate_views(&map(), around.as_deref())?),
             Query::ScoreViews {
                 utility: utility @ (Strategy::ObjectDriven | Strategy::ObjectDrivenDiscovery | Strategy::ExpectedGain),
                 explore_every_object,
             } => {
                 let current = step.world_from_camera;
-                Answer::Scores(s.score_views(map, camera()?, step.views, *utility, current, *explore_every_object)?)
+                Answer::Scores(s.score_views(
+                    &map(),
+                    camera()?,
+                    step.views,
+                    *utility,
+                    current,
+                    *explore_every_object,
+                )?)
             }
             Query::ScoreViews { utility, .. } => return Err(SystemError::NotAUtility(*utility)),
-            Query::PaperStop => Answer::Stop(s.paper_stop(map, camera()?)?),
-            Query::TableCandidateViews => views(s.table_candidate_views(map)?),
-            Query::TableGain => Answer::TableGain(s.table_gain(map, camera()?, step.views)),
+            Query::PaperStop => Answer::Stop(s.paper_stop(&map(), camera()?)?),
+            Query::TableCandidateViews => views(s.table_candidate_views(&map())?),
+            Query::TableGain => Answer::TableGain(s.table_gain(&map(), camera()?, step.views)),
             Query::TableViewsNeeded { limit } => {
-                Answer::Count(s.table_views_needed(map, camera()?, step.reachable, *limit)?)
+                Answer::Count(s.table_views_needed(&map(), camera()?, step.reachable, *limit)?)
             }
         })
     }

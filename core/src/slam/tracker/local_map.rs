@@ -1,7 +1,8 @@
 //! Local mapping: keyframes and map points (insertion with new points from depth, local bundle
 //! adjustment over a window of keyframes, culling), map reset and extension.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, HashMap};
+use std::hash::{BuildHasherDefault, Hasher};
 
 use nalgebra::Point3;
 
@@ -10,6 +11,33 @@ use super::{PoseSource, Tracker};
 use crate::geometry::{PinholeCamera, Se3};
 use crate::slam::ba::{BundleObservation, BundleProblem};
 use crate::slam::features::Descriptor;
+
+/// A point id's index in a bundle problem. Only queried, never iterated, so hash order cannot
+/// leak into results.
+type PointIndex = HashMap<u64, usize, BuildHasherDefault<PointIdHasher>>;
+
+/// Cheap hasher for point ids (sequential integers): the SplitMix64 finaliser.
+#[derive(Debug, Clone, Copy, Default)]
+struct PointIdHasher(u64);
+
+impl Hasher for PointIdHasher {
+    fn finish(&self) -> u64 {
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+
+    fn write(&mut self, bytes: &[u8]) {
+        for b in bytes {
+            self.0 = self.0.rotate_left(8) ^ u64::from(*b);
+        }
+    }
+
+    fn write_u64(&mut self, i: u64) {
+        self.0 = self.0.rotate_left(21) ^ i;
+    }
+}
 
 #[derive(Debug, Clone)]
 pub(super) struct MapPoint {
@@ -197,20 +225,28 @@ impl Tracker {
     pub(super) fn local_bundle_adjustment(&mut self, camera: &PinholeCamera) {
         let n_kf = self.keyframes.len();
         let first_local = n_kf.saturating_sub(self.config.local_keyframes);
-        // Points seen by the local window.
-        let mut point_index: BTreeMap<u64, usize> = BTreeMap::new();
+        // Points seen by the local window, numbered in order of first sight.
+        let mut point_index: PointIndex = PointIndex::default();
+        let mut local_ids: Vec<u64> = Vec::new();
         for kf in &self.keyframes[first_local..] {
             for o in &kf.observations {
                 if self.points.contains_key(&o.point_id) {
-                    let n = point_index.len();
-                    point_index.entry(o.point_id).or_insert(n);
+                    point_index.entry(o.point_id).or_insert_with(|| {
+                        local_ids.push(o.point_id);
+                        local_ids.len() - 1
+                    });
                 }
             }
         }
-        // Keyframes involved: the window plus fixed ones observing its points.
+        // Keyframes involved: the window plus fixed ones observing its points (points in id
+        // order). The points' positions come along.
+        let mut by_id: Vec<(u64, usize)> = local_ids.iter().enumerate().map(|(i, id)| (*id, i)).collect();
+        by_id.sort_unstable();
+        let mut points = vec![Point3::origin(); local_ids.len()];
         let mut kf_set: BTreeMap<usize, usize> = BTreeMap::new();
-        for id in point_index.keys() {
-            if let Some(p) = self.points.get(id) {
+        for &(id, i) in &by_id {
+            if let Some(p) = self.points.get(&id) {
+                points[i] = p.p_in_map;
                 for &k in &p.keyframes {
                     let n = kf_set.len();
                     kf_set.entry(k).or_insert(n);
@@ -254,12 +290,6 @@ impl Tracker {
                 }
             }
         }
-        let mut points = vec![Point3::origin(); point_index.len()];
-        for (id, &i) in &point_index {
-            if let Some(p) = self.points.get(id) {
-                points[i] = p.p_in_map;
-            }
-        }
         let mut problem = BundleProblem {
             camera_from_world: kf_list
                 .iter()
@@ -272,7 +302,7 @@ impl Tracker {
         if problem.camera_from_world.len() != kf_list.len() {
             return;
         }
-        problem.optimize_with_threads(camera, &self.config.bundle, self.threads);
+        problem.optimize_with_budget(camera, &self.config.bundle, &self.threads);
         for (pi, &k) in kf_list.iter().enumerate() {
             if !problem.fixed[pi] {
                 if let (Some(kf), Some(p)) = (self.keyframes.get_mut(k), problem.camera_from_world.get(pi)) {
@@ -280,8 +310,8 @@ impl Tracker {
                 }
             }
         }
-        for (id, &i) in &point_index {
-            if let (Some(p), Some(q)) = (self.points.get_mut(id), problem.points.get(i)) {
+        for (id, q) in local_ids.iter().zip(&problem.points) {
+            if let Some(p) = self.points.get_mut(id) {
                 p.p_in_map = *q;
             }
         }

@@ -366,8 +366,8 @@ pub struct Tracker {
     /// `motion_disagreement`).
     lost_by_reason: BTreeMap<&'static str, usize>,
     records: Vec<FrameRecord>,
-    /// Threads a frame's tracking may use ([`Self::set_threads`]).
-    threads: usize,
+    /// Threads a frame's tracking may use ([`Self::set_threads`], [`Self::thread_budget`]).
+    threads: std::sync::Arc<crate::ThreadBudget>,
 }
 
 impl Tracker {
@@ -434,7 +434,7 @@ impl Tracker {
             n_lost_hidden: 0,
             lost_by_reason: BTreeMap::new(),
             records: Vec::new(),
-            threads: crate::worker_threads(),
+            threads: std::sync::Arc::new(crate::ThreadBudget::new(crate::worker_threads())),
         })
     }
 
@@ -445,10 +445,17 @@ impl Tracker {
 
     /// Threads the following frames' tracking may use (ORB levels, projection search, local
     /// bundle adjustment): at least one, at most `crate::worker_threads()` (the default). The
-    /// results do not depend on it; the system lowers it to one on frames whose line segments
+    /// results do not depend on it; the system lowers it to one while a frame's line segments
     /// take the second core.
     pub fn set_threads(&mut self, threads: usize) {
-        self.threads = threads.clamp(1, crate::worker_threads());
+        self.threads.set(threads);
+    }
+
+    /// The tracker's thread budget, which its parallel stages read when they start: another
+    /// thread may raise it during [`Self::track`] (the system does when the frame's line
+    /// segments are done).
+    pub fn thread_budget(&self) -> std::sync::Arc<crate::ThreadBudget> {
+        std::sync::Arc::clone(&self.threads)
     }
 
     /// Number of map points.
@@ -537,7 +544,7 @@ impl Tracker {
         self.frame_index += 1;
         let prior = input.world_from_camera_prior;
         // ORB on the threads one frame may use (the same features on any number of them).
-        let features = self.orb.extract_with_threads(input.grey, self.threads)?;
+        let features = self.orb.extract_with_threads(input.grey, self.threads.get())?;
         let depth_m: Vec<Option<f64>> = features
             .keypoints
             .iter()

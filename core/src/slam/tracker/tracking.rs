@@ -189,7 +189,7 @@ impl Tracker {
     ) -> Vec<PointMatch> {
         let search = Search { frame, camera, camera_from_map, radius_px, scale_radius };
         let n = self.points.len();
-        let middle = (self.threads > 1 && n >= PARALLEL_SEARCH_MIN_POINTS)
+        let middle = (self.threads.get() > 1 && n >= PARALLEL_SEARCH_MIN_POINTS)
             .then(|| self.points.keys().nth(n / 2).copied())
             .flatten();
         let best_for_kp = match middle {
