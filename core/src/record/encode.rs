@@ -1,10 +1,11 @@
 //! The camera images of a recording: encoding (JPEG colour, 16-bit PNG depth) and logging, on the
-//! calling thread or on the recorder's encoder thread ([`Encoder`]).
+//! calling thread or on the recorder's encoder thread ([`Encoder`]), which also logs the arm's
+//! link poses.
 //!
-//! The encoder thread takes each image with the time it was logged at (`frame`, `sim_time`),
-//! sets that time on its own timelines (Rerun's time is per thread) and logs it, in the order the
-//! images were handed over. The hand-over queue is bounded ([`QUEUE`] images): a caller that gets
-//! ahead of the encoder waits. [`Encoder::finish`] waits until every image handed over is logged;
+//! The encoder thread takes each job with the time it was logged at (`frame`, `sim_time`), sets
+//! that time on its own timelines (Rerun's time is per thread) and runs it, in the order the jobs
+//! were handed over. The hand-over queue is bounded ([`QUEUE`] jobs): a caller that gets ahead of
+//! the encoder waits. [`Encoder::finish`] waits until every image handed over is logged;
 //! dropping the encoder does the same before the thread ends.
 
 use std::sync::mpsc::{sync_channel, Receiver, SyncSender};
@@ -15,7 +16,7 @@ use rerun::RecordingStream;
 
 use super::{RecordError, RecordOptions};
 
-/// Images the encoder thread holds at most beside the one it works on.
+/// Jobs the encoder thread holds at most beside the one it works on.
 pub(crate) const QUEUE: usize = 4;
 
 /// Entity paths of the camera images.
@@ -33,8 +34,11 @@ pub(crate) enum Image {
 /// The time of a log call: frame index and simulated seconds (None: no time set).
 pub(crate) type Time = Option<(u32, f64)>;
 
+/// Logging work handed to the encoder thread.
+pub(crate) type Work = Box<dyn FnOnce(&RecordingStream, &RecordOptions) -> Result<(), RecordError> + Send>;
+
 enum Job {
-    Log(Time, Image),
+    Log(Time, Work),
     /// Reply once every job before it is done.
     Finish(SyncSender<()>),
 }
@@ -64,14 +68,14 @@ impl Encoder {
         Ok(Self { jobs: Some(jobs), worker: Some(worker), failed })
     }
 
-    /// Hands `image` over, to be logged at `time`; waits while the queue is full.
-    pub(crate) fn log(&self, time: Time, image: Image) -> Result<(), RecordError> {
+    /// Hands `work` over, to be run at `time`; waits while the queue is full.
+    pub(crate) fn log(&self, time: Time, work: Work) -> Result<(), RecordError> {
         self.take_error()?;
         let jobs = self.jobs.as_ref().ok_or_else(stopped)?;
-        jobs.send(Job::Log(time, image)).map_err(|_| stopped())
+        jobs.send(Job::Log(time, work)).map_err(|_| stopped())
     }
 
-    /// Waits until every image handed over is logged; the first error of any of them.
+    /// Waits until every job handed over is done; the first error of any of them.
     pub(crate) fn finish(&self) -> Result<(), RecordError> {
         let jobs = self.jobs.as_ref().ok_or_else(stopped)?;
         let (done, wait) = sync_channel(1);
@@ -90,7 +94,7 @@ impl Encoder {
 }
 
 impl Drop for Encoder {
-    /// Logs every image handed over, then ends the thread.
+    /// Runs every job handed over, then ends the thread.
     fn drop(&mut self) {
         drop(self.jobs.take());
         if let Some(worker) = self.worker.take() {
@@ -102,7 +106,7 @@ impl Drop for Encoder {
 fn run(stream: &RecordingStream, options: &RecordOptions, rx: &Receiver<Job>, failed: &Mutex<Option<RecordError>>) {
     for job in rx {
         match job {
-            Job::Log(time, image) => {
+            Job::Log(time, work) => {
                 match time {
                     Some((frame, sim_time_s)) => {
                         stream.set_time_sequence("frame", i64::from(frame));
@@ -110,7 +114,7 @@ fn run(stream: &RecordingStream, options: &RecordOptions, rx: &Receiver<Job>, fa
                     }
                     None => stream.reset_time(),
                 }
-                if let Err(e) = log_image(stream, options, image) {
+                if let Err(e) = work(stream, options) {
                     failed.lock().unwrap_or_else(|e| e.into_inner()).get_or_insert(e);
                 }
             }

@@ -119,10 +119,11 @@ pub struct RecordOptions {
     pub table: Option<TableTop>,
     /// URDF of the arm to draw (`world/robot`): its collision meshes are logged once. Default none.
     pub robot_urdf: Option<PathBuf>,
-    /// Encode and log the camera images on the recorder's own thread, so that
-    /// [`Recorder::log_rgb`] and [`Recorder::log_depth`] return once the image is handed over
-    /// (the same bytes at the same times; [`Recorder::flush`] and drop wait for them). False:
-    /// on the calling thread. Default true.
+    /// Encode and log the camera images (and log the arm's link poses) on the recorder's own
+    /// thread, so that [`Recorder::log_rgb`], [`Recorder::log_depth`] and
+    /// [`Recorder::log_robot_pose`] return once the data is handed over (the same bytes at the
+    /// same times; [`Recorder::flush`] and drop wait for them). False: on the calling thread.
+    /// Default true.
     pub encoder_thread: bool,
 }
 
@@ -320,22 +321,37 @@ impl Recorder {
     }
 
     fn log_image(&self, image: Image) -> Result<(), RecordError> {
+        self.on_encoder(Box::new(move |stream, options| encode::log_image(stream, options, image)))
+    }
+
+    /// `work` on the encoder thread at the current time, or now on this thread without one.
+    fn on_encoder(&self, work: encode::Work) -> Result<(), RecordError> {
         match &self.encoder {
-            Some(encoder) => encoder.log(*self.time.lock().unwrap_or_else(|e| e.into_inner()), image),
-            None => encode::log_image(&self.stream, &self.options, image),
+            Some(encoder) => encoder.log(*self.time.lock().unwrap_or_else(|e| e.into_inner()), work),
+            None => work(&self.stream, &self.options),
         }
     }
 
-    /// The arm's links: `world_from_link` of each link by name, at `world/robot/<link>`. Links
-    /// without a mesh in the model are skipped; with no model (no [`RecordOptions::robot_urdf`])
-    /// nothing is logged.
+    /// The arm's links: `world_from_link` of each link by name, at `world/robot/<link>` (on the
+    /// encoder thread with [`RecordOptions::encoder_thread`]). Links without a mesh in the model
+    /// are skipped; with no model (no [`RecordOptions::robot_urdf`]) nothing is logged.
     pub fn log_robot_pose(&self, links: &[(String, Se3)]) -> Result<(), RecordError> {
-        for (name, world_from_link) in links {
-            if self.robot_links.iter().any(|l| l == name) {
-                self.log(&format!("world/robot/{name}"), &transform(world_from_link))?;
-            }
+        let poses: Vec<(String, rerun::Transform3D)> = links
+            .iter()
+            .filter(|(name, _)| self.robot_links.iter().any(|l| l == name))
+            .map(|(name, world_from_link)| (format!("world/robot/{name}"), transform(world_from_link)))
+            .collect();
+        if poses.is_empty() {
+            return Ok(());
         }
-        Ok(())
+        self.on_encoder(Box::new(move |stream, _| {
+            for (entity, pose) in &poses {
+                stream
+                    .log(entity.as_str(), pose)
+                    .map_err(|e| RecordError::Log { entity: entity.clone(), reason: e.to_string() })?;
+            }
+            Ok(())
+        }))
     }
 
     /// Detections as labelled 2D boxes over the image.
