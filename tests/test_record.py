@@ -139,3 +139,49 @@ def test_live_stream_reaches_a_viewer(tmp_path: Path) -> None:
     reader = rr_experimental.RrdReader(received)
     assert [s.application_id for s in reader.blueprints()] == ["objslam"]
     assert any(c.startswith("EncodedImage:") for c in entities(received)["/world/camera/image/rgb"])
+
+
+def camera_images(path: Path) -> dict[str, list[tuple[int, object, bytes]]]:
+    """The encoded camera images of a recording: entity → ``(frame, sim_time, blob)`` in frame order."""
+    out: dict[str, list[tuple[int, object, bytes]]] = {}
+    for chunk in rr_experimental.RrdReader(path).stream():
+        if chunk.entity_path not in ("/world/camera/image/rgb", "/world/camera/image/depth"):
+            continue
+        batch = chunk.to_record_batch()
+        names = batch.schema.names
+        blob = next(n for n in names if n.endswith("Image:blob"))
+        rows = zip(*(batch.column(names.index(n)).to_pylist() for n in ("frame", "sim_time", blob)))
+        out.setdefault(chunk.entity_path, []).extend((f, t, bytes(b[0])) for f, t, b in rows if b)
+    return {k: sorted(v) for k, v in out.items()}
+
+
+def test_the_encoder_thread_logs_the_same_images_and_close_waits_for_them(tmp_path: Path) -> None:
+    """Images encoded on the recorder's thread (the default) are the bytes the calling thread
+    encodes, at the same frames and times; the file is complete as soon as close returns."""
+    background = camera_images(record(tmp_path / "thread.rrd"))
+    calling = camera_images(record(tmp_path / "calling.rrd", encoder_thread=False))
+    assert background == calling
+    for entity in ("/world/camera/image/rgb", "/world/camera/image/depth"):
+        assert [f for f, _, _ in background[entity]] == list(range(12))
+    import cv2
+
+    jpeg = background["/world/camera/image/rgb"][5][2]
+    decoded = cv2.imdecode(np.frombuffer(jpeg, np.uint8), cv2.IMREAD_COLOR)[..., ::-1]
+    assert np.abs(decoded.astype(int) - frames()[5][0].astype(int)).mean() < 4.0
+    png = background["/world/camera/image/depth"][5][2]
+    depth_mm = cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_UNCHANGED)
+    assert np.array_equal(depth_mm, np.round(frames()[5][1] * 1000).astype(np.uint16))
+
+
+def test_a_recorder_dropped_without_close_keeps_its_images(tmp_path: Path) -> None:
+    import gc
+
+    rec = _native.Recorder(str(tmp_path / "run.rrd"), "objslam", "{}")
+    for i, (rgb, depth) in enumerate(frames()):
+        rec.set_frame(i, 0.25 * i)
+        rec.log_rgb(rgb)
+        rec.log_depth(depth)
+    del rec
+    gc.collect()
+    got = camera_images(tmp_path / "run.rrd")
+    assert [len(got[e]) for e in ("/world/camera/image/rgb", "/world/camera/image/depth")] == [12, 12]

@@ -70,7 +70,7 @@ pub(crate) fn array<T: numpy::Element + Copy, const D: usize>(
     if dims.iter().try_fold(1usize, |n, d| n.checked_mul(*d)).is_none_or(|n| n > MAX_ARRAY_ELEMENTS) {
         return Err(input_err(format!("{field}: shape {dims:?} has more than {MAX_ARRAY_ELEMENTS} elements")));
     }
-    Ok((a.iter().copied().collect(), dims))
+    Ok((a.as_slice().map_or_else(|| a.iter().copied().collect(), <[T]>::to_vec), dims))
 }
 
 /// [`array`] of float64 values, every one finite (the error names the first other one's index).
@@ -370,14 +370,16 @@ impl RecorderPy {
         self.rec()?.log_camera(&p, &camera(intrinsics, width, height)?).map_err(record_err)
     }
 
-    fn log_rgb(&self, rgb: &Bound<'_, PyAny>) -> PyResult<()> {
+    fn log_rgb(&self, py: Python<'_>, rgb: &Bound<'_, PyAny>) -> PyResult<()> {
         let (data, [h, w, _]) = array::<u8, 3>(rgb, "rgb", [None, None, Some(3)], "(H, W, 3)")?;
-        self.rec()?.log_rgb(w as u32, h as u32, &data).map_err(record_err)
+        let rec = self.rec()?;
+        py.detach(|| rec.log_rgb(w as u32, h as u32, data)).map_err(record_err)
     }
 
-    fn log_depth(&self, depth: &Bound<'_, PyAny>) -> PyResult<()> {
+    fn log_depth(&self, py: Python<'_>, depth: &Bound<'_, PyAny>) -> PyResult<()> {
         let d = depth_image(depth)?;
-        self.rec()?.log_depth(d.width, d.height, &d.data).map_err(record_err)
+        let rec = self.rec()?;
+        py.detach(|| rec.log_depth(d.width, d.height, d.data)).map_err(record_err)
     }
 
     fn log_detections(&self, detections: &Bound<'_, PyAny>) -> PyResult<()> {
@@ -441,10 +443,10 @@ impl RecorderPy {
         self.rec()?.log_event(text).map_err(record_err)
     }
 
-    /// Flush and close the file; later calls raise.
-    fn close(&mut self) -> PyResult<()> {
+    /// Flush (the images still being encoded first) and close the file; later calls raise.
+    fn close(&mut self, py: Python<'_>) -> PyResult<()> {
         match self.inner.take() {
-            Some(rec) => rec.flush().map_err(record_err),
+            Some(rec) => py.detach(move || rec.flush()).map_err(record_err),
             None => Ok(()),
         }
     }

@@ -21,7 +21,8 @@ fn slice<'a, T: numpy::Element>(a: &'a PyReadonlyArray3<'_, T>, field: &str, sha
 /// ``rgb`` (H, W, 3) uint8; or the renderer's (`objslam_core::sensor::RendererBuffers`): (H, W, 4)
 /// float32, OpenGL axes, position w ≥ 1 = no surface, ``rgb`` RGBA in [0, 1]. Returns ``(depth
 /// (H, W) float32, rgb (H, W, 3) uint8 or None, info_json {"unit", "stats"})``; without
-/// ``points``, ``(None, None, info)`` with the episode's unit only.
+/// ``points``, ``(None, None, info)`` with the episode's unit only. The model runs without the GIL,
+/// reading the arrays in place.
 #[pyfunction]
 #[pyo3(signature = (request_json, points = None, normals = None, rgb = None))]
 pub fn sensor_model<'py>(
@@ -42,14 +43,15 @@ pub fn sensor_model<'py>(
         let rgb = rgb.map(|a| a.extract::<PyReadonlyArray3<f32>>().map_err(rgb_err)).transpose()?;
         let colour = rgb.as_ref().map_or(Ok(&[][..]), |a| slice(a, "rgb", [h, w, 4]))?;
         let (position, normal) = (slice(&points, "points", [h, w, 4])?, slice(&normals, "normals", [h, w, 4])?);
-        request.run_renderer(&RendererBuffers { width: w, height: h, position, normal, colour }).map_err(input_err)?
+        let buffers = RendererBuffers { width: w, height: h, position, normal, colour };
+        py.detach(|| request.run_renderer(&buffers)).map_err(input_err)?
     } else {
         let rgb = rgb.map(|a| a.extract::<PyReadonlyArray3<u8>>().map_err(rgb_err)).transpose()?;
         let rgb = rgb.as_ref().map_or(Ok(&[][..]), |a| slice(a, "rgb", [h, w, 3]))?;
         let (points_in_camera, normals_in_camera) =
             (slice(&points, "points", [h, w, 3])?, slice(&normals, "normals", [h, w, 3])?);
         let frame = RenderedFrame { width: w, height: h, points_in_camera, normals_in_camera, rgb };
-        let (info, out) = request.run(Some(&frame)).map_err(input_err)?;
+        let (info, out) = py.detach(|| request.run(Some(&frame))).map_err(input_err)?;
         (info, out.ok_or_else(|| input_err("sensor model: no frame simulated"))?)
     };
     let depth = Array2::from_shape_vec((h, w), out.depth_m).map_err(input_err)?.into_pyarray(py);

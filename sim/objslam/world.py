@@ -232,6 +232,10 @@ class SimWorld:
             a.per_scene_id: (oid, spec.objects[oid].cls) for oid, a in self.object_actors.items()
         }
         self.robot_actor_ids = {link.entity.per_scene_id for link in self.robot.get_links()}
+        # Segmentation id → whether the robot's: a table lookup per pixel (ids past the table's
+        # last entry, which is False, read it).
+        self._robot_id_table = np.zeros(max(self.robot_actor_ids, default=0) + 2, dtype=bool)
+        self._robot_id_table[list(self.robot_actor_ids)] = True
         self.finger_actor_ids = {link.entity.per_scene_id for link in self.fingers}
         # Let objects settle on the table.
         for _ in range(PHYSICS_HZ // 4):
@@ -529,7 +533,7 @@ class SimWorld:
         seg = self.camera.get_picture("Segmentation")[..., 1].astype(np.uint32)
         normals_gl = self.camera.get_picture("Normal") if self.sensor is not None else None
         t1 = time.perf_counter()
-        robot = np.isin(seg, list(self.robot_actor_ids)) if self.camera_config.mask_robot_depth else None
+        robot = self._robot_id_table.take(seg, mode="clip") if self.camera_config.mask_robot_depth else None
         q = self.qpos_delayed()
         if self.sensor is None or normals_gl is None:
             # [0, 1] to 8 bits, rounded: one float copy, scaled, clipped and offset in place.

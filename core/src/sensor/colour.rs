@@ -79,6 +79,7 @@ pub fn colour_image(
     let mut out = vec![0u8; 3 * frame.width * frame.height];
     let table = NoiseTable::new(cfg);
     let mut scratch = BlurScratch::default();
+    scratch.start_frame();
     ColourRows::new(unit, frame, None, camera_end_from_start, table.as_ref(), seed, frame_index, &mut scratch)
         .run(0, &mut out);
     out
@@ -380,12 +381,23 @@ const ROWS: u8 = 0;
 const COLS: u8 = 1;
 const MIXED: u8 = 2;
 
-/// The prefix sums of one part of a frame's rows, kept from frame to frame (a frame of the same
-/// size reuses them without allocating).
+/// The prefix sums one thread computes for a frame's rows, kept from frame to frame (a frame of
+/// the same size reuses them without allocating) and from part to part of a frame (the sums of
+/// one part's rows serve the next part the thread takes).
 #[derive(Default)]
 pub(crate) struct BlurScratch {
     rows: Prefix,
     cols: Prefix,
+    /// Whether the sums are of the current frame: false from [`Self::start_frame`] until the
+    /// frame's first blurred part resets them.
+    in_frame: bool,
+}
+
+impl BlurScratch {
+    /// A new frame: the sums held are stale.
+    pub(crate) fn start_frame(&mut self) {
+        self.in_frame = false;
+    }
 }
 
 /// The motion blur of one frame (module docs), a row at a time.
@@ -398,7 +410,8 @@ struct MotionBlur<'a> {
     true_depth: Option<&'a [f32]>,
     rows: &'a mut Prefix,
     cols: &'a mut Prefix,
-    /// Whether `cols` is in use: from the first time a pixel's motion is steeper than 45°.
+    /// Whether `cols` is in use: from the first time a pixel's motion is steeper than 45° (in
+    /// any part of the frame this thread took).
     cols_ready: bool,
     /// Rotation (rows) and translation of the camera's motion.
     r: [[f32; 3]; 3],
@@ -437,16 +450,21 @@ impl<'a> MotionBlur<'a> {
         let (w, h) = (frame.width, frame.height);
         let k = &unit.colour_true;
         let (f, i) = (vec![0.0f32; w], vec![0u32; w]);
-        scratch.rows.reset_rows(w, h);
+        if !scratch.in_frame {
+            scratch.rows.reset_rows(w, h);
+            // The column sums wait for the first steep motion (reset then).
+            scratch.cols.steep = false;
+            scratch.in_frame = true;
+        }
         Self {
             w,
             h,
             src: frame.rgb,
             pts: frame.points_in_camera,
             true_depth,
+            cols_ready: scratch.cols.steep,
             rows: &mut scratch.rows,
             cols: &mut scratch.cols,
-            cols_ready: false,
             r: [0, 1, 2].map(|i| [0, 1, 2].map(|j| m[(i, j)] as f32)),
             t: [0, 1, 2].map(|i| m[(i, 3)] as f32),
             k: [k.fx as f32, k.fy as f32, k.cx as f32, k.cy as f32],

@@ -478,13 +478,21 @@ impl RendererBuffers<'_> {
             convert(0..h, &mut out.points, &mut out.normals, &mut out.rgb);
             return Ok(());
         }
-        let half = h / 2;
-        let (pa, pb) = out.points.split_at_mut(3 * half * w);
-        let (na, nb) = out.normals.split_at_mut(3 * half * w);
-        let (ra, rb) = out.rgb.split_at_mut(if with_colour { 3 * half * w } else { 0 });
+        // Parts of rows, each thread taking the next when done (as in `simulate_frame`).
+        let size = PART_ROWS * w.max(1);
+        let mut rgb: Vec<&mut [u8]> = out.rgb.chunks_mut(3 * size).collect();
+        rgb.resize_with(h.div_ceil(PART_ROWS), Default::default);
+        let parts = (0..h).step_by(PART_ROWS).map(|y| y..(y + PART_ROWS).min(h));
+        let queue =
+            Mutex::new(parts.zip(out.points.chunks_mut(3 * size).zip(out.normals.chunks_mut(3 * size))).zip(rgb));
+        let work = || {
+            while let Some(((rows, (points, normals)), rgb)) = next_part(&queue) {
+                convert(rows, points, normals, rgb);
+            }
+        };
         std::thread::scope(|s| {
-            s.spawn(|| convert(half..h, pb, nb, rb));
-            convert(0..half, pa, na, ra);
+            s.spawn(work);
+            work();
         });
         Ok(())
     }
@@ -506,6 +514,33 @@ pub struct SensorFrame {
 /// `camera_end_from_start` is the camera's motion over the colour exposure (4 × 4; identity or
 /// `None` = at rest). Per-frame draws are seeded by `(seed, frame_index)`.
 pub fn simulate_frame(
+    config: &SensorConfig,
+    unit: &SensorUnit,
+    frame: &RenderedFrame<'_>,
+    camera_end_from_start: Option<&Matrix4<f64>>,
+    seed: u64,
+    frame_index: u64,
+) -> Result<SensorFrame, SensorError> {
+    simulate_frame_on(crate::worker_threads(), config, unit, frame, camera_end_from_start, seed, frame_index)
+}
+
+/// Rows a thread takes at a time from a frame's queue of rows: small enough that a thread that
+/// starts late (or is descheduled) leaves the rest to the other, large enough that the rows each
+/// part computes twice (the mixed band around it, 1 row by default) stay a small share.
+const PART_ROWS: usize = 24;
+
+/// The next part of a queue of row parts, if any.
+fn next_part<T>(queue: &Mutex<T>) -> Option<T::Item>
+where
+    T: Iterator,
+{
+    queue.lock().unwrap_or_else(|e| e.into_inner()).next()
+}
+
+/// [`simulate_frame`] on `threads` threads (1 or 2; more count as 2).
+#[allow(clippy::too_many_arguments)]
+fn simulate_frame_on(
+    threads: usize,
     config: &SensorConfig,
     unit: &SensorUnit,
     frame: &RenderedFrame<'_>,
@@ -537,67 +572,88 @@ pub fn simulate_frame(
     let mut rgb = vec![0u8; if with_colour { 3 * n } else { 0 }];
     // Every value is written by the depth image pass.
     let mut depth_m = vec![0.0f32; n];
-    let part = |rows: std::ops::Range<usize>, scratch: &mut PartScratch, zbuf: &mut [f32], rgb: &mut [u8]| {
-        // Steps 1-3 on the part's rows and, uncounted, on the mixed band's rows around them
-        // (step 4 reads them); every row's result is the same whichever part computes it.
+    let two = threads >= 2 && h >= 2;
+    // The rows in parts, each with its rows of the colour image; a thread takes the next part
+    // when it is done with one, so the split follows how fast each thread actually runs.
+    let part_rows = if two { PART_ROWS } else { h.max(1) };
+    let mut rgb_parts: Vec<&mut [u8]> = rgb.chunks_mut(3 * part_rows * w.max(1)).collect();
+    rgb_parts.resize_with(h.div_ceil(part_rows), Default::default);
+    let queue = Mutex::new((0..h).step_by(part_rows).map(|y| y..(y + part_rows).min(h)).zip(rgb_parts));
+    // Every part this thread takes: steps 1-3 on its rows and, uncounted, on the mixed band's rows
+    // around them (step 4 reads them), registration into the thread's z-buffer, colour. Every
+    // row's result is the same whichever thread computes it. Returns the counts and the rows of
+    // the z-buffer written.
+    let work = |scratch: &mut PartScratch, zbuf: &mut [f32]| {
         let band = config.stereo.mixed_band_px;
-        let (lo, hi) = (rows.start.saturating_sub(band), (rows.end + band).min(h));
-        let (z, state) = (&mut scratch.z[..n], &mut scratch.state[..n]);
-        let mut stats =
-            depth.surfaces(rows.start, &mut z[rows.start * w..rows.end * w], &mut state[rows.start * w..rows.end * w]);
-        depth.surfaces(lo, &mut z[lo * w..rows.start * w], &mut state[lo * w..rows.start * w]);
-        depth.surfaces(rows.end, &mut z[rows.end * w..hi * w], &mut state[rows.end * w..hi * w]);
-        let touched;
-        (stats.mixed, touched) = depth.register(rows.clone(), &scratch.z, &scratch.state, zbuf);
-        if with_colour {
-            colour::ColourRows::new(
-                unit,
-                frame,
-                Some(&scratch.z[..n]),
-                camera_end_from_start,
-                noise.as_deref(),
-                seed,
-                frame_index,
-                &mut scratch.blur,
-            )
-            .run(rows.start, rgb);
+        let (mut stats, mut touched) = (DepthStats::default(), 0..0);
+        scratch.blur.start_frame();
+        while let Some((rows, rgb)) = next_part(&queue) {
+            let (lo, hi) = (rows.start.saturating_sub(band), (rows.end + band).min(h));
+            let (z, state) = (&mut scratch.z[..n], &mut scratch.state[..n]);
+            let mut part = depth.surfaces(
+                rows.start,
+                &mut z[rows.start * w..rows.end * w],
+                &mut state[rows.start * w..rows.end * w],
+            );
+            depth.surfaces(lo, &mut z[lo * w..rows.start * w], &mut state[lo * w..rows.start * w]);
+            depth.surfaces(rows.end, &mut z[rows.end * w..hi * w], &mut state[rows.end * w..hi * w]);
+            let written;
+            (part.mixed, written) = depth.register(rows.clone(), &scratch.z, &scratch.state, zbuf);
+            stats = stats.plus(&part);
+            if !written.is_empty() {
+                touched = match touched.is_empty() {
+                    true => written,
+                    false => touched.start.min(written.start)..touched.end.max(written.end),
+                };
+            }
+            if with_colour {
+                colour::ColourRows::new(
+                    unit,
+                    frame,
+                    Some(&scratch.z[..n]),
+                    camera_end_from_start,
+                    noise.as_deref(),
+                    seed,
+                    frame_index,
+                    &mut scratch.blur,
+                )
+                .run(rows.start, rgb);
+            }
         }
         (stats, touched)
     };
     let mut scratch = PartScratch::take(n);
     let mut stats;
-    if crate::worker_threads() < 2 || h < 2 {
+    if !two {
         let mut zbuf = std::mem::take(&mut scratch.zbuf);
         let touched;
-        (stats, touched) = part(0..h, &mut scratch, &mut zbuf, &mut rgb);
+        (stats, touched) = work(&mut scratch, &mut zbuf);
         stats.valid_out = depth_image(&[&zbuf], &mut depth_m);
         zbuf[touched.start * w..touched.end * w].fill(f32::INFINITY);
         scratch.zbuf = zbuf;
     } else {
-        // Two threads, each on half of the rows, each registering into its own z-buffer; once
-        // both are done (the registration moves depths across the halves' border), each makes
-        // its half of the depth image from both z-buffers, then resets its own.
+        // Two threads, each registering into its own z-buffer; once both are done (the
+        // registration moves depths across parts), each makes half of the depth image from both
+        // z-buffers, then resets its own.
         let mut second = PartScratch::take(n);
         let half = h / 2;
-        let (rgb_a, rgb_b) = rgb.split_at_mut(if with_colour { 3 * half * w } else { 0 });
         let (out_a, out_b) = depth_m.split_at_mut(half * w);
         let zbufs = [RwLock::new(std::mem::take(&mut scratch.zbuf)), RwLock::new(std::mem::take(&mut second.zbuf))];
         let barrier = Barrier::new(2);
-        let run =
-            |i: usize, rows: std::ops::Range<usize>, scratch: &mut PartScratch, rgb: &mut [u8], out: &mut [f32]| {
-                // A panic on either thread still meets the other at every rendezvous.
-                let mut meet = Rendezvous { barrier: &barrier, owed: 2 };
-                let (stats, touched) = part(rows.clone(), scratch, &mut write(&zbufs[i]), rgb);
-                meet.wait();
-                let span = rows.start * w..rows.end * w;
-                let valid = depth_image(&[&read(&zbufs[0])[span.clone()], &read(&zbufs[1])[span]], out);
-                meet.wait();
-                write(&zbufs[i])[touched.start * w..touched.end * w].fill(f32::INFINITY);
-                (stats, valid)
-            };
+        let run = |i: usize, rows: std::ops::Range<usize>, scratch: &mut PartScratch, out: &mut [f32]| {
+            // A panic on either thread still meets the other at every rendezvous.
+            let mut meet = Rendezvous { barrier: &barrier, owed: 2 };
+            let (stats, touched) = work(scratch, &mut write(&zbufs[i]));
+            meet.wait();
+            let span = rows.start * w..rows.end * w;
+            let valid = depth_image(&[&read(&zbufs[0])[span.clone()], &read(&zbufs[1])[span]], out);
+            meet.wait();
+            write(&zbufs[i])[touched.start * w..touched.end * w].fill(f32::INFINITY);
+            (stats, valid)
+        };
         let (a, b) = std::thread::scope(|s| {
-            let b = s.spawn(|| run(1, half..h, &mut second, rgb_b, out_b));
-            (run(0, 0..half, &mut scratch, rgb_a, out_a), b.join())
+            let b = s.spawn(|| run(1, half..h, &mut second, out_b));
+            (run(0, 0..half, &mut scratch, out_a), b.join())
         });
         let b = b.unwrap_or_else(|e| std::panic::resume_unwind(e));
         stats = a.0.plus(&b.0);
@@ -822,6 +878,57 @@ mod tests {
             assert_eq!(both.stats, stats);
             assert!(stats.mixed > 0 && stats.shadow > 0);
             assert_eq!(both.rgb, colour_image(&cfg.colour, &unit, &frame, Some(&m), 9, 4));
+        }
+    }
+
+    #[test]
+    fn a_frame_is_the_same_on_one_and_two_threads() {
+        // Five parts of rows (the last short), a nearer box and a tilted, textured plane; the
+        // camera at rest, rolling about its axis (every blur direction within a row: row and
+        // column sums, line changes), and moving steeply.
+        let (w, h) = (128usize, 4 * PART_ROWS + 5);
+        let k = Intrinsics { fx: 100.0, fy: 100.0, cx: 64.0, cy: h as f64 / 2.0 };
+        let (mut p, mut nrm, mut rgb) = (vec![0.0f32; 3 * w * h], vec![0.0f32; 3 * w * h], vec![0u8; 3 * w * h]);
+        for y in 0..h {
+            for x in 0..w {
+                let i = y * w + x;
+                let boxed = (40..90).contains(&x) && (30..70).contains(&y);
+                let z = if boxed { 0.35 } else { 0.5 + 0.002 * y as f32 };
+                p[3 * i] = ((x as f64 + 0.5 - k.cx) / k.fx) as f32 * z;
+                p[3 * i + 1] = ((y as f64 + 0.5 - k.cy) / k.fy) as f32 * z;
+                p[3 * i + 2] = if x == 7 && y % 9 == 0 { 0.0 } else { z };
+                nrm[3 * i + 2] = -1.0;
+                rgb[3 * i..3 * i + 3].copy_from_slice(&[
+                    (x * 7 % 256) as u8,
+                    (y * 11 % 256) as u8,
+                    ((x ^ y) % 200) as u8,
+                ]);
+            }
+        }
+        let cfg = SensorConfig::default();
+        let unit = SensorUnit::draw(&cfg, k, 5).unwrap();
+        let frame = RenderedFrame { width: w, height: h, points_in_camera: &p, normals_in_camera: &nrm, rgb: &rgb };
+        let motion = |w: Vector3<f64>, t: [f64; 3]| {
+            let mut m = Matrix4::identity();
+            m.fixed_view_mut::<3, 3>(0, 0).copy_from(Rotation3::new(w).matrix());
+            m.fixed_view_mut::<3, 1>(0, 3).copy_from(&Vector3::from(t));
+            m
+        };
+        let rolling = motion(Vector3::new(0.002, -0.001, 0.08), [0.002, -0.001, 0.0]);
+        let steep = motion(Vector3::new(0.03, 0.0, 0.0), [0.0, 0.004, 0.0]);
+        for m in [None, Some(rolling), Some(steep)] {
+            let one = simulate_frame_on(1, &cfg, &unit, &frame, m.as_ref(), 9, 4).unwrap();
+            assert!(one.stats.mixed > 0 && one.stats.shadow > 0);
+            // The parts go to whichever thread asks first: several runs, several splits.
+            for _ in 0..6 {
+                let two = simulate_frame_on(2, &cfg, &unit, &frame, m.as_ref(), 9, 4).unwrap();
+                assert_eq!((&two.depth_m, &two.rgb, two.stats), (&one.depth_m, &one.rgb, one.stats));
+            }
+            if let Some(m) = m {
+                // Blurred: differs from the frame at rest.
+                assert_ne!(one.rgb, simulate_frame_on(1, &cfg, &unit, &frame, None, 9, 4).unwrap().rgb);
+                assert_eq!(one.rgb, colour_image(&cfg.colour, &unit, &frame, Some(&m), 9, 4));
+            }
         }
     }
 
