@@ -387,7 +387,9 @@ fn a_false_positive_over_a_bottle_stays_out_of_the_map() {
         phantom,
     );
     report("same, covered-phantom fold off", &scene, &kept);
-    // Existence evidence instead of the fold: boxed in 3 of the 11 frames that saw its place.
+    // Existence evidence does not replace the fold here: a box of another label over the whole
+    // bottle is what a label confusion looks like, so its frames do not count as the phantom's
+    // absence (the rule itself: `pipeline::tests::existence_ratio_*`).
     let evidence = map_with(
         &scene,
         &views,
@@ -395,8 +397,7 @@ fn a_false_positive_over_a_bottle_stays_out_of_the_map() {
         phantom,
     );
     report("same, existence ratio 0.3", &scene, &evidence);
-    assert_eq!(evidence.len(), 1);
-    assert_eq!(evidence.objects[0].label, Label::Bottle);
+    assert_eq!(evidence.len(), 2);
     assert_eq!(kept.len(), 2);
     assert_eq!(map.len(), 1);
     assert_eq!(map.objects[0].label, Label::Bottle);
