@@ -4,6 +4,8 @@ pinned rerun-sdk's RRD reader."""
 from __future__ import annotations
 
 import json
+import os
+import signal
 from pathlib import Path
 
 import numpy as np
@@ -121,10 +123,13 @@ def test_live_stream_reaches_a_viewer(tmp_path: Path) -> None:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
     received = tmp_path / "received.rrd"
+    # Its own process group: the launcher may start the viewer binary as a child, and the whole
+    # group is stopped at the end (no server outlives the test).
     server = subprocess.Popen(
         [rerun_executable(), "--port", str(port), "--save", str(received)],
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
+        start_new_session=True,
     )
     try:
         deadline = time.monotonic() + 20
@@ -134,7 +139,7 @@ def test_live_stream_reaches_a_viewer(tmp_path: Path) -> None:
         record(tmp_path / "run.rrd", live_url=f"rerun+http://127.0.0.1:{port}/proxy")
         time.sleep(1.0)
     finally:
-        server.terminate()
+        os.killpg(server.pid, signal.SIGTERM)
         server.wait(timeout=10)
     reader = rr_experimental.RrdReader(received)
     assert [s.application_id for s in reader.blueprints()] == ["objslam"]
