@@ -104,6 +104,34 @@ pub fn keep_frame_buffers() {
     });
 }
 
+/// Cheap hasher for our own integer keys (map point ids, packed voxel keys): the SplitMix64
+/// finaliser, not DoS-resistant. Tables keyed by it are only queried, never iterated, so hash
+/// order cannot leak into results.
+#[derive(Debug, Clone, Copy, Default)]
+pub(crate) struct IntKeyHasher(u64);
+
+impl std::hash::Hasher for IntKeyHasher {
+    fn finish(&self) -> u64 {
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+
+    fn write(&mut self, bytes: &[u8]) {
+        for b in bytes {
+            self.0 = self.0.rotate_left(8) ^ u64::from(*b);
+        }
+    }
+
+    fn write_u64(&mut self, i: u64) {
+        self.0 = self.0.rotate_left(21) ^ i;
+    }
+}
+
+/// The build-hasher of [`IntKeyHasher`] for `HashMap` / `HashSet`.
+pub(crate) type IntKeyBuild = std::hash::BuildHasherDefault<IntKeyHasher>;
+
 /// `work(i)` for every `i` in `0..n` on up to `threads` threads, the results in index order: the
 /// same as `(0..n).map(work).collect()` for any `threads`. With two or more, the calling thread
 /// and one scoped helper take the next index from a shared counter until none is left, so a

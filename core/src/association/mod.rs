@@ -109,7 +109,6 @@ pub mod metrics;
 pub mod stats;
 
 use std::collections::{BTreeMap, BTreeSet, HashSet};
-use std::hash::{BuildHasherDefault, Hasher};
 use std::sync::OnceLock;
 
 use nalgebra::{Point3, Vector3};
@@ -661,33 +660,8 @@ impl GlobalObject {
     }
 }
 
-/// Membership set of occupied voxels (packed keys, [`voxel_key`]). Only queried, never iterated,
-/// so hash order cannot leak into results.
-type VoxelSet = HashSet<u64, BuildHasherDefault<VoxelHasher>>;
-
-/// Cheap hasher for packed voxel keys: the SplitMix64 finaliser (not DoS-resistant; keys are our
-/// own coordinates).
-#[derive(Debug, Clone, Copy, Default)]
-struct VoxelHasher(u64);
-
-impl Hasher for VoxelHasher {
-    fn finish(&self) -> u64 {
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-
-    fn write(&mut self, bytes: &[u8]) {
-        for b in bytes {
-            self.0 = self.0.rotate_left(8) ^ u64::from(*b);
-        }
-    }
-
-    fn write_u64(&mut self, i: u64) {
-        self.0 = self.0.rotate_left(21) ^ i;
-    }
-}
+/// Membership set of occupied voxels (packed keys, [`voxel_key`]); only queried, never iterated.
+type VoxelSet = HashSet<u64, crate::IntKeyBuild>;
 
 /// A sighting's frame index and box.
 type FrameBox = (u32, Box2);

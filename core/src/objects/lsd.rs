@@ -121,31 +121,39 @@ pub fn segments_in_box(segments: &[LineSegment], bbox: &Box2, margin_px: f64) ->
         .collect()
 }
 
-/// OpenCV's LSD pre-scaling: Gaussian blur with σ = 0.6 / scale (kernel half-size
-/// ⌈σ·√(2·3·ln 10)⌉, reflect-101 border), then bilinear resampling to `round(scale · size)` with
-/// pixel-centre alignment (`cv2.resize(.., INTER_LINEAR)`), both rounded to 8 bits as OpenCV does.
-/// `lsdetect`'s own scaling picks the nearest source pixel instead, which jitters oblique edges and
-/// splits long segments; this keeps the output close to OpenCV's.
-fn gaussian_downscale(image: &[u8], width: usize, height: usize, scale: f64) -> (Vec<u8>, usize, usize) {
+/// The pre-scaling's Gaussian kernel (normalised, `f32`) and its half-size: σ = 0.6 / scale,
+/// half-size ⌈σ·√(2·3·ln 10)⌉ (OpenCV's LSD).
+fn blur_kernel(scale: f64) -> (Vec<f32>, usize) {
     const SIGMA_SCALE: f64 = 0.6;
     const SPREC: f64 = 3.0;
     let sigma = SIGMA_SCALE / scale;
     let half = (sigma * (2.0 * SPREC * std::f64::consts::LN_10).sqrt()).ceil() as usize;
     let kernel: Vec<f64> = (0..=2 * half).map(|i| (-0.5 * ((i as f64 - half as f64) / sigma).powi(2)).exp()).collect();
     let total: f64 = kernel.iter().sum();
-    let kernel: Vec<f32> = kernel.iter().map(|k| (k / total) as f32).collect();
-    // Reflect-101 index (OpenCV's BORDER_DEFAULT) for the few border taps.
-    let reflect = |i: isize, n: usize| -> usize {
-        let n = n as isize;
-        if n == 1 {
-            return 0;
-        }
-        let mut i = i;
-        while i < 0 || i >= n {
-            i = if i < 0 { -i } else { 2 * n - 2 - i };
-        }
-        i as usize
-    };
+    (kernel.iter().map(|k| (k / total) as f32).collect(), half)
+}
+
+/// Reflect-101 index (OpenCV's BORDER_DEFAULT) of `i` in `0..n`, for the few border taps.
+fn reflect101(i: isize, n: usize) -> usize {
+    let n = n as isize;
+    if n == 1 {
+        return 0;
+    }
+    let mut i = i;
+    while i < 0 || i >= n {
+        i = if i < 0 { -i } else { 2 * n - 2 - i };
+    }
+    i as usize
+}
+
+/// OpenCV's LSD pre-scaling: Gaussian blur with σ = 0.6 / scale (kernel half-size
+/// ⌈σ·√(2·3·ln 10)⌉, reflect-101 border), then bilinear resampling to `round(scale · size)` with
+/// pixel-centre alignment (`cv2.resize(.., INTER_LINEAR)`), both rounded to 8 bits as OpenCV does.
+/// `lsdetect`'s own scaling picks the nearest source pixel instead, which jitters oblique edges and
+/// splits long segments; this keeps the output close to OpenCV's.
+fn gaussian_downscale(image: &[u8], width: usize, height: usize, scale: f64) -> (Vec<u8>, usize, usize) {
+    let (kernel, half) = blur_kernel(scale);
+    let reflect = reflect101;
     let mut horiz = vec![0.0f32; width * height];
     let mut padded = vec![0.0f32; width + 2 * half];
     for (row, out) in image.chunks_exact(width).zip(horiz.chunks_exact_mut(width)) {
@@ -278,26 +286,8 @@ mod tests {
     /// The downscale as first written (one source-pixel gather per tap and output pixel), the
     /// reference of the faster one.
     fn gaussian_downscale_reference(image: &[u8], width: usize, height: usize, scale: f64) -> (Vec<u8>, usize, usize) {
-        const SIGMA_SCALE: f64 = 0.6;
-        const SPREC: f64 = 3.0;
-        let sigma = SIGMA_SCALE / scale;
-        let half = (sigma * (2.0 * SPREC * std::f64::consts::LN_10).sqrt()).ceil() as usize;
-        let kernel: Vec<f64> =
-            (0..=2 * half).map(|i| (-0.5 * ((i as f64 - half as f64) / sigma).powi(2)).exp()).collect();
-        let total: f64 = kernel.iter().sum();
-        let kernel: Vec<f32> = kernel.iter().map(|k| (k / total) as f32).collect();
-        // Reflect-101 index (OpenCV's BORDER_DEFAULT) for the few border taps.
-        let reflect = |i: isize, n: usize| -> usize {
-            let n = n as isize;
-            if n == 1 {
-                return 0;
-            }
-            let mut i = i;
-            while i < 0 || i >= n {
-                i = if i < 0 { -i } else { 2 * n - 2 - i };
-            }
-            i as usize
-        };
+        let (kernel, half) = blur_kernel(scale);
+        let reflect = reflect101;
         let mut horiz = vec![0.0f32; width * height];
         let mut padded = vec![0.0f32; width + 2 * half];
         for (row, out) in image.chunks_exact(width).zip(horiz.chunks_exact_mut(width)) {

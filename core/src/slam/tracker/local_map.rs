@@ -2,7 +2,6 @@
 //! adjustment over a window of keyframes, culling), map reset and extension.
 
 use std::collections::{BTreeMap, HashMap};
-use std::hash::{BuildHasherDefault, Hasher};
 
 use nalgebra::Point3;
 
@@ -12,32 +11,8 @@ use crate::geometry::{PinholeCamera, Se3};
 use crate::slam::ba::{BundleObservation, BundleProblem};
 use crate::slam::features::Descriptor;
 
-/// A point id's index in a bundle problem. Only queried, never iterated, so hash order cannot
-/// leak into results.
-type PointIndex = HashMap<u64, usize, BuildHasherDefault<PointIdHasher>>;
-
-/// Cheap hasher for point ids (sequential integers): the SplitMix64 finaliser.
-#[derive(Debug, Clone, Copy, Default)]
-struct PointIdHasher(u64);
-
-impl Hasher for PointIdHasher {
-    fn finish(&self) -> u64 {
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-
-    fn write(&mut self, bytes: &[u8]) {
-        for b in bytes {
-            self.0 = self.0.rotate_left(8) ^ u64::from(*b);
-        }
-    }
-
-    fn write_u64(&mut self, i: u64) {
-        self.0 = self.0.rotate_left(21) ^ i;
-    }
-}
+/// A point id's index in a bundle problem (only queried, never iterated).
+type PointIndex = HashMap<u64, usize, crate::IntKeyBuild>;
 
 #[derive(Debug, Clone)]
 pub(super) struct MapPoint {
