@@ -41,6 +41,7 @@ from typing import Any
 import numpy as np
 import sapien
 from objslam import _native
+from objslam.calibration import STREAM_AR_LIVE, STREAM_AR_UNIT, STREAM_SENSOR, episode_rng
 from objslam.camera import SAPIEN_FROM_CV, RgbdSensor
 from objslam.camera_path import look_at
 from objslam.config import load_run_config, to_dict
@@ -89,7 +90,7 @@ class Truth:
     live depth an RGB-D camera at that pose would deliver."""
 
     def __init__(self, cfg: Any, scene: Any) -> None:
-        self.world = SimWorld(scene, cfg.camera, np.random.default_rng([cfg.seed, 1]))
+        self.world = SimWorld(scene, cfg.camera, episode_rng(cfg.seed, scene.seed, STREAM_SENSOR))
         self.objects = gt_objects(scene, self.world.ground_truth())
         c = cfg.camera
         self.intrinsics = c.intrinsics()
@@ -105,12 +106,12 @@ class Truth:
         self.sensor = (
             RgbdSensor(
                 replace(c, calibration=exact_colour),
-                seed=int(np.random.default_rng([cfg.seed, 2]).integers(1 << 62)),
+                seed=int(episode_rng(cfg.seed, scene.seed, STREAM_AR_UNIT).integers(1 << 62)),
             )
             if c.model == "d435"
             else None
         )
-        self.live_rng = np.random.default_rng([cfg.seed, 3])
+        self.live_rng = episode_rng(cfg.seed, scene.seed, STREAM_AR_LIVE)
         self.frames = 0
         self.rgb = np.zeros((c.height, c.width, 3), np.uint8)
         """Colour image of the last view."""

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 from objslam.detector import DetectorConfig, SimulatedDetector
@@ -56,3 +58,24 @@ def test_seeded_and_validated() -> None:
         SimulatedDetector(DetectorConfig(miss_rate=1.5), np.random.default_rng(0))
     with pytest.raises(ValueError, match="segmentation"):
         SimulatedDetector(DetectorConfig(), np.random.default_rng(0)).detect(seg[None], ids)
+
+
+def test_scenes_of_one_run_draw_independent_persistent_fields() -> None:
+    """Each object's persistent confusion field is keyed by its index in the scene; the detector's
+    stream mixes the scene seed in, so over many scenes of one run object 0 is mislabelled from a
+    given direction in about ``view_confusion_rate`` of them (with the run seed alone: all or
+    none), and one (run, scene) pair always draws the same field."""
+    from objslam.calibration import STREAM_DETECTOR, episode_rng
+
+    cfg = DetectorConfig()
+    direction = np.array([-0.4, 0.1, 0.6])
+
+    def confused(run_seed: int, scene_seed: int) -> bool:
+        det = SimulatedDetector(cfg, episode_rng(run_seed, scene_seed, STREAM_DETECTOR))
+        return det._object(0, "can")[2](direction) > det._confuse_z
+
+    n = 400
+    share = np.mean([confused(0, s) for s in range(n)])
+    sd = math.sqrt(cfg.view_confusion_rate * (1 - cfg.view_confusion_rate) / n)
+    assert abs(share - cfg.view_confusion_rate) < 4 * sd, share
+    assert all(confused(3, s) == confused(3, s) for s in range(20))

@@ -104,6 +104,23 @@ def arm_error_seed(run_seed: int, scene_seed: int) -> int:
     return (run_seed * 1_000_003 + scene_seed) % (1 << 63)
 
 
+#: Random streams of an episode (:func:`episode_rng`).
+STREAM_SENSOR, STREAM_DETECTOR, STREAM_STRATEGY = 1, 2, 3
+#: The grasp world's own sensor and detector streams.
+STREAM_GRASP_SENSOR, STREAM_GRASP_DETECTOR = 7, 8
+#: The AR experiment's camera unit and live depth noise.
+STREAM_AR_UNIT, STREAM_AR_LIVE = 9, 10
+
+
+def episode_rng(run_seed: int, scene_seed: int, stream: int) -> np.random.Generator:
+    """Random stream ``stream`` (``STREAM_*``) of one episode, from the run seed mixed with the scene
+    file's seed (:func:`arm_error_seed`): the scenes of one run draw independent sensor noise,
+    detector noise (each object's persistent miss and confusion fields are keyed by its index in
+    the scene, so with the run seed alone object k of every scene would be missed or mislabelled
+    from the same directions) and random-strategy choices."""
+    return np.random.default_rng([arm_error_seed(run_seed, scene_seed), stream])
+
+
 def _unit(rng: np.random.Generator) -> np.ndarray:
     while True:
         v = rng.standard_normal(3)

@@ -44,7 +44,17 @@ from typing import Any
 import numpy as np
 
 from . import _native
-from .calibration import ArmErrors, arm_error_seed, draw_arm_errors, draw_table_plane, pose_error
+from .calibration import (
+    STREAM_DETECTOR,
+    STREAM_SENSOR,
+    STREAM_STRATEGY,
+    ArmErrors,
+    arm_error_seed,
+    draw_arm_errors,
+    draw_table_plane,
+    episode_rng,
+    pose_error,
+)
 from .config import REPO_ROOT, ConfigError, RunConfig, to_dict
 from .detector import Detection, SimulatedDetector
 from .evaluation import offset_removed
@@ -511,8 +521,8 @@ class Episode:
         self.rec = _Recorder(
             self.run_dir / "run.rrd" if cfg.record.enabled else None, recording_options(cfg, scene)
         )
-        rng_sensor = np.random.default_rng([cfg.seed, 1])
-        rng_detector = np.random.default_rng([cfg.seed, 2])
+        rng_sensor = episode_rng(cfg.seed, scene.seed, STREAM_SENSOR)
+        rng_detector = episode_rng(cfg.seed, scene.seed, STREAM_DETECTOR)
         self.arm = episode_arm_errors(cfg, scene)
         self.world = SimWorld(scene, cfg.camera, rng_sensor, textures=cfg.textures, arm_errors=self.arm)
         self.detector = SimulatedDetector(cfg.detector, rng_detector)
@@ -544,7 +554,7 @@ class Episode:
         user_strategy = (
             make_strategy(cfg.python_strategy, cfg.python_strategy_params) if cfg.python_strategy else None
         )
-        rng_strategy = np.random.default_rng([cfg.seed, 3])
+        rng_strategy = episode_rng(cfg.seed, self.scene.seed, STREAM_STRATEGY)
         while True:
             decision = self.decide(user_strategy, rng_strategy)
             if decision["action"] == "stop":

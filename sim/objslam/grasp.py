@@ -67,7 +67,13 @@ from typing import Any
 import numpy as np
 
 from . import _native
-from .calibration import arm_error_seed, draw_arm_errors
+from .calibration import (
+    STREAM_GRASP_DETECTOR,
+    STREAM_GRASP_SENSOR,
+    arm_error_seed,
+    draw_arm_errors,
+    episode_rng,
+)
 from .camera_path import look_at
 from .config import RunConfig
 from .detector import SimulatedDetector
@@ -109,12 +115,12 @@ class GraspSession:
         self.world = SimWorld(
             scene,
             run_cfg.camera,
-            np.random.default_rng([seed, 7]),
+            episode_rng(seed, scene.seed, STREAM_GRASP_SENSOR),
             grasp_physics=True,
             arm_errors=self.arm,
             contact=run_cfg.contact,
         )
-        self.detector = SimulatedDetector(run_cfg.detector, np.random.default_rng([seed, 8]))
+        self.detector = SimulatedDetector(run_cfg.detector, episode_rng(seed, scene.seed, STREAM_GRASP_DETECTOR))
         planner_cfg = {"rng_seed": int(seed) + 1, **cfg.planner}
         self.planner = _native.Planner(str(panda_urdf_path()), json.dumps(planner_cfg))
         self.limits = self.planner.joint_limits()

@@ -147,12 +147,13 @@ def ring_pose(center_xy: tuple[float, float], ring: Ring, azimuth_deg: float) ->
 def render_pool(cfg: Any, scene: Any, rings: list[Ring], seed: int, progress: bool = True) -> list[PoolFrame]:
     """Render the query pool of one scene (see the module docs). ``cfg`` is the run config of the
     query session (its seed draws the arm errors and the sensor and detector noise)."""
+    from .calibration import STREAM_DETECTOR, STREAM_SENSOR, episode_rng
     from .detector import SimulatedDetector
     from .episode import episode_arm_errors, grey_of
     from .world import SimWorld, UnreachablePoseError
 
-    rng_sensor = np.random.default_rng([seed, 1])
-    rng_detector = np.random.default_rng([seed, 2])
+    rng_sensor = episode_rng(seed, scene.seed, STREAM_SENSOR)
+    rng_detector = episode_rng(seed, scene.seed, STREAM_DETECTOR)
     world = SimWorld(
         scene, cfg.camera, rng_sensor, textures=cfg.textures, arm_errors=episode_arm_errors(cfg, scene)
     )

@@ -5,8 +5,9 @@ A scene file (``scenes/*.toml``) describes a tabletop for the benchmark:
 Task
     Map every object on the table (class, centre, size, yaw) from the hand camera.
 Randomisations
-    Object textures are generated from ``[scene].seed``; the run seed (not the scene) drives sensor
-    noise, detector noise and any random strategy.
+    Object textures are generated from ``[scene].seed``; the run seed mixed with it drives the
+    sensor noise, the detector noise, the arm's errors and any random strategy
+    (``objslam.calibration.episode_rng``).
 Success
     Judged by the evaluation against the ground truth in this file (3D IoU, CDE, YAE, counts).
 
