@@ -128,18 +128,18 @@ def missed(m: dict) -> int:
 
 
 def test_discovery_finds_the_object_the_paper_rule_leaves_unmapped(tmp_path, ci_overlay) -> None:
-    """Against the scene file: with a 35° camera the Init views of scene06 (seed 7) miss objects;
+    """Against the scene file: with a 35° camera the Init views of scene06 (seed 0) miss objects;
     the paper's stopping rule (object-driven-discovery with its discovery settings off) ends once the
     mapped objects are explored and never maps them, while looking at the unseen table before
     stopping (explore.discovery_before_stop, with the budget reserve of the run defaults) finds
-    them. The scenario is common: it holds on 6 of 10 scene / seed pairs tried (scenes 02 and 04-07,
-    seeds 0 and 7). It was found with a cylinder's top at its highest point, which the test keeps,
+    them. The scenario is common: it holds on 9 of 13 scene / seed pairs tried (scenes 02 and 04-07,
+    seeds 7, 0 and 1). It was found with a cylinder's top at its highest point, which the test keeps,
     to test the stopping rule rather than the estimator."""
     common = {
         "preset": '"ideal"',  # the scenario was found in the ideal world
         "scene": '"scenes/scene06.toml"',
         "camera.fovy_deg": 35.0,
-        "seed": 7,
+        "seed": 0,
         "map.param.cylinder.top_from_face": "false",
     }
     paper = run_episode(
@@ -154,15 +154,17 @@ def test_discovery_finds_the_object_the_paper_rule_leaves_unmapped(tmp_path, ci_
 
 def test_object_evidence_maps_the_object_seen_only_at_the_border(tmp_path, ci_overlay) -> None:
     """Against the scene file and simulator ground truth: with a 35° camera and exact poses, the
-    Init views of scene06 (seed 1) see an object only truncated at the image border; without object
+    Init views of scene06 (seed 2) see an object only truncated at the image border; without object
     evidence its returns count as table and the budget goes elsewhere, so it is never mapped. With
     ``explore.discovery_evidence_height_m`` its cells stay unexplained and draw a view centred on
-    it: every object mapped (seeds 1 and 2 both show the effect)."""
+    it: every object mapped. Of 16 scene / seed pairs tried (scenes 02, 05, 06 and 07, seeds 0-4),
+    8 leave an object unmapped without the evidence and 4 of those show the whole effect (scene02
+    seeds 0 and 1, scene05 seed 4, scene06 seed 2)."""
     common = {
         "preset": '"ideal"',  # the scenario was found in the ideal world
         "scene": '"scenes/scene06.toml"',
         "camera.fovy_deg": 35.0,
-        "seed": 1,
+        "seed": 2,
         "pose_source": '"fk"',
         "record.enabled": "false",
     }
