@@ -27,7 +27,8 @@ random Fourier features with an angular scale :attr:`view_correlation_deg`, thre
 quantile that gives the stated share of directions. The detector uses the frame's true geometry
 (:class:`DetectorView`: camera pose, object centres, the table) only to simulate; it is simulator
 side, and none of it reaches the estimator except through the boxes. Every random draw comes from
-the generator passed in (seeded from the run seed); the persistent draws from one seed taken from
+the generator passed in (an episode's is seeded from the run and scene seeds,
+:func:`objslam.calibration.episode_rng`); the persistent draws from one seed taken from
 it when any persistent effect is on, so with them all off the draws are those of the per-frame
 model alone.
 """
