@@ -59,6 +59,11 @@ fn a_replay_is_deterministic() {
 /// Every output of a replay: each frame's object ids and pose, each view's progress, the final
 /// map file, grid cells and pose metrics.
 fn replay_outputs(capture: &Capture, threads: usize) -> Vec<String> {
+    replay_outputs_paced(capture, threads, std::time::Duration::ZERO)
+}
+
+/// [`replay_outputs`] with a pause after each frame (the caller's own work between frames).
+fn replay_outputs_paced(capture: &Capture, threads: usize, pause: std::time::Duration) -> Vec<String> {
     use objslam_core::system::{FrameInput, Query, StepContext};
     let mut system = capture.system().unwrap();
     system.set_threads(threads);
@@ -78,6 +83,7 @@ fn replay_outputs(capture: &Capture, threads: usize) -> Vec<String> {
                 };
                 out.push(format!("{:?}", system.process_frame(input).unwrap()));
                 out.push(serde_json::to_string(&system.query(&Query::LastPose, &step).unwrap()).unwrap());
+                std::thread::sleep(pause);
             }
             CaptureEvent::ViewDone { counts_as_view } => {
                 system.view_done(*counts_as_view);
@@ -99,6 +105,42 @@ fn one_and_two_threads_give_the_same_outputs() {
     let capture = fixture();
     let one = replay_outputs(&capture, 1);
     assert_eq!(replay_outputs(&capture, 2), one);
+}
+
+/// `capture` with the tracker's local bundle adjustment deferred.
+fn deferred(mut capture: Capture) -> Capture {
+    if let Some(t) = capture.header.tracker_config.as_mut() {
+        t.defer_local_bundle = true;
+    }
+    capture
+}
+
+#[test]
+fn the_deferred_bundle_adjustment_gives_the_same_outputs_whatever_the_timing() {
+    // Each keyframe's local bundle adjustment runs on a worker thread, joined when the next frame
+    // starts: without a pause the join usually waits for it, with one it has long finished.
+    let capture = deferred(fixture());
+    let eager = replay_outputs(&capture, 2);
+    assert_eq!(replay_outputs_paced(&capture, 2, std::time::Duration::from_millis(3)), eager);
+    assert_eq!(replay_outputs(&capture, 1), eager, "one and two threads");
+}
+
+#[test]
+fn deferring_the_bundle_adjustment_leaves_the_tracker_state_as_it_was() {
+    // Deferred, only the keyframes' own frames are output at their tracked poses; the map, the
+    // keyframes and the trajectory the tracker ends with are the same bits.
+    let deferred = deferred(fixture());
+    let at_once = fixture();
+    assert!(at_once.header.tracker_config.is_some_and(|t| !t.defer_local_bundle), "not deferred by default");
+    let end_state = |capture: &Capture| {
+        let mut system = capture.system().unwrap();
+        capture.replay(&mut system).unwrap();
+        let t = system.tracker().unwrap();
+        (t.map_points_in_world(), t.trajectory(), t.n_keyframes())
+    };
+    let (a, b) = (end_state(&deferred), end_state(&at_once));
+    assert!(a.2 >= 2, "{} keyframes", a.2);
+    assert_eq!(a, b);
 }
 
 #[test]

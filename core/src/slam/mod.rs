@@ -92,7 +92,9 @@
 //!    last [`TrackerConfig::local_keyframes`] keyframes and their points (keyframes outside the
 //!    window that see those points are fixed, as is keyframe 0: ORB-SLAM2's local BA), drops
 //!    outlier observations, and culls points (found/visible < 0.25, or seen by < 2 keyframes three
-//!    keyframes after creation).
+//!    keyframes after creation). With [`TrackerConfig::defer_local_bundle`] the adjustment and
+//!    the culling run on a worker thread and are applied when the next frame starts: the
+//!    keyframe's own frame is output at its tracked pose, every later frame sees the adjusted map.
 //! 6. World frame (the gauge). The SLAM map is its own frame; it is expressed in the world by the
 //!    rigid transform `world ← map` that best explains every kinematic prior so far
 //!    ([`TrackerConfig::anchor_to_prior_mean`]). The bias is per view, so the fit has one

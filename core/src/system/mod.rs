@@ -27,6 +27,10 @@
 //! 3. The pipeline associates the frame's detections and updates the objects (with the tracker's
 //!    observed map points when the pipeline takes its points from them).
 //! 4. The session integrates the frame into the surface grids of the objects it observed.
+//! 5. With `TrackerConfig::defer_local_bundle`, when the frame became a keyframe its local
+//!    bundle adjustment starts on a worker thread now: it runs beside the caller's work and the
+//!    next frame (or [`System::view_done`]) applies it first. The frame itself is mapped at its
+//!    tracked pose.
 //!
 //! The true camera pose, when given, is used only to score the poses afterwards (ATE / RPE) and by
 //! the tracker's `ground_truth` ablation pose source; it never reaches the estimate otherwise.
@@ -236,7 +240,9 @@ impl System {
             tracker.set_threads(threads);
             let tracked = track(tracker, &frame)?;
             let segments = lsd()?.flatten();
-            return self.map_frame(frame, Some(tracked), world_from_camera_gt, segments.as_deref());
+            return self.map_frame(frame, Some(tracked), world_from_camera_gt, segments.as_deref()).inspect(|_| {
+                self.start_bundle();
+            });
         }
         // The line segments need only the grey image: on two cores they are found on the second
         // one while the frame is tracked, associated and integrated into the grids (the segments
@@ -258,6 +264,15 @@ impl System {
             self.pipeline.add_line_frames(&mapped_frame, &assigned, segments.as_deref());
             Ok(assigned)
         })
+        .inspect(|_| self.start_bundle())
+    }
+
+    /// Start the tracker's deferred bundle adjustment when the frame's own work is done, so that
+    /// it runs beside the caller's work until the next frame, not beside this frame's.
+    fn start_bundle(&mut self) {
+        if let Some(t) = self.tracker.as_mut() {
+            t.start_bundle();
+        }
     }
 
     /// The frame after tracking: poses, gauge, association, grids, then the line frames.
@@ -316,9 +331,13 @@ impl System {
         Ok((frame, summary.assigned))
     }
 
-    /// A view was reached and its frames fused (`counts_as_view` false for Init views): refresh the
-    /// estimates, update the objects' histories, note the entropy.
+    /// A view was reached and its frames fused (`counts_as_view` false for Init views): apply the
+    /// tracker's pending bundle adjustment ([`Tracker::settle`]), refresh the estimates, update
+    /// the objects' histories, note the entropy.
     pub fn view_done(&mut self, counts_as_view: bool) {
+        if let Some(t) = self.tracker.as_mut() {
+            t.settle();
+        }
         self.pipeline.refresh_estimates();
         self.session.view_done(&self.pipeline.map(), counts_as_view);
         self.session.mark_entropy();

@@ -8,7 +8,7 @@ use nalgebra::Point3;
 use super::tracking::{FrameData, PointMatch};
 use super::{PoseSource, Tracker};
 use crate::geometry::{PinholeCamera, Se3};
-use crate::slam::ba::{BundleObservation, BundleProblem};
+use crate::slam::ba::{BundleConfig, BundleObservation, BundleProblem};
 use crate::slam::features::Descriptor;
 
 /// A point id's index in a bundle problem (only queried, never iterated).
@@ -23,6 +23,35 @@ pub(super) struct MapPoint {
     pub(super) created_kf: usize,
     pub(super) n_visible: u32,
     pub(super) n_found: u32,
+}
+
+/// A local bundle problem and where its parts come from.
+#[derive(Debug)]
+pub(super) struct LocalBundle {
+    problem: BundleProblem,
+    /// The keyframe of each pose.
+    kf_list: Vec<usize>,
+    /// The map point id of each point.
+    local_ids: Vec<u64>,
+    /// The (keyframe, observation index) of each observation.
+    obs_src: Vec<(usize, usize)>,
+}
+
+impl LocalBundle {
+    /// Optimise on the threads `budget` grants; returns each observation's inlier flag.
+    fn solve(&mut self, camera: &PinholeCamera, config: &BundleConfig, budget: &crate::ThreadBudget) -> Vec<bool> {
+        self.problem.optimize_with_budget(camera, config, budget);
+        self.problem.inlier_flags(camera, config)
+    }
+}
+
+/// A keyframe's local bundle adjustment not applied yet ([`TrackerConfig::defer_local_bundle`]).
+#[derive(Debug)]
+pub(super) enum PendingBundle {
+    /// Built, not started ([`Tracker::start_bundle`] starts it).
+    Ready(LocalBundle, PinholeCamera),
+    /// On its worker thread: the solved bundle and its inlier flags.
+    Running(std::thread::JoinHandle<(LocalBundle, Vec<bool>)>),
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -54,7 +83,7 @@ impl Tracker {
         view_index: u64,
     ) {
         let map_from_camera = self.world_from_map().inverse() * world_from_camera;
-        let (map_from_camera, _) = self.insert_keyframe_with(frame, camera, map_from_camera, &[], true);
+        let (map_from_camera, _) = self.insert_keyframe_with(frame, camera, map_from_camera, &[], true, false);
         self.n_extensions += 1;
         self.unmapped_streak = 0;
         // The next frame is seeded from here by the prior's motion, as from a tracked frame; the
@@ -113,12 +142,56 @@ impl Tracker {
         if !need_kf {
             return (map_from_camera, matches.to_vec(), false);
         }
-        let (pose, observed) = self.insert_keyframe_with(frame, camera, map_from_camera, matches, false);
+        let (pose, observed) =
+            self.insert_keyframe_with(frame, camera, map_from_camera, matches, false, self.config.defer_local_bundle);
         (pose, observed, true)
     }
 
+    /// Start the keyframe's deferred local bundle adjustment, if one waits, on a worker thread of
+    /// its own (one thread).
+    pub(super) fn start_pending_bundle(&mut self) {
+        if let Some(PendingBundle::Ready(mut bundle, camera)) = self.pending_bundle.take() {
+            let config = self.config.bundle;
+            self.pending_bundle = Some(PendingBundle::Running(std::thread::spawn(move || {
+                let flags = bundle.solve(&camera, &config, &crate::ThreadBudget::new(1));
+                (bundle, flags)
+            })));
+        }
+    }
+
+    /// Apply the keyframe's deferred local bundle adjustment, if any (waiting for its thread, or
+    /// solving it here when it was not started), then cull; the last tracked frame (the keyframe's) takes the adjusted pose as the
+    /// next frame's seed, the motion gate's reference and its trajectory entry. The tracker's
+    /// state is then what it would have been had the adjustment run within the keyframe's frame.
+    pub(super) fn settle_bundle(&mut self) {
+        let (bundle, flags) = match self.pending_bundle.take() {
+            None => return,
+            Some(PendingBundle::Ready(mut bundle, camera)) => {
+                let flags = bundle.solve(&camera, &self.config.bundle, &self.threads);
+                (bundle, flags)
+            }
+            Some(PendingBundle::Running(handle)) => handle.join().unwrap_or_else(|e| std::panic::resume_unwind(e)),
+        };
+        self.apply_bundle(bundle, &flags);
+        self.cull();
+        let Some(pose) = self.keyframes.last().map(|k| k.map_from_camera) else {
+            return;
+        };
+        if let Some(last) = self.last.as_mut() {
+            last.0 = pose;
+        }
+        if let Some(newest) = self.view_tracked.back_mut() {
+            newest.0 = pose;
+        }
+        if let Some(record) = self.records.last_mut() {
+            record.map_from_camera = Some(pose);
+        }
+    }
+
     /// Insert a keyframe (`fixed`: held fixed in bundle adjustment) with new points from the
-    /// unmatched keypoints with depth, then bundle-adjust and cull.
+    /// unmatched keypoints with depth, then bundle-adjust and cull. With `defer` the adjustment
+    /// is built and left pending; [`Self::settle_bundle`] applies it with the culling: the
+    /// keyframe keeps `map_from_camera` and its points their positions until then.
     pub(super) fn insert_keyframe_with(
         &mut self,
         frame: &FrameData,
@@ -126,6 +199,7 @@ impl Tracker {
         map_from_camera: Se3,
         matches: &[PointMatch],
         fixed: bool,
+        defer: bool,
     ) -> (Se3, Vec<PointMatch>) {
         let kf_index = self.keyframes.len();
         let kps = &frame.features.keypoints;
@@ -189,7 +263,14 @@ impl Tracker {
             self.keyframes.last().map_or(0, |k| k.observations.len()).min(matches.len() + self.config.max_new_points),
         );
         if self.config.pose_source == PoseSource::Slam && self.keyframes.len() > 1 {
-            self.local_bundle_adjustment(camera);
+            if let Some(mut bundle) = self.local_bundle() {
+                if defer {
+                    self.pending_bundle = Some(PendingBundle::Ready(bundle, *camera));
+                    return (map_from_camera, observed);
+                }
+                let flags = bundle.solve(camera, &self.config.bundle, &self.threads);
+                self.apply_bundle(bundle, &flags);
+            }
         }
         self.cull();
         observed.retain(|m| self.points.contains_key(&m.point_id));
@@ -197,7 +278,10 @@ impl Tracker {
         (pose, observed)
     }
 
-    pub(super) fn local_bundle_adjustment(&mut self, camera: &PinholeCamera) {
+    /// The local bundle problem of the newest keyframe: the last
+    /// [`TrackerConfig::local_keyframes`] keyframes, their points and the keyframes outside the
+    /// window that see them (fixed). None when a keyframe is missing.
+    fn local_bundle(&self) -> Option<LocalBundle> {
         let n_kf = self.keyframes.len();
         let first_local = n_kf.saturating_sub(self.config.local_keyframes);
         // Points seen by the local window, numbered in order of first sight.
@@ -265,7 +349,7 @@ impl Tracker {
                 }
             }
         }
-        let mut problem = BundleProblem {
+        let problem = BundleProblem {
             camera_from_world: kf_list
                 .iter()
                 .filter_map(|&k| self.keyframes.get(k).map(|kf| kf.map_from_camera.inverse()))
@@ -274,10 +358,18 @@ impl Tracker {
             points,
             observations,
         };
-        if problem.camera_from_world.len() != kf_list.len() {
-            return;
-        }
-        problem.optimize_with_budget(camera, &self.config.bundle, &self.threads);
+        (problem.camera_from_world.len() == kf_list.len()).then_some(LocalBundle {
+            problem,
+            kf_list,
+            local_ids,
+            obs_src,
+        })
+    }
+
+    /// Write a solved local bundle back: the variable keyframes' poses, the points, and drop the
+    /// observations `flags` marks as outliers.
+    fn apply_bundle(&mut self, bundle: LocalBundle, flags: &[bool]) {
+        let LocalBundle { problem, kf_list, local_ids, obs_src } = bundle;
         for (pi, &k) in kf_list.iter().enumerate() {
             if !problem.fixed[pi] {
                 if let (Some(kf), Some(p)) = (self.keyframes.get_mut(k), problem.camera_from_world.get(pi)) {
@@ -291,7 +383,6 @@ impl Tracker {
             }
         }
         // Drop outlier observations.
-        let flags = problem.inlier_flags(camera, &self.config.bundle);
         let mut drop: BTreeMap<usize, Vec<usize>> = BTreeMap::new();
         for (flag, &(k, oi)) in flags.iter().zip(&obs_src) {
             if !flag {
