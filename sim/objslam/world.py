@@ -551,7 +551,7 @@ class SimWorld:
             # the robot's own pixels (the finger tips) are marked as no surface. Segmentation is
             # used only for that mask.
             if robot is not None:
-                pos[robot, 3] = 1.0
+                np.copyto(pos[..., 3], np.float32(1.0), where=robot)
             rgb, depth = self.sensor.apply(
                 pos, normals_gl, rgba, frame_index=self.frame_index, camera_end_from_start=self._exposure_motion(self.qpos())
             )
