@@ -41,7 +41,7 @@
 //! than the colour's and the band falls outside the registered image), temporal noise
 //! correlation, multipath and specular surfaces.
 
-use super::{check, max_f, min_f, to_i32, RenderedFrame, SensorError, SensorUnit, SplitMix64, TAG_DEPTH};
+use super::{check, max_f, min_f, to_i32, Hits, RenderedFrame, SensorError, SensorUnit, SplitMix64, TAG_DEPTH};
 use nalgebra::{Matrix3, Vector3};
 use serde::{Deserialize, Serialize};
 
@@ -252,10 +252,11 @@ impl<'a> DepthFrame<'a> {
     }
 
     /// The frame's geometry read from the renderer's own buffers instead of its points and
-    /// normals ([`super::RendererBuffers`]' position and normal, `4 · w · h` each): the same
-    /// result as from the buffers converted by [`super::RendererBuffers::convert_into`].
-    pub(crate) fn on_renderer_buffers(self, position: &'a [f32], normal: &'a [f32]) -> Self {
-        Self { geometry: Geometry::Renderer { position, normal }, ..self }
+    /// normals ([`super::RendererBuffers`]' position and normal, `4 · w · h` each, and which
+    /// pixels hit): the same result as from the buffers converted by
+    /// [`super::RendererBuffers::convert_into`].
+    pub(crate) fn on_renderer_buffers(self, position: &'a [f32], normal: &'a [f32], hits: Hits<'a>) -> Self {
+        Self { geometry: Geometry::Renderer { position, normal, hits }, ..self }
     }
 
     /// Steps 1-3 on rows `y0..` (as many as `z` holds): the true depth (0 without a surface) and
@@ -268,11 +269,12 @@ impl<'a> DepthFrame<'a> {
             let row = match self.geometry {
                 Geometry::OpenCv { points, normals } => {
                     let span = 3 * y * w..3 * (y + 1) * w;
-                    self.surfaces.row::<3>(y, &points[span.clone()], &normals[span], zr, sr, &mut scratch)
+                    self.surfaces.row::<3>(y, &points[span.clone()], &normals[span], None, zr, sr, &mut scratch)
                 }
-                Geometry::Renderer { position, normal } => {
+                Geometry::Renderer { position, normal, hits } => {
                     let span = 4 * y * w..4 * (y + 1) * w;
-                    self.surfaces.row::<4>(y, &position[span.clone()], &normal[span], zr, sr, &mut scratch)
+                    let hits = Some((hits, y * w));
+                    self.surfaces.row::<4>(y, &position[span.clone()], &normal[span], hits, zr, sr, &mut scratch)
                 }
             };
             stats = stats.plus(&row);
@@ -332,9 +334,9 @@ enum Geometry<'a> {
     /// [`RenderedFrame`]'s: three floats a pixel, OpenCV axes, z <= 0 = no surface.
     OpenCv { points: &'a [f32], normals: &'a [f32] },
     /// The renderer's: four floats a pixel, OpenGL axes (y and z negated), no surface where
-    /// `w >= 1`. The products and squares the model takes of a point and its normal are the
+    /// `w >= 1` or a dropped segmentation id ([`Hits`]). The products and squares the model takes of a point and its normal are the
     /// same in either axes (each negation meets another), so only the depth reads the axis.
-    Renderer { position: &'a [f32], normal: &'a [f32] },
+    Renderer { position: &'a [f32], normal: &'a [f32], hits: Hits<'a> },
 }
 
 /// Steps 1-3 (range, the second imager's shadow, grazing incidence) on one row of the rendered
@@ -367,12 +369,15 @@ impl Surfaces {
     }
 
     /// Row `y`: `pts`, `nrm` its rendered points and normals, `S` floats a pixel ([`Geometry`]:
-    /// 3 OpenCV, 4 the renderer's); `scratch` (length of the row) is overwritten.
+    /// 3 OpenCV, 4 the renderer's, with which pixels hit and the row's first pixel index);
+    /// `scratch` (length of the row) is overwritten.
+    #[allow(clippy::too_many_arguments)]
     fn row<const S: usize>(
         &self,
         y: usize,
         pts: &[f32],
         nrm: &[f32],
+        hits: Option<(Hits<'_>, usize)>,
         z: &mut [f32],
         state: &mut [u8],
         scratch: &mut [f32],
@@ -380,14 +385,17 @@ impl Surfaces {
         let mut stats = DepthStats::default();
         let (mut surface, mut out) = (0u32, 0u32);
         // The depths contiguous first, then the states without branches (several pixels at a time).
-        for (zv, p) in z.iter_mut().zip(pts.chunks_exact(S)) {
-            *zv = if S == 3 {
-                p[2]
-            } else if p[3] < 1.0 || p[3].is_nan() {
-                -p[2]
-            } else {
-                0.0
-            };
+        match hits {
+            None => {
+                for (zv, p) in z.iter_mut().zip(pts.chunks_exact(S)) {
+                    *zv = p[2];
+                }
+            }
+            Some((hits, i0)) => {
+                for (i, (zv, p)) in z.iter_mut().zip(pts.chunks_exact(S)).enumerate() {
+                    *zv = if hits.hit(i0 + i, p) { -p[2] } else { 0.0 };
+                }
+            }
         }
         for (zv, st) in z.iter_mut().zip(state.iter_mut()) {
             let v = *zv;

@@ -404,6 +404,32 @@ pub struct RendererBuffers<'a> {
     pub normal: &'a [f32],
     /// Per pixel: (r, g, b, a) in [0, 1]. Length `4 · width · height`, or empty for depth only.
     pub colour: &'a [f32],
+    /// Per pixel: the renderer's segmentation id. Length `width · height`, or empty for none.
+    pub segmentation: &'a [u32],
+    /// Segmentation ids whose pixels count as nothing hit (the robot's own), each below 2^20;
+    /// read only with a segmentation.
+    pub dropped_ids: &'a [u32],
+}
+
+/// Whether a pixel of the renderer's buffers has a surface: its position's w below 1 (or NaN),
+/// and its segmentation id (when given) not dropped.
+#[derive(Clone, Copy)]
+pub(crate) struct Hits<'a> {
+    segmentation: &'a [u32],
+    /// Per id: dropped; the last entry is false and stands for every id past it. Empty: no drops.
+    dropped: &'a [bool],
+}
+
+impl Hits<'_> {
+    /// Whether pixel `i`, at position `p` (its four floats), hit a surface.
+    #[inline]
+    pub(crate) fn hit(&self, i: usize, p: &[f32]) -> bool {
+        let hit = p[3] < 1.0 || p[3].is_nan();
+        match self.dropped.last() {
+            None => hit,
+            Some(_) => hit && !self.dropped[(self.segmentation[i] as usize).min(self.dropped.len() - 1)],
+        }
+    }
 }
 
 /// The buffers of a [`RenderedFrame`], owned.
@@ -435,8 +461,38 @@ impl FrameBuffers {
 }
 
 impl RendererBuffers<'_> {
+    /// The table of [`Hits`] (empty without a segmentation or dropped ids).
+    fn dropped_table(&self) -> Result<Vec<bool>, SensorError> {
+        if self.segmentation.is_empty() || self.dropped_ids.is_empty() {
+            return Ok(Vec::new());
+        }
+        let n = self.width * self.height;
+        if self.segmentation.len() != n {
+            return Err(SensorError::BufferLength {
+                field: "segmentation",
+                expected: n,
+                actual: self.segmentation.len(),
+            });
+        }
+        let mut table = Vec::new();
+        for &id in self.dropped_ids {
+            check("dropped_ids", id as f64, id < 1 << 20, "is not below 2^20")?;
+            let i = id as usize;
+            if table.len() < i + 2 {
+                table.resize(i + 2, false);
+            }
+            table[i] = true;
+        }
+        Ok(table)
+    }
+
+    fn hits<'t>(&'t self, dropped: &'t [bool]) -> Hits<'t> {
+        Hits { segmentation: self.segmentation, dropped }
+    }
+
     /// The buffers in the sensor model's conventions, into `out` (its allocations reused):
-    /// OpenCV axes (y and z negated), the point (0, 0, 0) where nothing was hit, colour to 8 bits
+    /// OpenCV axes (y and z negated), the point (0, 0, 0) where nothing was hit (w >= 1, or a
+    /// dropped segmentation id), colour to 8 bits
     /// rounded to nearest (`clamp(255 c, 0, 255) + ½`, truncated). On two threads where the
     /// machine has two cores.
     pub fn convert_into(&self, out: &mut FrameBuffers) -> Result<(), SensorError> {
@@ -457,14 +513,17 @@ impl RendererBuffers<'_> {
             return Err(SensorError::BufferLength { field: "colour", expected: 4 * n, actual: self.colour.len() });
         }
         let with_colour = !self.colour.is_empty();
+        let dropped = self.dropped_table()?;
+        let hits = self.hits(&dropped);
         (out.width, out.height) = (w, h);
         out.points.resize(if geometry { 3 * n } else { 0 }, 0.0);
         out.normals.resize(if geometry { 3 * n } else { 0 }, 0.0);
         out.rgb.resize(if with_colour { 3 * n } else { 0 }, 0);
         let convert = |rows: std::ops::Range<usize>, points: &mut [f32], normals: &mut [f32], rgb: &mut [u8]| {
             let span = 4 * rows.start * w..4 * rows.end * w;
-            for (o, p) in points.chunks_exact_mut(3).zip(self.position[span.clone()].chunks_exact(4)) {
-                let hit = p[3] < 1.0 || p[3].is_nan();
+            let pixels = self.position[span.clone()].chunks_exact(4).enumerate();
+            for (o, (i, p)) in points.chunks_exact_mut(3).zip(pixels) {
+                let hit = hits.hit(rows.start * w + i, p);
                 o[0] = if hit { p[0] } else { 0.0 };
                 o[1] = if hit { -p[1] } else { 0.0 };
                 o[2] = if hit { -p[2] } else { 0.0 };
@@ -587,9 +646,10 @@ fn simulate_frame_on(
         }
     }
     let (w, h) = (frame.width, frame.height);
+    let dropped = renderer.map(|r| r.dropped_table()).transpose()?.unwrap_or_default();
     let mut depth = depth::DepthFrame::new(&config.stereo, unit, frame, seed, frame_index);
     if let Some(r) = renderer {
-        depth = depth.on_renderer_buffers(r.position, r.normal);
+        depth = depth.on_renderer_buffers(r.position, r.normal, r.hits(&dropped));
     }
     let noise = colour::NoiseTable::shared(&config.colour);
     let with_colour = !frame.rgb.is_empty();
@@ -974,7 +1034,8 @@ mod tests {
     fn renderer_buffers_read_in_place_give_the_converted_frames_result() {
         // A tilted plane (grazing normals on its left third) with a nearer box; pixels without a
         // surface (w = 1 and w = 2, over points that would be surfaces) and a NaN w (a surface
-        // to the conversion); at rest, rolling and moving steeply.
+        // to the conversion); at rest, rolling and moving steeply. Then the same with segmentation
+        // ids, two of them dropped: the same as their pixels' w set to 1.
         let (w, h) = (128usize, 4 * PART_ROWS + 5);
         let (fx, cx, cy) = (100.0f32, 64.0f32, h as f32 / 2.0);
         let (mut position, mut normal, mut colour) = (Vec::new(), Vec::new(), Vec::new());
@@ -1000,7 +1061,15 @@ mod tests {
                 ]);
             }
         }
-        let buffers = RendererBuffers { width: w, height: h, position: &position, normal: &normal, colour: &colour };
+        let buffers = RendererBuffers {
+            width: w,
+            height: h,
+            position: &position,
+            normal: &normal,
+            colour: &colour,
+            segmentation: &[],
+            dropped_ids: &[],
+        };
         let mut converted = FrameBuffers::default();
         buffers.convert_into(&mut converted).unwrap();
         let rolling = [
@@ -1036,6 +1105,32 @@ mod tests {
             camera_end_from_start: None,
         };
         assert!(request.run_renderer(&short).unwrap_err().to_string().contains("position"));
+
+        let segmentation: Vec<u32> = (0..w * h).map(|i| ((i % w) / 20 + (i / w) / 30) as u32).collect();
+        let dropped_ids = [2u32, 5];
+        let mut marked = position.clone();
+        for (p, id) in marked.chunks_exact_mut(4).zip(&segmentation) {
+            if dropped_ids.contains(id) {
+                p[3] = 1.0;
+            }
+        }
+        let with_ids = RendererBuffers { segmentation: &segmentation, dropped_ids: &dropped_ids, ..buffers };
+        let marked = RendererBuffers { position: &marked, ..buffers };
+        let (mut a, mut b) = (FrameBuffers::default(), FrameBuffers::default());
+        with_ids.convert_into(&mut a).unwrap();
+        marked.convert_into(&mut b).unwrap();
+        assert_eq!((&a.points, &a.normals, &a.rgb), (&b.points, &b.normals, &b.rgb));
+        assert_ne!(a.points, converted.points);
+        for motion in [None, Some(rolling)] {
+            let request = SensorRequest { camera_end_from_start: motion, ..request.clone() };
+            let (_, want) = request.run_renderer(&marked).unwrap();
+            let (_, got) = request.run_renderer(&with_ids).unwrap();
+            assert_eq!((&got.depth_m, &got.rgb, got.stats), (&want.depth_m, &want.rgb, want.stats));
+        }
+        let short = RendererBuffers { segmentation: &segmentation[1..], ..with_ids };
+        assert!(request.run_renderer(&short).unwrap_err().to_string().contains("segmentation"));
+        let huge = RendererBuffers { dropped_ids: &[1 << 20], ..with_ids };
+        assert!(request.run_renderer(&huge).unwrap_err().to_string().contains("dropped_ids"));
     }
 
     #[test]
@@ -1045,7 +1140,15 @@ mod tests {
             (0..w * h).flat_map(|i| [0.1 * i as f32, 0.2, -0.5, if i == 5 { 1.0 } else { 0.0 }]).collect();
         let normal: Vec<f32> = (0..w * h).flat_map(|_| [0.0, 0.6, 0.8, 0.0]).collect();
         let colour: Vec<f32> = (0..w * h).flat_map(|i| [-0.2, 0.5, 1.3, 1.0].map(|c| c + 0.001 * i as f32)).collect();
-        let buffers = RendererBuffers { width: w, height: h, position: &position, normal: &normal, colour: &colour };
+        let buffers = RendererBuffers {
+            width: w,
+            height: h,
+            position: &position,
+            normal: &normal,
+            colour: &colour,
+            segmentation: &[],
+            dropped_ids: &[],
+        };
         let mut out = FrameBuffers::default();
         buffers.convert_into(&mut out).unwrap();
         assert_eq!(&out.points[..3], &[0.0, -0.2, 0.5]);
