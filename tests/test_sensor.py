@@ -146,6 +146,18 @@ def test_renderer_buffers_give_the_frame_of_their_opencv_form() -> None:
         _native.sensor_model(json.dumps(cam.sensor_request(seed=0)), pos, normal, rgb)
     with pytest.raises(_native.InputError, match="normals"):
         _native.sensor_model(json.dumps(cam.sensor_request(seed=0)), pos, normal[:, :, :3].copy(), rgba)
+    # Pixels of dropped segmentation ids (the robot's) are the same as pixels marked w = 1.
+    seg = (np.arange(H * W, dtype=np.uint32).reshape(H, W) // 997) % 7
+    marked = pos.copy()
+    marked[np.isin(seg, [2, 5]), 3] = 1.0
+    for m in (None, motion):
+        want = sensor.apply(marked, normal, rgba, frame_index=1, camera_end_from_start=m)
+        got = sensor.apply(pos, normal, rgba, frame_index=1, camera_end_from_start=m, segmentation=seg, dropped_ids=[5, 2])
+        np.testing.assert_array_equal(got[0], want[0])
+        np.testing.assert_array_equal(got[1], want[1])
+        assert not np.array_equal(got[1], sensor.apply(pos, normal, rgba, frame_index=1, camera_end_from_start=m)[1])
+    with pytest.raises(_native.InputError, match="segmentation"):
+        sensor.apply(pos, normal, rgba, frame_index=1, segmentation=seg[:, :10], dropped_ids=[5])
 
 
 def _view(eye: np.ndarray, centre: np.ndarray) -> DetectorView:

@@ -1,7 +1,7 @@
 //! The RGB-D sensor model (`objslam_core::sensor`): one entry point, numpy in, numpy out.
 
 use numpy::ndarray::{Array2, Array3};
-use numpy::{IntoPyArray, PyArray2, PyArray3, PyReadonlyArray3, PyUntypedArrayMethods};
+use numpy::{IntoPyArray, PyArray2, PyArray3, PyReadonlyArray2, PyReadonlyArray3, PyUntypedArrayMethods};
 use objslam_core::sensor::{RenderedFrame, RendererBuffers, SensorRequest};
 use pyo3::prelude::*;
 
@@ -19,18 +19,21 @@ fn slice<'a, T: numpy::Element>(a: &'a PyReadonlyArray3<'_, T>, field: &str, sha
 /// The sensor model on one rendered frame. ``request_json``: `objslam_core::sensor::SensorRequest`.
 /// Buffers: ``points`` / ``normals`` (H, W, 3) float32, OpenCV camera axes, z ≤ 0 = no surface,
 /// ``rgb`` (H, W, 3) uint8; or the renderer's (`objslam_core::sensor::RendererBuffers`): (H, W, 4)
-/// float32, OpenGL axes, position w ≥ 1 = no surface, ``rgb`` RGBA in [0, 1]. Returns ``(depth
+/// float32, OpenGL axes, position w ≥ 1 = no surface, ``rgb`` RGBA in [0, 1], and optionally
+/// ``segmentation`` (H, W) uint32 whose ``dropped_ids`` count as no surface. Returns ``(depth
 /// (H, W) float32, rgb (H, W, 3) uint8 or None, info_json {"unit", "stats"})``; without
 /// ``points``, ``(None, None, info)`` with the episode's unit only. The model runs without the GIL,
 /// reading the arrays in place.
 #[pyfunction]
-#[pyo3(signature = (request_json, points = None, normals = None, rgb = None))]
+#[pyo3(signature = (request_json, points = None, normals = None, rgb = None, segmentation = None, dropped_ids = vec![]))]
 pub fn sensor_model<'py>(
     py: Python<'py>,
     request_json: &str,
     points: Option<PyReadonlyArray3<'py, f32>>,
     normals: Option<PyReadonlyArray3<'py, f32>>,
     rgb: Option<Bound<'py, PyAny>>,
+    segmentation: Option<PyReadonlyArray2<'py, u32>>,
+    dropped_ids: Vec<u32>,
 ) -> PyResult<SensorOutput<'py>> {
     let request: SensorRequest = parse_json("request_json", request_json)?;
     let (Some(points), Some(normals)) = (points, normals) else {
@@ -43,7 +46,13 @@ pub fn sensor_model<'py>(
         let rgb = rgb.map(|a| a.extract::<PyReadonlyArray3<f32>>().map_err(rgb_err)).transpose()?;
         let colour = rgb.as_ref().map_or(Ok(&[][..]), |a| slice(a, "rgb", [h, w, 4]))?;
         let (position, normal) = (slice(&points, "points", [h, w, 4])?, slice(&normals, "normals", [h, w, 4])?);
-        let buffers = RendererBuffers { width: w, height: h, position, normal, colour };
+        let segmentation = match &segmentation {
+            Some(a) if a.shape() != [h, w] => return Err(input_err("segmentation: expected shape (H, W)")),
+            Some(a) => a.as_slice().map_err(|_| input_err("segmentation: must be C-contiguous"))?,
+            None => &[],
+        };
+        let dropped_ids = &dropped_ids;
+        let buffers = RendererBuffers { width: w, height: h, position, normal, colour, segmentation, dropped_ids };
         py.detach(|| request.run_renderer(&buffers)).map_err(input_err)?
     } else {
         let rgb = rgb.map(|a| a.extract::<PyReadonlyArray3<u8>>().map_err(rgb_err)).transpose()?;

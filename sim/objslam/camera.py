@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
@@ -236,11 +237,15 @@ class RgbdSensor:
         *,
         frame_index: int,
         camera_end_from_start: np.ndarray | None = None,
+        segmentation: np.ndarray | None = None,
+        dropped_ids: Sequence[int] = (),
     ) -> tuple[np.ndarray, np.ndarray]:
         """``(rgb, depth_m)`` the sensor delivers from a rendered frame: (H, W, 3) camera-frame
         points (OpenCV axes, z ≤ 0 = no surface), normals and 8-bit colour, or the renderer's own
         (H, W, 4) position (OpenGL axes, w ≥ 1 = no surface), normal and RGBA in [0, 1] buffers;
-        ``camera_end_from_start`` is the camera's motion over the exposure (4x4, None = at rest)."""
+        ``camera_end_from_start`` is the camera's motion over the exposure (4x4, None = at rest).
+        With the renderer's buffers, pixels whose ``segmentation`` id (H, W) is in ``dropped_ids``
+        (the robot's own) count as no surface."""
         motion = None if camera_end_from_start is None else np.asarray(camera_end_from_start).tolist()
         req = dict(self._request, frame_index=int(frame_index), camera_end_from_start=motion)
         renderer = np.shape(points_in_camera)[-1] == 4
@@ -249,6 +254,8 @@ class RgbdSensor:
             np.ascontiguousarray(points_in_camera, dtype=np.float32),
             np.ascontiguousarray(normals_in_camera, dtype=np.float32),
             np.ascontiguousarray(rgb, dtype=np.float32 if renderer else np.uint8),
+            None if segmentation is None else np.ascontiguousarray(segmentation, dtype=np.uint32),
+            list(dropped_ids),
         )
         self.last_stats = json.loads(info)["stats"]
         return colour, depth

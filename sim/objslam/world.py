@@ -236,6 +236,7 @@ class SimWorld:
         # last entry, which is False, read it).
         self._robot_id_table = np.zeros(max(self.robot_actor_ids, default=0) + 2, dtype=bool)
         self._robot_id_table[list(self.robot_actor_ids)] = True
+        self._robot_ids = sorted(self.robot_actor_ids)
         self.finger_actor_ids = {link.entity.per_scene_id for link in self.fingers}
         # Let objects settle on the table.
         for _ in range(PHYSICS_HZ // 4):
@@ -533,9 +534,9 @@ class SimWorld:
         seg = self.camera.get_picture("Segmentation")[..., 1].astype(np.uint32)
         normals_gl = self.camera.get_picture("Normal") if self.sensor is not None else None
         t1 = time.perf_counter()
-        robot = self._robot_id_table.take(seg, mode="clip") if self.camera_config.mask_robot_depth else None
         q = self.qpos_delayed()
         if self.sensor is None or normals_gl is None:
+            robot = self._robot_id_table.take(seg, mode="clip") if self.camera_config.mask_robot_depth else None
             # [0, 1] to 8 bits, rounded: one float copy, scaled, clipped and offset in place.
             scaled = rgba[..., :3] * np.float32(255.0)
             np.clip(scaled, 0.0, 255.0, out=scaled)
@@ -548,12 +549,16 @@ class SimWorld:
             depth = self.camera_config.depth_noise.apply(depth, self.rng)
         else:
             # The renderer's own buffers go to the sensor model, which reads them in OpenGL axes;
-            # the robot's own pixels (the finger tips) are marked as no surface. Segmentation is
-            # used only for that mask.
-            if robot is not None:
-                pos[robot, 3] = 1.0
+            # the robot's own pixels (the finger tips), by their segmentation ids, have no surface.
+            dropped = self._robot_ids if self.camera_config.mask_robot_depth else ()
             rgb, depth = self.sensor.apply(
-                pos, normals_gl, rgba, frame_index=self.frame_index, camera_end_from_start=self._exposure_motion(self.qpos())
+                pos,
+                normals_gl,
+                rgba,
+                frame_index=self.frame_index,
+                camera_end_from_start=self._exposure_motion(self.qpos()),
+                segmentation=seg,
+                dropped_ids=dropped,
             )
         self.last_timings_ms = {"render": (t1 - t0) * 1e3, "sensor": (time.perf_counter() - t1) * 1e3}
         world_from_camera_gt = self.world_from_camera_gt()

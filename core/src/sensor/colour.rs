@@ -425,15 +425,17 @@ struct MotionBlur<'a> {
     dv: Vec<f32>,
     /// Per pixel of the current row, its box: down the columns (1) or along the rows; whether its
     /// segment changes lines; the index of the sums before the pixels holding its two ends and
-    /// where in those pixels the ends lie (0-1); 1 / its length; the slope of the line index.
+    /// where in those pixels the ends lie (0-1); 1 / its length; 1 / the slope of the line
+    /// index; its start and end as (line, position) along the sums' axis.
     steep: Vec<u32>,
     multi: Vec<u32>,
     i0: Vec<u32>,
     i1: Vec<u32>,
+    ends: Vec<[u32; 4]>,
     f0: Vec<f32>,
     f1: Vec<f32>,
     inv_len: Vec<f32>,
-    slope: Vec<f32>,
+    inv_slope: Vec<f32>,
     /// The row's blurred values, then as bytes (four a pixel).
     tot: Vec<Px>,
     bytes: Vec<u8>,
@@ -475,10 +477,11 @@ impl<'a> MotionBlur<'a> {
             multi: i.clone(),
             i0: i.clone(),
             i1: i,
+            ends: vec![[0; 4]; w],
             f0: f.clone(),
             f1: f.clone(),
             inv_len: f.clone(),
-            slope: f,
+            inv_slope: f,
             tot: vec![[0.0; 4]; w],
             bytes: vec![0; 4 * w],
         }
@@ -566,15 +569,16 @@ impl<'a> MotionBlur<'a> {
         let w = self.w;
         let (wf, hf, yf) = (w as f32, self.h as f32, y as f32);
         let (du, dv) = (&self.du[..w], &self.dv[..w]);
-        let (steep, multi, i0, i1, f0, f1, inv_len, slope) = (
+        let (steep, multi, i0, i1, ends, f0, f1, inv_len, inv_slope) = (
             &mut self.steep[..w],
             &mut self.multi[..w],
             &mut self.i0[..w],
             &mut self.i1[..w],
+            &mut self.ends[..w],
             &mut self.f0[..w],
             &mut self.f1[..w],
             &mut self.inv_len[..w],
-            &mut self.slope[..w],
+            &mut self.inv_slope[..w],
         );
         // Sums along the rows: index line · (w + 1) + k; down the columns: line + k · w.
         let (row_stride, col_stride) = ((w + 1) as u32, w as u32);
@@ -604,6 +608,7 @@ impl<'a> MotionBlur<'a> {
             let la = min_f(max_f(round_f(q + (ka - p) * s), 0.0), n_line - 1.0);
             let lb = min_f(max_f(round_f(q + (kb - p) * s), 0.0), n_line - 1.0);
             let [la_i, ka_i, lb_i, kb_i] = [la, ka, lb, kb].map(|v| to_i32(v) as u32);
+            ends[x] = [la_i, ka_i, lb_i, kb_i];
             (i0[x], i1[x]) = if is_steep {
                 (la_i + ka_i * col_stride, lb_i + kb_i * col_stride)
             } else {
@@ -613,7 +618,7 @@ impl<'a> MotionBlur<'a> {
             multi[x] = u32::from(la != lb);
             (f0[x], f1[x]) = (a - ka, b - kb);
             inv_len[x] = if moving { r.abs() } else { 1.0 };
-            slope[x] = s;
+            inv_slope[x] = 1.0 / s;
         }
     }
 
@@ -654,25 +659,23 @@ impl<'a> MotionBlur<'a> {
         let steep = self.steep[x] != 0;
         let (pre, line_stride, ps) =
             if steep && self.cols_ready { (&self.cols.sums, 1, w) } else { (&self.rows.sums, w + 1, 1) };
-        let (ia, ib) = (self.i0[x] as usize, self.i1[x] as usize);
-        let ((la, ka), (lb, kb)) = if steep {
-            ((ia % w, ia / w), (ib % w, ib / w))
-        } else {
-            ((ia / (w + 1), ia % (w + 1)), (ib / (w + 1), ib % (w + 1)))
-        };
+        let [la, ka, lb, kb] = self.ends[x].map(|v| v as usize);
         let (p, q) = if steep { (y as f32, x as f32) } else { (x as f32, y as f32) };
         let up = lb > la;
-        let inv = 1.0 / self.slope[x];
+        let inv = self.inv_slope[x];
+        // The crossings come in order along the segment (t grows from line to line), so each is
+        // clamped to the segment's own ends: no crossing waits for the one before it.
+        let (kaf, kbf) = (ka as f32, kb as f32);
         let mut total = [0.0f32; 4];
-        let (mut l, mut k) = (la, ka);
+        let mut l = la;
         while l != lb {
             let t = p + (l as f32 + if up { 0.5 } else { -0.5 } - q) * inv;
             // The first pixel past line l's run.
             let next = if up { ceil_f(t) } else { floor_f(t) + 1.0 };
-            let next = to_i32(min_f(max_f(next, k as f32), kb as f32)) as usize;
+            let next = to_i32(min_f(max_f(next, kaf), kbf)) as usize;
             let l_next = if up { l + 1 } else { l - 1 };
             total = add4(total, sub4(pre[l * line_stride + next * ps], pre[l_next * line_stride + next * ps]));
-            (k, l) = (next, l_next);
+            l = l_next;
         }
         total
     }

@@ -41,7 +41,7 @@
 //! than the colour's and the band falls outside the registered image), temporal noise
 //! correlation, multipath and specular surfaces.
 
-use super::{check, max_f, min_f, to_i32, RenderedFrame, SensorError, SensorUnit, SplitMix64, TAG_DEPTH};
+use super::{check, max_f, min_f, to_i32, Hits, RenderedFrame, SensorError, SensorUnit, SplitMix64, TAG_DEPTH};
 use nalgebra::{Matrix3, Vector3};
 use serde::{Deserialize, Serialize};
 
@@ -222,6 +222,7 @@ pub(crate) struct DepthFrame<'a> {
     cfg: &'a StereoDepthConfig,
     unit: &'a SensorUnit,
     frame: &'a RenderedFrame<'a>,
+    geometry: Geometry<'a>,
     seed: u64,
     frame_index: u64,
     surfaces: Surfaces,
@@ -242,11 +243,20 @@ impl<'a> DepthFrame<'a> {
             cfg,
             unit,
             frame,
+            geometry: Geometry::OpenCv { points: frame.points_in_camera, normals: frame.normals_in_camera },
             seed,
             frame_index,
             surfaces: Surfaces::new(cfg, unit, seed, frame_index),
             field: CorrelatedField::new(frame.width, frame.height, cell, &mut rng),
         }
+    }
+
+    /// The frame's geometry read from the renderer's own buffers instead of its points and
+    /// normals ([`super::RendererBuffers`]' position and normal, `4 · w · h` each, and which
+    /// pixels hit): the same result as from the buffers converted by
+    /// [`super::RendererBuffers::convert_into`].
+    pub(crate) fn on_renderer_buffers(self, position: &'a [f32], normal: &'a [f32], hits: Hits<'a>) -> Self {
+        Self { geometry: Geometry::Renderer { position, normal, hits }, ..self }
     }
 
     /// Steps 1-3 on rows `y0..` (as many as `z` holds): the true depth (0 without a surface) and
@@ -256,9 +266,18 @@ impl<'a> DepthFrame<'a> {
         let mut stats = DepthStats::default();
         let mut scratch = vec![0.0f32; w];
         for (y, (zr, sr)) in (y0..).zip(z.chunks_exact_mut(w.max(1)).zip(state.chunks_exact_mut(w.max(1)))) {
-            let pr = &self.frame.points_in_camera[3 * y * w..3 * (y + 1) * w];
-            let nr = &self.frame.normals_in_camera[3 * y * w..3 * (y + 1) * w];
-            stats = stats.plus(&self.surfaces.row(y, pr, nr, zr, sr, &mut scratch));
+            let row = match self.geometry {
+                Geometry::OpenCv { points, normals } => {
+                    let span = 3 * y * w..3 * (y + 1) * w;
+                    self.surfaces.row::<3>(y, &points[span.clone()], &normals[span], None, zr, sr, &mut scratch)
+                }
+                Geometry::Renderer { position, normal, hits } => {
+                    let span = 4 * y * w..4 * (y + 1) * w;
+                    let hits = Some((hits, y * w));
+                    self.surfaces.row::<4>(y, &position[span.clone()], &normal[span], hits, zr, sr, &mut scratch)
+                }
+            };
+            stats = stats.plus(&row);
         }
         stats
     }
@@ -309,6 +328,17 @@ impl<'a> DepthFrame<'a> {
     }
 }
 
+/// Where the depth model reads a frame's surface points and normals.
+#[derive(Clone, Copy)]
+enum Geometry<'a> {
+    /// [`RenderedFrame`]'s: three floats a pixel, OpenCV axes, z <= 0 = no surface.
+    OpenCv { points: &'a [f32], normals: &'a [f32] },
+    /// The renderer's: four floats a pixel, OpenGL axes (y and z negated), no surface where
+    /// `w >= 1` or a dropped segmentation id ([`Hits`]). The products and squares the model takes of a point and its normal are the
+    /// same in either axes (each negation meets another), so only the depth reads the axis.
+    Renderer { position: &'a [f32], normal: &'a [f32], hits: Hits<'a> },
+}
+
 /// Steps 1-3 (range, the second imager's shadow, grazing incidence) on one row of the rendered
 /// grid: the true depth (0 without a surface) and each pixel's state.
 struct Surfaces {
@@ -338,13 +368,16 @@ impl Surfaces {
         }
     }
 
-    /// Row `y`: `pts`, `nrm` its rendered points and normals; `scratch` (length of the row) is
-    /// overwritten.
-    fn row(
+    /// Row `y`: `pts`, `nrm` its rendered points and normals, `S` floats a pixel ([`Geometry`]:
+    /// 3 OpenCV, 4 the renderer's, with which pixels hit and the row's first pixel index);
+    /// `scratch` (length of the row) is overwritten.
+    #[allow(clippy::too_many_arguments)]
+    fn row<const S: usize>(
         &self,
         y: usize,
         pts: &[f32],
         nrm: &[f32],
+        hits: Option<(Hits<'_>, usize)>,
         z: &mut [f32],
         state: &mut [u8],
         scratch: &mut [f32],
@@ -352,8 +385,17 @@ impl Surfaces {
         let mut stats = DepthStats::default();
         let (mut surface, mut out) = (0u32, 0u32);
         // The depths contiguous first, then the states without branches (several pixels at a time).
-        for (zv, p) in z.iter_mut().zip(pts.chunks_exact(3)) {
-            *zv = p[2];
+        match hits {
+            None => {
+                for (zv, p) in z.iter_mut().zip(pts.chunks_exact(S)) {
+                    *zv = p[2];
+                }
+            }
+            Some((hits, i0)) => {
+                for (i, (zv, p)) in z.iter_mut().zip(pts.chunks_exact(S)).enumerate() {
+                    *zv = if hits.hit(i0 + i, p) { -p[2] } else { 0.0 };
+                }
+            }
         }
         for (zv, st) in z.iter_mut().zip(state.iter_mut()) {
             let v = *zv;
@@ -390,7 +432,7 @@ impl Surfaces {
         // square root and the draw only there.
         let c0_sq = (self.cos_start * self.cos_start) as f32;
         let mut candidates = 0u32;
-        for ((c, &st), (p, n)) in scratch.iter_mut().zip(state.iter()).zip(pts.chunks_exact(3).zip(nrm.chunks_exact(3)))
+        for ((c, &st), (p, n)) in scratch.iter_mut().zip(state.iter()).zip(pts.chunks_exact(S).zip(nrm.chunks_exact(S)))
         {
             let dot = p[0] * n[0] + p[1] * n[1] + p[2] * n[2];
             let denom = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]) * (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);

@@ -404,6 +404,32 @@ pub struct RendererBuffers<'a> {
     pub normal: &'a [f32],
     /// Per pixel: (r, g, b, a) in [0, 1]. Length `4 · width · height`, or empty for depth only.
     pub colour: &'a [f32],
+    /// Per pixel: the renderer's segmentation id. Length `width · height`, or empty for none.
+    pub segmentation: &'a [u32],
+    /// Segmentation ids whose pixels count as nothing hit (the robot's own), each below 2^20;
+    /// read only with a segmentation.
+    pub dropped_ids: &'a [u32],
+}
+
+/// Whether a pixel of the renderer's buffers has a surface: its position's w below 1 (or NaN),
+/// and its segmentation id (when given) not dropped.
+#[derive(Clone, Copy)]
+pub(crate) struct Hits<'a> {
+    segmentation: &'a [u32],
+    /// Per id: dropped; the last entry is false and stands for every id past it. Empty: no drops.
+    dropped: &'a [bool],
+}
+
+impl Hits<'_> {
+    /// Whether pixel `i`, at position `p` (its four floats), hit a surface.
+    #[inline]
+    pub(crate) fn hit(&self, i: usize, p: &[f32]) -> bool {
+        let hit = p[3] < 1.0 || p[3].is_nan();
+        match self.dropped.last() {
+            None => hit,
+            Some(_) => hit && !self.dropped[(self.segmentation[i] as usize).min(self.dropped.len() - 1)],
+        }
+    }
 }
 
 /// The buffers of a [`RenderedFrame`], owned.
@@ -435,11 +461,47 @@ impl FrameBuffers {
 }
 
 impl RendererBuffers<'_> {
+    /// The table of [`Hits`] (empty without a segmentation or dropped ids).
+    fn dropped_table(&self) -> Result<Vec<bool>, SensorError> {
+        if self.segmentation.is_empty() || self.dropped_ids.is_empty() {
+            return Ok(Vec::new());
+        }
+        let n = self.width * self.height;
+        if self.segmentation.len() != n {
+            return Err(SensorError::BufferLength {
+                field: "segmentation",
+                expected: n,
+                actual: self.segmentation.len(),
+            });
+        }
+        let mut table = Vec::new();
+        for &id in self.dropped_ids {
+            check("dropped_ids", id as f64, id < 1 << 20, "is not below 2^20")?;
+            let i = id as usize;
+            if table.len() < i + 2 {
+                table.resize(i + 2, false);
+            }
+            table[i] = true;
+        }
+        Ok(table)
+    }
+
+    fn hits<'t>(&'t self, dropped: &'t [bool]) -> Hits<'t> {
+        Hits { segmentation: self.segmentation, dropped }
+    }
+
     /// The buffers in the sensor model's conventions, into `out` (its allocations reused):
-    /// OpenCV axes (y and z negated), the point (0, 0, 0) where nothing was hit, colour to 8 bits
+    /// OpenCV axes (y and z negated), the point (0, 0, 0) where nothing was hit (w >= 1, or a
+    /// dropped segmentation id), colour to 8 bits
     /// rounded to nearest (`clamp(255 c, 0, 255) + ½`, truncated). On two threads where the
     /// machine has two cores.
     pub fn convert_into(&self, out: &mut FrameBuffers) -> Result<(), SensorError> {
+        self.convert(out, true)
+    }
+
+    /// [`Self::convert_into`]; without `geometry`, the colour alone (points and normals left
+    /// empty: the depth model reads the position and normal buffers in place).
+    fn convert(&self, out: &mut FrameBuffers, geometry: bool) -> Result<(), SensorError> {
         let (w, h) = (self.width, self.height);
         let n = w * h;
         for (field, len) in [("position", self.position.len()), ("normal", self.normal.len())] {
@@ -451,14 +513,17 @@ impl RendererBuffers<'_> {
             return Err(SensorError::BufferLength { field: "colour", expected: 4 * n, actual: self.colour.len() });
         }
         let with_colour = !self.colour.is_empty();
+        let dropped = self.dropped_table()?;
+        let hits = self.hits(&dropped);
         (out.width, out.height) = (w, h);
-        out.points.resize(3 * n, 0.0);
-        out.normals.resize(3 * n, 0.0);
+        out.points.resize(if geometry { 3 * n } else { 0 }, 0.0);
+        out.normals.resize(if geometry { 3 * n } else { 0 }, 0.0);
         out.rgb.resize(if with_colour { 3 * n } else { 0 }, 0);
         let convert = |rows: std::ops::Range<usize>, points: &mut [f32], normals: &mut [f32], rgb: &mut [u8]| {
             let span = 4 * rows.start * w..4 * rows.end * w;
-            for (o, p) in points.chunks_exact_mut(3).zip(self.position[span.clone()].chunks_exact(4)) {
-                let hit = p[3] < 1.0 || p[3].is_nan();
+            let pixels = self.position[span.clone()].chunks_exact(4).enumerate();
+            for (o, (i, p)) in points.chunks_exact_mut(3).zip(pixels) {
+                let hit = hits.hit(rows.start * w + i, p);
                 o[0] = if hit { p[0] } else { 0.0 };
                 o[1] = if hit { -p[1] } else { 0.0 };
                 o[2] = if hit { -p[2] } else { 0.0 };
@@ -479,12 +544,19 @@ impl RendererBuffers<'_> {
             return Ok(());
         }
         // Parts of rows, each thread taking the next when done (as in `simulate_frame`).
+        // A buffer left empty gives every part an empty slice.
         let size = PART_ROWS * w.max(1);
-        let mut rgb: Vec<&mut [u8]> = out.rgb.chunks_mut(3 * size).collect();
-        rgb.resize_with(h.div_ceil(PART_ROWS), Default::default);
+        let n_parts = h.div_ceil(PART_ROWS);
+        fn chunks<T>(v: &mut [T], size: usize, n_parts: usize) -> Vec<&mut [T]> {
+            let mut c: Vec<&mut [T]> = v.chunks_mut(size).collect();
+            c.resize_with(n_parts, Default::default);
+            c
+        }
+        let (points, normals) =
+            (chunks(&mut out.points, 3 * size, n_parts), chunks(&mut out.normals, 3 * size, n_parts));
+        let rgb = chunks(&mut out.rgb, 3 * size, n_parts);
         let parts = (0..h).step_by(PART_ROWS).map(|y| y..(y + PART_ROWS).min(h));
-        let queue =
-            Mutex::new(parts.zip(out.points.chunks_mut(3 * size).zip(out.normals.chunks_mut(3 * size))).zip(rgb));
+        let queue = Mutex::new(parts.zip(points.into_iter().zip(normals)).zip(rgb));
         let work = || {
             while let Some(((rows, (points, normals)), rgb)) = next_part(&queue) {
                 convert(rows, points, normals, rgb);
@@ -521,7 +593,7 @@ pub fn simulate_frame(
     seed: u64,
     frame_index: u64,
 ) -> Result<SensorFrame, SensorError> {
-    simulate_frame_on(crate::worker_threads(), config, unit, frame, camera_end_from_start, seed, frame_index)
+    simulate_frame_on(crate::worker_threads(), config, unit, frame, None, camera_end_from_start, seed, frame_index)
 }
 
 /// Rows a thread takes at a time from a frame's queue of rows: small enough that a thread that
@@ -537,24 +609,32 @@ where
     queue.lock().unwrap_or_else(|e| e.into_inner()).next()
 }
 
-/// [`simulate_frame`] on `threads` threads (1 or 2; more count as 2).
+/// [`simulate_frame`] on `threads` threads (1 or 2; more count as 2); with `renderer`, the depth
+/// model reads its position and normal buffers in place of `frame`'s points and normals (which
+/// may then be empty).
 #[allow(clippy::too_many_arguments)]
 fn simulate_frame_on(
     threads: usize,
     config: &SensorConfig,
     unit: &SensorUnit,
     frame: &RenderedFrame<'_>,
+    renderer: Option<&RendererBuffers<'_>>,
     camera_end_from_start: Option<&Matrix4<f64>>,
     seed: u64,
     frame_index: u64,
 ) -> Result<SensorFrame, SensorError> {
     config.validate()?;
     let n = frame.width * frame.height;
-    for (field, len) in
-        [("points_in_camera", frame.points_in_camera.len()), ("normals_in_camera", frame.normals_in_camera.len())]
-    {
-        if len != 3 * n {
-            return Err(SensorError::BufferLength { field, expected: 3 * n, actual: len });
+    let geometry = match renderer {
+        Some(r) => [("position", r.position.len(), 4 * n), ("normal", r.normal.len(), 4 * n)],
+        None => [
+            ("points_in_camera", frame.points_in_camera.len(), 3 * n),
+            ("normals_in_camera", frame.normals_in_camera.len(), 3 * n),
+        ],
+    };
+    for (field, len, expected) in geometry {
+        if len != expected {
+            return Err(SensorError::BufferLength { field, expected, actual: len });
         }
     }
     if !frame.rgb.is_empty() && frame.rgb.len() != 3 * n {
@@ -566,7 +646,11 @@ fn simulate_frame_on(
         }
     }
     let (w, h) = (frame.width, frame.height);
-    let depth = depth::DepthFrame::new(&config.stereo, unit, frame, seed, frame_index);
+    let dropped = renderer.map(|r| r.dropped_table()).transpose()?.unwrap_or_default();
+    let mut depth = depth::DepthFrame::new(&config.stereo, unit, frame, seed, frame_index);
+    if let Some(r) = renderer {
+        depth = depth.on_renderer_buffers(r.position, r.normal, r.hits(&dropped));
+    }
     let noise = colour::NoiseTable::shared(&config.colour);
     let with_colour = !frame.rgb.is_empty();
     let mut rgb = vec![0u8; if with_colour { 3 * n } else { 0 }];
@@ -794,13 +878,27 @@ impl SensorRequest {
         Ok((SensorInfo { unit, stats: Some(out.stats) }, Some(out)))
     }
 
-    /// [`Self::run`] on the renderer's own buffers ([`RendererBuffers::convert_into`]; the
-    /// converted buffers are kept between calls).
+    /// [`Self::run`] on the renderer's own buffers: the same result as on the buffers
+    /// [`RendererBuffers::convert_into`] makes, with only the colour converted (kept between
+    /// calls); the depth model reads the position and normal buffers in place.
     pub fn run_renderer(&self, buffers: &RendererBuffers<'_>) -> Result<(SensorInfo, SensorFrame), SensorError> {
         static CONVERTED: Mutex<Option<FrameBuffers>> = Mutex::new(None);
         let unit = self.unit()?;
         let mut converted = CONVERTED.lock().unwrap_or_else(|e| e.into_inner()).take().unwrap_or_default();
-        let out = buffers.convert_into(&mut converted).and_then(|()| self.simulate(&unit, &converted.frame()));
+        let out = buffers.convert(&mut converted, false).and_then(|()| {
+            let motion = self.camera_end_from_start.map(|m| Matrix4::from_fn(|r, c| m[r][c]));
+            let (threads, frame) = (crate::worker_threads(), converted.frame());
+            simulate_frame_on(
+                threads,
+                &self.config,
+                &unit,
+                &frame,
+                Some(buffers),
+                motion.as_ref(),
+                self.seed,
+                self.frame_index,
+            )
+        });
         *CONVERTED.lock().unwrap_or_else(|e| e.into_inner()) = Some(converted);
         let out = out?;
         Ok((SensorInfo { unit, stats: Some(out.stats) }, out))
@@ -917,19 +1015,122 @@ mod tests {
         let rolling = motion(Vector3::new(0.002, -0.001, 0.08), [0.002, -0.001, 0.0]);
         let steep = motion(Vector3::new(0.03, 0.0, 0.0), [0.0, 0.004, 0.0]);
         for m in [None, Some(rolling), Some(steep)] {
-            let one = simulate_frame_on(1, &cfg, &unit, &frame, m.as_ref(), 9, 4).unwrap();
+            let one = simulate_frame_on(1, &cfg, &unit, &frame, None, m.as_ref(), 9, 4).unwrap();
             assert!(one.stats.mixed > 0 && one.stats.shadow > 0);
             // The parts go to whichever thread asks first: several runs, several splits.
             for _ in 0..6 {
-                let two = simulate_frame_on(2, &cfg, &unit, &frame, m.as_ref(), 9, 4).unwrap();
+                let two = simulate_frame_on(2, &cfg, &unit, &frame, None, m.as_ref(), 9, 4).unwrap();
                 assert_eq!((&two.depth_m, &two.rgb, two.stats), (&one.depth_m, &one.rgb, one.stats));
             }
             if let Some(m) = m {
                 // Blurred: differs from the frame at rest.
-                assert_ne!(one.rgb, simulate_frame_on(1, &cfg, &unit, &frame, None, 9, 4).unwrap().rgb);
+                assert_ne!(one.rgb, simulate_frame_on(1, &cfg, &unit, &frame, None, None, 9, 4).unwrap().rgb);
                 assert_eq!(one.rgb, colour_image(&cfg.colour, &unit, &frame, Some(&m), 9, 4));
             }
         }
+    }
+
+    #[test]
+    fn renderer_buffers_read_in_place_give_the_converted_frames_result() {
+        // A tilted plane (grazing normals on its left third) with a nearer box; pixels without a
+        // surface (w = 1 and w = 2, over points that would be surfaces) and a NaN w (a surface
+        // to the conversion); at rest, rolling and moving steeply. Then the same with segmentation
+        // ids, two of them dropped: the same as their pixels' w set to 1.
+        let (w, h) = (128usize, 4 * PART_ROWS + 5);
+        let (fx, cx, cy) = (100.0f32, 64.0f32, h as f32 / 2.0);
+        let (mut position, mut normal, mut colour) = (Vec::new(), Vec::new(), Vec::new());
+        for y in 0..h {
+            for x in 0..w {
+                let boxed = (40..90).contains(&x) && (30..70).contains(&y);
+                let z = if boxed { 0.35 } else { 0.5 + 0.002 * y as f32 };
+                let (px, py) = ((x as f32 + 0.5 - cx) / fx * z, (y as f32 + 0.5 - cy) / fx * z);
+                let wv = match (x * 31 + y * 17) % 97 {
+                    0 => 1.0,
+                    1 => 2.0,
+                    2 => f32::NAN,
+                    _ => 0.5,
+                };
+                position.extend([px, -py, -z, wv]);
+                let n = if x < w / 3 && !boxed { [0.958, 0.02, 0.287] } else { [0.0, 0.0, -1.0] };
+                normal.extend([n[0], -n[1], -n[2], 0.0]);
+                colour.extend([
+                    (x * 7 % 256) as f32 / 255.0,
+                    (y * 11 % 256) as f32 / 300.0,
+                    ((x ^ y) % 200) as f32 / 199.0,
+                    1.0,
+                ]);
+            }
+        }
+        let buffers = RendererBuffers {
+            width: w,
+            height: h,
+            position: &position,
+            normal: &normal,
+            colour: &colour,
+            segmentation: &[],
+            dropped_ids: &[],
+        };
+        let mut converted = FrameBuffers::default();
+        buffers.convert_into(&mut converted).unwrap();
+        let rolling = [
+            [0.9968, -0.0799, -0.001, 0.002],
+            [0.0799, 0.9968, 0.002, -0.001],
+            [0.001, -0.002, 1.0, 0.0],
+            [0.0, 0.0, 0.0, 1.0],
+        ];
+        let steep = [[1.0, 0.0, 0.0, 0.0], [0.0, 0.9996, -0.03, 0.004], [0.0, 0.03, 0.9996, 0.0], [0.0, 0.0, 0.0, 1.0]];
+        for motion in [None, Some(rolling), Some(steep)] {
+            let request = SensorRequest {
+                config: SensorConfig::default(),
+                seed: 9,
+                frame_index: 4,
+                intrinsics: [[100.0, 0.0, 64.0], [0.0, 100.0, cy as f64], [0.0, 0.0, 1.0]],
+                camera_end_from_start: motion,
+            };
+            let (_, want) = request.run(Some(&converted.frame())).unwrap();
+            let want = want.unwrap();
+            assert!(want.stats.grazing > 0 && want.stats.shadow > 0 && want.stats.mixed > 0, "{:?}", want.stats);
+            for _ in 0..3 {
+                let (info, got) = request.run_renderer(&buffers).unwrap();
+                assert_eq!((&got.depth_m, &got.rgb, got.stats), (&want.depth_m, &want.rgb, want.stats));
+                assert_eq!(info.stats, Some(want.stats));
+            }
+        }
+        let short = RendererBuffers { position: &position[4..], ..buffers };
+        let request = SensorRequest {
+            config: SensorConfig::default(),
+            seed: 9,
+            frame_index: 4,
+            intrinsics: [[100.0, 0.0, 64.0], [0.0, 100.0, cy as f64], [0.0, 0.0, 1.0]],
+            camera_end_from_start: None,
+        };
+        assert!(request.run_renderer(&short).unwrap_err().to_string().contains("position"));
+
+        let segmentation: Vec<u32> = (0..w * h).map(|i| ((i % w) / 20 + (i / w) / 30) as u32).collect();
+        let dropped_ids = [2u32, 5];
+        let mut marked = position.clone();
+        for (p, id) in marked.chunks_exact_mut(4).zip(&segmentation) {
+            if dropped_ids.contains(id) {
+                p[3] = 1.0;
+            }
+        }
+        let with_ids = RendererBuffers { segmentation: &segmentation, dropped_ids: &dropped_ids, ..buffers };
+        let marked = RendererBuffers { position: &marked, ..buffers };
+        let (mut a, mut b) = (FrameBuffers::default(), FrameBuffers::default());
+        with_ids.convert_into(&mut a).unwrap();
+        marked.convert_into(&mut b).unwrap();
+        assert_eq!((&a.points, &a.normals, &a.rgb), (&b.points, &b.normals, &b.rgb));
+        assert_ne!(a.points, converted.points);
+        for motion in [None, Some(rolling)] {
+            let request = SensorRequest { camera_end_from_start: motion, ..request.clone() };
+            let (_, want) = request.run_renderer(&marked).unwrap();
+            let (_, got) = request.run_renderer(&with_ids).unwrap();
+            assert_eq!((&got.depth_m, &got.rgb, got.stats), (&want.depth_m, &want.rgb, want.stats));
+        }
+        let short = RendererBuffers { segmentation: &segmentation[1..], ..with_ids };
+        assert!(request.run_renderer(&short).unwrap_err().to_string().contains("segmentation"));
+        let huge = RendererBuffers { dropped_ids: &[1 << 20], ..with_ids };
+        assert!(request.run_renderer(&huge).unwrap_err().to_string().contains("dropped_ids"));
     }
 
     #[test]
@@ -939,7 +1140,15 @@ mod tests {
             (0..w * h).flat_map(|i| [0.1 * i as f32, 0.2, -0.5, if i == 5 { 1.0 } else { 0.0 }]).collect();
         let normal: Vec<f32> = (0..w * h).flat_map(|_| [0.0, 0.6, 0.8, 0.0]).collect();
         let colour: Vec<f32> = (0..w * h).flat_map(|i| [-0.2, 0.5, 1.3, 1.0].map(|c| c + 0.001 * i as f32)).collect();
-        let buffers = RendererBuffers { width: w, height: h, position: &position, normal: &normal, colour: &colour };
+        let buffers = RendererBuffers {
+            width: w,
+            height: h,
+            position: &position,
+            normal: &normal,
+            colour: &colour,
+            segmentation: &[],
+            dropped_ids: &[],
+        };
         let mut out = FrameBuffers::default();
         buffers.convert_into(&mut out).unwrap();
         assert_eq!(&out.points[..3], &[0.0, -0.2, 0.5]);
