@@ -223,6 +223,13 @@ pub struct AssociationConfig {
     pub t_alpha: f64,
     /// Minimum centroid-history length for the single-sample t-test (default 3; at least 2).
     pub t_min_history: usize,
+    /// Standard error of the single-sample t-test. False (the paper's statistic): `σ(C)/√|C|`, a
+    /// test of the history's mean, which tightens as the history grows (with 100 centroids and
+    /// the 5 mm floor it rejects a centroid 1 mm off the mean), so a well-observed object seen
+    /// from a new side, where its partial cloud's centroid moves by centimetres, fails it. True
+    /// (beyond the paper): `σ(C)·√(1 + 1/|C|)`, the prediction interval of one new centroid from
+    /// the history's spread. Default false.
+    pub t_prediction: bool,
     /// Floor on the history's per-axis standard deviation in the t-tests, metres (default 0.005:
     /// the centroid of a partial surface cloud moves by millimetres with the viewpoint, so a
     /// history from similar views understates the spread of the next view's centroid).
@@ -268,6 +275,7 @@ impl Default for AssociationConfig {
             np_max_points: 30,
             t_alpha: 0.05,
             t_min_history: 3,
+            t_prediction: false,
             t_min_std_m: 0.005,
             merge_alpha: 0.05,
             merge_min_history: 3,
@@ -1109,7 +1117,8 @@ fn t_test(cfg: &AssociationConfig, centroid: &Vector3<f64>, obj: &GlobalObject) 
         if sd.is_nan() || sd <= 0.0 {
             return None;
         }
-        let t = (mean - centroid[axis]) / (sd / nf.sqrt());
+        let se = if cfg.t_prediction { sd * (1.0 + 1.0 / nf).sqrt() } else { sd / nf.sqrt() };
+        let t = (mean - centroid[axis]) / se;
         if stats::student_t_two_sided_p(t, nf - 1.0) < cfg.t_alpha {
             all = false;
             break;

@@ -453,3 +453,28 @@ fn modes_and_configs_round_trip_through_json() {
         serde_json::from_str(r#"{"association": {"mode": "iou"}, "local": {"pixel_stride": 2}}"#).unwrap();
     assert_eq!((m.association.mode, m.local.pixel_stride), (AssociationMode::Iou, 2));
 }
+
+/// The single-sample t-test's two statistics on a well-observed object: a history of 100
+/// centroids spread 1 cm along x (views from several sides). The paper's standard error of the
+/// mean (1 mm) rejects the next view's centroid 1.5 cm off the mean; the prediction interval of
+/// one new centroid (`t_prediction`) accepts it and still rejects a neighbour 6 cm away.
+#[test]
+fn t_prediction_accepts_a_new_side_and_rejects_a_neighbour() {
+    let cfg = AssociationConfig::default();
+    let pred = AssociationConfig { t_prediction: true, ..cfg };
+    let base = Vector3::new(0.5, 0.0, 0.03);
+    let mut o = GlobalObject::new(0, 0.005);
+    for f in 0..100u32 {
+        let dx = if f % 2 == 0 { 0.01 } else { -0.01 };
+        o.push_history(CentroidSample { frame: f, centroid_in_world: base + Vector3::new(dx, 0.0, 0.0) }, 100);
+    }
+    let side = base + Vector3::new(0.015, 0.0, 0.0);
+    let neighbour = base + Vector3::new(0.06, 0.0, 0.0);
+    assert_eq!(t_test(&cfg, &side, &o), Some(false));
+    assert_eq!(t_test(&pred, &side, &o), Some(true));
+    assert_eq!(t_test(&cfg, &neighbour, &o), Some(false));
+    assert_eq!(t_test(&pred, &neighbour, &o), Some(false));
+    // On y and z the history has no spread: the 5 mm floor decides for both statistics.
+    let off_y = base + Vector3::new(0.0, 0.02, 0.0);
+    assert_eq!(t_test(&pred, &off_y, &o), Some(false));
+}
