@@ -146,6 +146,40 @@ fn reflect101(i: isize, n: usize) -> usize {
     i as usize
 }
 
+/// The vertical pass of the Gaussian blur over the horizontally blurred rows (reflect-101 border),
+/// rounded to 8 bits.
+fn blur_columns(horiz: &[f32], width: usize, height: usize, kernel: &[f32], half: usize) -> Vec<u8> {
+    let mut blurred = vec![0u8; width * height];
+    let mut acc = vec![0.0f32; width];
+    for (y, out) in blurred.chunks_exact_mut(width).enumerate() {
+        acc.iter_mut().for_each(|a| *a = 0.0);
+        for (k, &kv) in kernel.iter().enumerate() {
+            let sy = reflect101(y as isize + k as isize - half as isize, height);
+            for (a, v) in acc.iter_mut().zip(&horiz[sy * width..(sy + 1) * width]) {
+                *a += kv * v;
+            }
+        }
+        for (o, a) in out.iter_mut().zip(&acc) {
+            *o = (a + 0.5) as u8;
+        }
+    }
+    blurred
+}
+
+/// `round(scale · n)`, at least 1.
+fn scaled_size(n: usize, scale: f64) -> usize {
+    ((n as f64 * scale).round() as usize).max(1)
+}
+
+/// Bilinear resampling with pixel-centre alignment: the two source indices of output index `dst`
+/// (of a side `n` long in the source) and the second one's weight.
+fn bilinear_taps(dst: usize, n: usize, scale: f64) -> (usize, usize, f32) {
+    let s = ((dst as f64 + 0.5) * (1.0 / scale) - 0.5).max(0.0);
+    let i0 = (s.floor() as usize).min(n - 1);
+    let i1 = (i0 + 1).min(n - 1);
+    (i0, i1, (s - i0 as f64) as f32)
+}
+
 /// OpenCV's LSD pre-scaling: Gaussian blur with σ = 0.6 / scale (kernel half-size
 /// ⌈σ·√(2·3·ln 10)⌉, reflect-101 border), then bilinear resampling to `round(scale · size)` with
 /// pixel-centre alignment (`cv2.resize(.., INTER_LINEAR)`), both rounded to 8 bits as OpenCV does.
@@ -172,29 +206,9 @@ fn gaussian_downscale(image: &[u8], width: usize, height: usize, scale: f64) -> 
             }
         }
     }
-    let mut blurred = vec![0u8; width * height];
-    let mut acc = vec![0.0f32; width];
-    for (y, out) in blurred.chunks_exact_mut(width).enumerate() {
-        acc.iter_mut().for_each(|a| *a = 0.0);
-        for (k, &kv) in kernel.iter().enumerate() {
-            let sy = reflect(y as isize + k as isize - half as isize, height);
-            for (a, v) in acc.iter_mut().zip(&horiz[sy * width..(sy + 1) * width]) {
-                *a += kv * v;
-            }
-        }
-        for (o, a) in out.iter_mut().zip(&acc) {
-            *o = (a + 0.5) as u8;
-        }
-    }
-    let new_w = ((width as f64 * scale).round() as usize).max(1);
-    let new_h = ((height as f64 * scale).round() as usize).max(1);
-    let inv = 1.0 / scale;
-    let taps = |dst: usize, n: usize| -> (usize, usize, f32) {
-        let s = ((dst as f64 + 0.5) * inv - 0.5).max(0.0);
-        let i0 = (s.floor() as usize).min(n - 1);
-        let i1 = (i0 + 1).min(n - 1);
-        (i0, i1, (s - i0 as f64) as f32)
-    };
+    let blurred = blur_columns(&horiz, width, height, &kernel, half);
+    let (new_w, new_h) = (scaled_size(width, scale), scaled_size(height, scale));
+    let taps = |dst: usize, n: usize| bilinear_taps(dst, n, scale);
     let cols: Vec<(usize, usize, f32)> = (0..new_w).map(|x| taps(x, width)).collect();
     // Each source row resampled along x once (an output row reads two, and neighbouring output
     // rows share them), then the rows blended: the same products and sums per pixel.
@@ -302,29 +316,9 @@ mod tests {
                 }
             }
         }
-        let mut blurred = vec![0u8; width * height];
-        let mut acc = vec![0.0f32; width];
-        for (y, out) in blurred.chunks_exact_mut(width).enumerate() {
-            acc.iter_mut().for_each(|a| *a = 0.0);
-            for (k, &kv) in kernel.iter().enumerate() {
-                let sy = reflect(y as isize + k as isize - half as isize, height);
-                for (a, v) in acc.iter_mut().zip(&horiz[sy * width..(sy + 1) * width]) {
-                    *a += kv * v;
-                }
-            }
-            for (o, a) in out.iter_mut().zip(&acc) {
-                *o = (a + 0.5) as u8;
-            }
-        }
-        let new_w = ((width as f64 * scale).round() as usize).max(1);
-        let new_h = ((height as f64 * scale).round() as usize).max(1);
-        let inv = 1.0 / scale;
-        let taps = |dst: usize, n: usize| -> (usize, usize, f32) {
-            let s = ((dst as f64 + 0.5) * inv - 0.5).max(0.0);
-            let i0 = (s.floor() as usize).min(n - 1);
-            let i1 = (i0 + 1).min(n - 1);
-            (i0, i1, (s - i0 as f64) as f32)
-        };
+        let blurred = blur_columns(&horiz, width, height, &kernel, half);
+        let (new_w, new_h) = (scaled_size(width, scale), scaled_size(height, scale));
+        let taps = |dst: usize, n: usize| bilinear_taps(dst, n, scale);
         let cols: Vec<(usize, usize, f32)> = (0..new_w).map(|x| taps(x, width)).collect();
         let mut out = vec![0u8; new_w * new_h];
         for (y, dst) in out.chunks_exact_mut(new_w).enumerate() {
