@@ -6,8 +6,9 @@
 //! `track_frame` bench's sequence, `slam::synthetic::TrackSequence`, after ray-casting its 20
 //! frames, about 0.4 s), `... orb 600` (600 extractions of the `orb_extract_640x480` bench
 //! frames) or `... sensor 150` (150 frames of the `sensor_model_640x480` bench,
-//! `sensor::synthetic::TiltedTable`). Prints a checksum (inliers, keypoints, or a hash of every
-//! depth and colour value) so two builds' work can be compared too.
+//! `sensor::synthetic::TiltedTable`; `sensor-roll`: the same frames with the `_rolling` bench's
+//! motion). Prints a checksum (inliers, keypoints, or a hash of every depth and colour value) so
+//! two builds' work can be compared too.
 
 use anyhow::{anyhow, bail, Result};
 use objslam_core::sensor::synthetic::TiltedTable;
@@ -17,7 +18,7 @@ use objslam_core::slam::{OrbConfig, OrbExtractor, Tracker, TrackerConfig};
 
 fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().collect();
-    let usage = || anyhow!("usage: fixed_work (track | orb | sensor) <count>");
+    let usage = || anyhow!("usage: fixed_work (track | orb | sensor | sensor-roll) <count>");
     let n: usize = args.get(2).ok_or_else(usage)?.parse().map_err(|_| usage())?;
     match args.get(1).map(String::as_str) {
         Some("orb") => {
@@ -39,11 +40,14 @@ fn main() -> Result<()> {
             }
             println!("{acc} {:.3} ms/frame", t0.elapsed().as_secs_f64() * 1e3 / n.max(1) as f64);
         }
-        Some("sensor") => {
+        Some(which @ ("sensor" | "sensor-roll")) => {
             let cfg = SensorConfig::default();
             let scene = TiltedTable::new();
             let unit = SensorUnit::draw(&cfg, scene.intrinsics, 3)?;
-            let motion = TiltedTable::motion(cfg.colour.exposure_s);
+            let motion = match which {
+                "sensor" => TiltedTable::motion(cfg.colour.exposure_s),
+                _ => TiltedTable::rolling_motion(cfg.colour.exposure_s),
+            };
             let mut hash = 0u64;
             for i in 0..n as u64 {
                 let out = simulate_frame(&cfg, &unit, &scene.frame(), Some(&motion), 7, i)?;

@@ -654,6 +654,7 @@ impl<'a> MotionBlur<'a> {
 
     /// Where pixel (x, y)'s segment changes lines (crosses l ± ½): the sum up to there on the
     /// line it leaves minus the same on the line it enters.
+    #[inline(always)]
     fn line_changes(&self, x: usize, y: usize) -> Px {
         let w = self.w;
         let steep = self.steep[x] != 0;
@@ -666,16 +667,19 @@ impl<'a> MotionBlur<'a> {
         // The crossings come in order along the segment (t grows from line to line), so each is
         // clamped to the segment's own ends: no crossing waits for the one before it.
         let (kaf, kbf) = (ka as f32, kb as f32);
+        let (step, off, next_off) =
+            if up { (line_stride as isize, 0.5, 0.0) } else { (-(line_stride as isize), -0.5, 1.0) };
         let mut total = [0.0f32; 4];
-        let mut l = la;
-        while l != lb {
-            let t = p + (l as f32 + if up { 0.5 } else { -0.5 } - q) * inv;
+        let mut lf = la as f32;
+        let mut i = (la * line_stride) as isize;
+        for _ in 0..la.abs_diff(lb) {
+            let t = p + (lf + off - q) * inv;
             // The first pixel past line l's run.
-            let next = if up { ceil_f(t) } else { floor_f(t) + 1.0 };
-            let next = to_i32(min_f(max_f(next, kaf), kbf)) as usize;
-            let l_next = if up { l + 1 } else { l - 1 };
-            total = add4(total, sub4(pre[l * line_stride + next * ps], pre[l_next * line_stride + next * ps]));
-            l = l_next;
+            let next = if up { ceil_f(t) } else { floor_f(t) } + next_off;
+            let next = (to_i32(min_f(max_f(next, kaf), kbf)) as usize * ps) as isize;
+            total = add4(total, sub4(pre[(i + next) as usize], pre[(i + step + next) as usize]));
+            i += step;
+            lf += if up { 1.0 } else { -1.0 };
         }
         total
     }

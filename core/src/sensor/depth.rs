@@ -647,7 +647,7 @@ struct Registration {
     lo_y: Vec<f32>,
     hi_y: Vec<f32>,
     zq: Vec<f32>,
-    rect: Vec<[i32; 4]>,
+    rect: [Vec<i32>; 4],
     /// The target rows written so far (empty: none).
     touched: std::ops::Range<usize>,
 }
@@ -684,7 +684,7 @@ impl Registration {
             lo_y: vec![0.0; w],
             hi_y: vec![0.0; w],
             zq: vec![0.0; w],
-            rect: vec![[0; 4]; w],
+            rect: [0, 1, 2, 3].map(|_| vec![0; w]),
             touched: 0..0,
         }
     }
@@ -729,12 +729,17 @@ impl Registration {
             zq[x] = if hit { quantised } else { f32::INFINITY };
         }
         let (wf, hf) = (w as f32, self.h as f32);
-        for (((r, &lx), &hx), (&ly, &hy)) in self.rect.iter_mut().zip(&*lo_x).zip(&*hi_x).zip(lo_y.iter().zip(&*hi_y)) {
-            *r = [round_index(min_f(lx, hx), wf), round_index(hx, wf), round_index(ly, hf), round_index(hy, hf)];
+        // Each bound in an array of its own (so that the rounding runs on several at a time).
+        let [rx0, rx1, ry0, ry1] = &mut self.rect;
+        let (rx0, rx1, ry0, ry1) = (&mut rx0[..w], &mut rx1[..w], &mut ry0[..w], &mut ry1[..w]);
+        for x in 0..w {
+            let (lx, hx, ly, hy) = (lo_x[x], hi_x[x], lo_y[x], hi_y[x]);
+            (rx0[x], rx1[x], ry0[x], ry1[x]) =
+                (round_index(min_f(lx, hx), wf), round_index(hx, wf), round_index(ly, hf), round_index(hy, hf));
         }
         let (mut lo, mut hi) = (i32::MAX, 0);
         let last = out.len().saturating_sub(1);
-        for (&[x0, x1, y0, y1], &zv) in self.rect.iter().zip(&*zq) {
+        for (((&x0, &x1), (&y0, &y1)), &zv) in rx0.iter().zip(&*rx1).zip(ry0.iter().zip(&*ry1)).zip(&*zq) {
             if x1 > x0 && zv < f32::INFINITY {
                 (lo, hi) = (lo.min(y0), hi.max(y1));
             }

@@ -1133,6 +1133,41 @@ mod tests {
         assert!(request.run_renderer(&huge).unwrap_err().to_string().contains("dropped_ids"));
     }
 
+    /// FNV-1a over every depth value's bits and every colour byte.
+    fn output_hash(out: &SensorFrame) -> u64 {
+        let bytes = out.depth_m.iter().flat_map(|v| v.to_bits().to_le_bytes()).chain(out.rgb.iter().copied());
+        bytes.fold(0xcbf2_9ce4_8422_2325, |h, b| (h ^ u64::from(b)).wrapping_mul(0x100_0000_01b3))
+    }
+
+    #[test]
+    fn bench_frame_outputs_are_unchanged() {
+        // Every depth value and colour byte of the bench frame at rest, moving along the rows (the
+        // bench's motion), rolling about the optical axis and moving steeply, on one and two
+        // threads. A change of the model changes these hashes on purpose (update them then); a
+        // change of speed alone must not.
+        let cfg = SensorConfig::default();
+        let scene = synthetic::TiltedTable::new();
+        let unit = SensorUnit::draw(&cfg, scene.intrinsics, 3).unwrap();
+        let mut steep = Matrix4::identity();
+        steep.fixed_view_mut::<3, 3>(0, 0).copy_from(Rotation3::new(Vector3::new(0.03, 0.004, 0.0)).matrix());
+        steep[(1, 3)] = 0.004;
+        let exposure = cfg.colour.exposure_s;
+        let cases = [
+            (None, 0x85fa_23c6_77f3_ce35),
+            (Some(synthetic::TiltedTable::motion(exposure)), 0x6a43_e60a_a567_4499),
+            (Some(synthetic::TiltedTable::rolling_motion(exposure)), 0xd65a_fbe5_f40d_75c1),
+            (Some(steep), 0xcbce_9799_3e63_bbf7),
+        ];
+        let mut got = vec![];
+        for (motion, _) in cases {
+            let one = simulate_frame_on(1, &cfg, &unit, &scene.frame(), None, motion.as_ref(), 7, 3).unwrap();
+            let two = simulate_frame_on(2, &cfg, &unit, &scene.frame(), None, motion.as_ref(), 7, 3).unwrap();
+            got.push((output_hash(&one), output_hash(&two)));
+        }
+        let want: Vec<(u64, u64)> = cases.iter().map(|(_, h)| (*h, *h)).collect();
+        assert_eq!(got, want, "{:x?}", got);
+    }
+
     #[test]
     fn renderer_buffers_convert_to_opencv_axes_and_bytes() {
         let (w, h) = (3usize, 4usize);

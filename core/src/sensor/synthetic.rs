@@ -80,6 +80,18 @@ impl TiltedTable {
         m[(0, 3)] = 0.3 * exposure_s;
         m
     }
+
+    /// The camera's motion over an exposure of `exposure_s` seconds when it rolls at 1.2 rad/s
+    /// about its optical axis (a wrist turning: about 7 px at the image corners over 15 ms, under
+    /// a pixel at the centre, opposite directions on opposite sides), turns at 0.1 rad/s about x
+    /// and −0.05 rad/s about y and moves at 0.05 m/s.
+    pub fn rolling_motion(exposure_s: f64) -> Matrix4<f64> {
+        let mut m = Matrix4::identity();
+        let r = Rotation3::new(Vector3::new(0.1, -0.05, 1.2) * exposure_s);
+        m.fixed_view_mut::<3, 3>(0, 0).copy_from(r.matrix());
+        m.fixed_view_mut::<3, 1>(0, 3).copy_from(&(Vector3::new(0.02, 0.01, 0.045) * exposure_s));
+        m
+    }
 }
 
 impl Default for TiltedTable {
