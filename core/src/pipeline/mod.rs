@@ -262,11 +262,13 @@ pub struct PipelineConfig {
     /// [`EXISTENCE_DEPTH_TOLERANCE_M`] nearer than its near side), yet no detection was assigned to
     /// it and no detection of another label boxed it ([`EXISTENCE_OTHER_LABEL_IOU`]: a look-alike's
     /// name on the same object is a label confusion). A detector's false positive (a stray box on
-    /// a bottle's top, a duplicate beside the
-    /// object it copies) is boxed in a few frames of the many that see its place; a real object
-    /// is boxed in most frames that see it, and frames that do not see it (hidden, cut by the
-    /// image border) do not count. Frames count from the object's first estimate (the test needs
-    /// `parameterize`). Fraction in [0, 1]; 0 disables (the paper: no such test).
+    /// a bottle's top, a duplicate beside the object it copies) is boxed in a few frames of the
+    /// many that see its place; a real object is boxed in most frames that see it, and frames
+    /// that do not see it (hidden, cut by the image border) do not count. Frames count from the
+    /// object's first estimate (the test needs `parameterize`). Fraction in [0, 1]; 0 disables
+    /// (the paper: no such test). Default 0.33 (studies/existence_evidence: on the hard suite and
+    /// the test split, counts within one of the truth on 7 and 6 of 7 scenes instead of 4 and 3,
+    /// mean recall at 3D IoU 0.25 unchanged within 0.01).
     pub existence_ratio: f64,
     /// With a SLAM pose source: when the tracker re-fits its world ← map gauge (every view's
     /// kinematic prior moves it by millimetres), move the whole map with it
@@ -302,7 +304,7 @@ impl Default for PipelineConfig {
             consolidate_overlap_co_observed_share: 0.5,
             consolidate_covered_share: 2.0,
             min_observations: 3,
-            existence_ratio: 0.0,
+            existence_ratio: 0.33,
             follow_slam_gauge: true,
         }
     }
