@@ -18,10 +18,8 @@ use std::path::Path;
 
 use anyhow::{anyhow, Result};
 use objslam_core::eval::{estimates_from_map, evaluate, EvalConfig};
-use objslam_core::explore::TableRect;
 use objslam_core::pipeline::PipelineConfig;
 use objslam_core::system::capture::Capture;
-use objslam_core::system::System;
 use serde_json::Value;
 
 /// Merge `patch` into `base`, objects key by key.
@@ -53,9 +51,7 @@ fn main() -> Result<()> {
         let mut cfg = serde_json::to_value(&capture.header.mapper_config)?;
         merge(&mut cfg, &patch);
         let cfg: PipelineConfig = serde_json::from_value(cfg)?;
-        let [cx, cy, sx, sy] = capture.header.table;
-        let table = TableRect { center_m: [cx, cy], size_m: [sx, sy], height_m: 0.0 };
-        let mut system = System::new(cfg, capture.header.active_config.clone(), capture.header.tracker_config, table)?;
+        let mut system = capture.system_with(cfg)?;
         capture.replay(&mut system)?;
         let map = system.map();
         let ev = evaluate(&capture.header.ground_truth, &estimates_from_map(&map), &EvalConfig::default());

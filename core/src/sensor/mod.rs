@@ -920,6 +920,17 @@ impl SensorRequest {
 mod tests {
     use super::*;
 
+    /// Renderer buffers of a `w` × `h` frame without segmentation.
+    fn unsegmented<'a>(
+        w: usize,
+        h: usize,
+        position: &'a [f32],
+        normal: &'a [f32],
+        colour: &'a [f32],
+    ) -> RendererBuffers<'a> {
+        RendererBuffers { width: w, height: h, position, normal, colour, segmentation: &[], dropped_ids: &[] }
+    }
+
     fn nominal() -> Intrinsics {
         Intrinsics { fx: 433.0, fy: 433.0, cx: 320.0, cy: 240.0 }
     }
@@ -1061,15 +1072,7 @@ mod tests {
                 ]);
             }
         }
-        let buffers = RendererBuffers {
-            width: w,
-            height: h,
-            position: &position,
-            normal: &normal,
-            colour: &colour,
-            segmentation: &[],
-            dropped_ids: &[],
-        };
+        let buffers = unsegmented(w, h, &position, &normal, &colour);
         let mut converted = FrameBuffers::default();
         buffers.convert_into(&mut converted).unwrap();
         let rolling = [
@@ -1175,15 +1178,7 @@ mod tests {
             (0..w * h).flat_map(|i| [0.1 * i as f32, 0.2, -0.5, if i == 5 { 1.0 } else { 0.0 }]).collect();
         let normal: Vec<f32> = (0..w * h).flat_map(|_| [0.0, 0.6, 0.8, 0.0]).collect();
         let colour: Vec<f32> = (0..w * h).flat_map(|i| [-0.2, 0.5, 1.3, 1.0].map(|c| c + 0.001 * i as f32)).collect();
-        let buffers = RendererBuffers {
-            width: w,
-            height: h,
-            position: &position,
-            normal: &normal,
-            colour: &colour,
-            segmentation: &[],
-            dropped_ids: &[],
-        };
+        let buffers = unsegmented(w, h, &position, &normal, &colour);
         let mut out = FrameBuffers::default();
         buffers.convert_into(&mut out).unwrap();
         assert_eq!(&out.points[..3], &[0.0, -0.2, 0.5]);

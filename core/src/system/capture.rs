@@ -164,14 +164,14 @@ impl Capture {
 
     /// A fresh system with the capture's configs.
     pub fn system(&self) -> Result<System, CaptureError> {
+        self.system_with(self.header.mapper_config.clone())
+    }
+
+    /// A fresh system with the capture's exploration and tracker configs and `mapper_config`.
+    pub fn system_with(&self, mapper_config: PipelineConfig) -> Result<System, CaptureError> {
         let [cx, cy, sx, sy] = self.header.table;
         let table = TableRect { center_m: [cx, cy], size_m: [sx, sy], height_m: 0.0 };
-        Ok(System::new(
-            self.header.mapper_config.clone(),
-            self.header.active_config.clone(),
-            self.header.tracker_config,
-            table,
-        )?)
+        Ok(System::new(mapper_config, self.header.active_config.clone(), self.header.tracker_config, table)?)
     }
 
     /// A frame's grey image, depth and core frame (its true pose: [`CapturedFrame::true_pose`]).
