@@ -1,7 +1,7 @@
 //! The object map of recorded episodes under a changed pipeline config, judged against their
 //! ground truth: association and consolidation studies without rendering.
 //!
-//! `cargo run --release -p objslam-core --example map_replay -- [--objects] '<json patch>' <capture dir>...`
+//! `cargo run --release -p objslam-core --example map_replay -- [--objects] [--dump DIR] '<json patch>' <capture dir>...`
 //!
 //! Each capture (`experiments/capture.py`) is replayed once through a fresh system whose
 //! `mapper_config` is the capture's with the JSON object `patch` merged in (nested objects merge
@@ -9,8 +9,10 @@
 //! against the truth, recall and precision at 3D IoU 0.25, and the mean 3D IoU; then the totals:
 //! captures whose count is within one of the truth, captures with recall at least 0.9, mean IoU.
 //! With `--objects` it also lists every true object under 3D IoU 0.25 (its estimate and the true
-//! objects that estimate covers, or the estimates covering a missed one) and every estimate
-//! matched to no true object (its observations and the two nearest true objects).
+//! objects that estimate covers, or the estimates covering a missed one, with their label votes)
+//! and every estimate matched to no true object (its observations and the two nearest true
+//! objects). With `--dump DIR` it writes each replayed map, clouds included, to
+//! `DIR/<capture>.map.json`.
 //! The views are the capture's (the strategy's choices under the recorded map), so this ranks
 //! mapping changes on fixed inputs; the exploration benchmark judges them in closed loop.
 
@@ -40,7 +42,14 @@ fn main() -> Result<()> {
     if objects {
         args.remove(0);
     }
-    let usage = || anyhow!("usage: map_replay [--objects] '<json patch>' <capture dir>...");
+    // Optional: write each replayed map (with the objects' clouds) to DIR/<capture>.map.json.
+    let dump = if args.first().is_some_and(|a| a == "--dump") && args.len() > 1 {
+        args.remove(0);
+        Some(std::path::PathBuf::from(args.remove(0)))
+    } else {
+        None
+    };
+    let usage = || anyhow!("usage: map_replay [--objects] [--dump DIR] '<json patch>' <capture dir>...");
     let patch: Value = serde_json::from_str(args.first().ok_or_else(usage)?)?;
     if args.len() < 2 {
         return Err(usage());
@@ -54,6 +63,10 @@ fn main() -> Result<()> {
         let mut system = capture.system_with(cfg)?;
         capture.replay(&mut system)?;
         let map = system.map();
+        if let Some(out) = &dump {
+            let name = Path::new(dir).file_name().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+            std::fs::write(out.join(format!("{name}.map.json")), serde_json::to_string(&map)?)?;
+        }
         let ev = evaluate(&capture.header.ground_truth, &estimates_from_map(&map), &EvalConfig::default());
         if objects {
             for o in &ev.objects {
@@ -75,7 +88,8 @@ fn main() -> Result<()> {
                                 let f = objslam_core::geometry::intersection_volume(&m.geometry(), &g.geometry)
                                     / g.geometry.volume();
                                 if f > 0.1 {
-                                    println!("      covered by est {} ({:?}) {:.2}", m.id, m.label, f);
+                                    let votes = system.pipeline().label_votes(m.id);
+                                    println!("      covered by est {} ({:?}) {:.2} votes {votes:?}", m.id, m.label, f);
                                 }
                             }
                         }

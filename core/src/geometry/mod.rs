@@ -538,6 +538,26 @@ impl RadiusGrid {
             })
         })
     }
+
+    /// How many stored points lie within the radius of `q` (inclusive; 0 for a non-finite `q`).
+    pub fn count_within(&self, q: &Point3<f64>) -> usize {
+        if !q.coords.iter().all(|v| v.is_finite()) {
+            return 0;
+        }
+        let c = self.cell(q);
+        let r2 = self.radius * self.radius;
+        let mut n = 0;
+        for dx in -1..=1 {
+            for dy in -1..=1 {
+                for dz in -1..=1 {
+                    if let Some(ps) = self.cells.get(&[c[0] + dx, c[1] + dy, c[2] + dz]) {
+                        n += ps.iter().filter(|p| (*p - q).norm_squared() <= r2).count();
+                    }
+                }
+            }
+        }
+        n
+    }
 }
 
 /// The main body of a cloud: points are voxelised into cells of `voxel_m`; occupied cells within

@@ -270,6 +270,21 @@ pub struct PipelineConfig {
     /// the test split, counts within one of the truth on 7 and 6 of 7 scenes instead of 4 and 3,
     /// mean recall at 3D IoU 0.25 unchanged within 0.01).
     pub existence_ratio: f64,
+    /// Beyond the paper: point ownership between neighbours. A box reaches past its object, so
+    /// an object's cloud holds pieces of its neighbours (a bottle's flank in a flat block's
+    /// cloud makes the block three times as tall), and no depth cut removes them when the two
+    /// surfaces touch in the image. The neighbour's own cloud is far denser there: before an
+    /// object is estimated, every point of its cloud that has more points of another object's
+    /// cloud than of its own within this radius is left out. Metres; 0 disables (the paper: each
+    /// object keeps its ensemble's points). Default 0.005 (studies/point_ownership: on the hard
+    /// suite's 21 replayed episodes, mean 3D IoU 0.641 instead of 0.580, recall at 3D IoU 0.25
+    /// at least 0.9 on 20 instead of 17).
+    pub ownership_radius_m: f64,
+    /// Ownership trims a minority: when an object would keep less than this share of its cloud,
+    /// the other object holds the same surface (a duplicate, or the same object under a
+    /// look-alike's label), which is consolidation's to decide, and the cloud is kept whole
+    /// (default 0.5).
+    pub ownership_min_kept: f64,
     /// With a SLAM pose source: when the tracker re-fits its world ← map gauge (every view's
     /// kinematic prior moves it by millimetres), move the whole map with it
     /// ([`ObjectPipeline::transform_world`]) so points fused under different gauges stay one rigid
@@ -305,6 +320,8 @@ impl Default for PipelineConfig {
             consolidate_covered_share: 2.0,
             min_observations: 3,
             existence_ratio: 0.33,
+            ownership_radius_m: 0.005,
+            ownership_min_kept: 0.5,
             follow_slam_gauge: true,
         }
     }
@@ -666,10 +683,26 @@ impl ObjectPipeline {
         }
         let map = self.raw_map();
         let dirty = std::mem::take(&mut self.dirty);
+        let r = self.config.ownership_radius_m;
+        let clouds: Vec<&[Point3<f64>]> =
+            if r > 0.0 { map.objects.iter().map(|o| &o.points_in_world[..]).collect() } else { Vec::new() };
+        let bounds: Vec<Option<(Point3<f64>, Point3<f64>)>> = clouds.iter().map(|c| cloud_bounds(c)).collect();
         for id in dirty {
-            let Some(obj) = map.get(id) else { continue };
+            let Some(index) = map.objects.iter().position(|o| o.id == id) else { continue };
             let Some(est) = self.estimators.get_mut(&id) else { continue };
-            if let Ok(e) = est.estimate(&obj.points_in_world) {
+            let obj = &map.objects[index];
+            let owned;
+            let points = if r > 0.0 {
+                owned = owned_points(&clouds, &bounds, index, r);
+                if (owned.len() as f64) < self.config.ownership_min_kept * obj.points_in_world.len() as f64 {
+                    &obj.points_in_world[..]
+                } else {
+                    &owned[..]
+                }
+            } else {
+                &obj.points_in_world[..]
+            };
+            if let Ok(e) = est.estimate(points) {
                 self.estimates.insert(id, e);
             }
         }
@@ -922,18 +955,7 @@ impl ObjectPipeline {
         for o in base.objects {
             // The last object on the fold chain that is still in the association's map (a chain
             // may pass through an id the association itself merged away).
-            let (mut id, mut root, mut guard) = (o.id, o.id, 0);
-            while let Some(next) = self.merged_into.get(&id) {
-                id = *next;
-                if present.contains(&id) {
-                    root = id;
-                }
-                guard += 1;
-                if guard > 10_000 {
-                    break;
-                }
-            }
-            groups.entry(root).or_default().push(o);
+            groups.entry(self.fold_root(o.id, &present)).or_default().push(o);
         }
         let mut objects = Vec::with_capacity(groups.len());
         for (root, mut members) in groups {
@@ -1046,6 +1068,36 @@ impl ObjectPipeline {
         map
     }
 
+    /// An object's label votes (detections per [`crate::map::Label::index`], folded objects'
+    /// included), `None` for an unknown id or under the naive mapper.
+    pub fn label_votes(&self, id: u32) -> Option<[u32; crate::map::Label::ALL.len()]> {
+        let Mapper::Ensemble(a) = &self.mapper else { return None };
+        a.object(id)?;
+        let present: BTreeSet<u32> = a.objects().map(GlobalObject::id).collect();
+        let mut votes = [0; crate::map::Label::ALL.len()];
+        for o in a.objects() {
+            if self.fold_root(o.id(), &present) == id {
+                for (v, n) in votes.iter_mut().zip(o.label_votes()) {
+                    *v += n;
+                }
+            }
+        }
+        Some(votes)
+    }
+
+    /// The last object on `id`'s fold chain that is in `present` (`id` itself when unfolded).
+    fn fold_root(&self, id: u32, present: &BTreeSet<u32>) -> u32 {
+        let (mut id, mut root) = (id, id);
+        for _ in 0..10_000 {
+            let Some(next) = self.merged_into.get(&id) else { break };
+            id = *next;
+            if present.contains(&id) {
+                root = id;
+            }
+        }
+        root
+    }
+
     /// The estimator inputs of every confirmed object that has an estimator.
     pub fn estimator_inputs(&self) -> Vec<EstimatorInput> {
         let mut map = self.raw_map();
@@ -1147,6 +1199,51 @@ pub fn frame_segments(
         return Ok(None);
     }
     Ok(detect_segments(grey, lsd).ok())
+}
+
+/// Axis-aligned bounds of a cloud's finite points (`None` when it has none).
+fn cloud_bounds(points: &[Point3<f64>]) -> Option<(Point3<f64>, Point3<f64>)> {
+    let mut it = points.iter().filter(|p| p.coords.iter().all(|v| v.is_finite()));
+    let first = *it.next()?;
+    Some(it.fold((first, first), |(lo, hi), p| (lo.inf(p), hi.sup(p))))
+}
+
+/// The points of `clouds[index]` its object owns ([`PipelineConfig::ownership_radius_m`]): those
+/// with at least as many of its own points as of any other cloud's within `radius`. `bounds`
+/// holds every cloud's [`cloud_bounds`], in the same order.
+fn owned_points(
+    clouds: &[&[Point3<f64>]],
+    bounds: &[Option<(Point3<f64>, Point3<f64>)>],
+    index: usize,
+    radius: f64,
+) -> Vec<Point3<f64>> {
+    let own = clouds[index];
+    let Some(Some((lo, hi))) = bounds.get(index).copied() else { return own.to_vec() };
+    let pad = nalgebra::Vector3::repeat(radius);
+    let (lo, hi) = (lo - pad, hi + pad);
+    let inside = |p: &Point3<f64>| (0..3).all(|k| p[k] >= lo[k] && p[k] <= hi[k]);
+    let mut others: Vec<RadiusGrid> = Vec::new();
+    for (j, (cloud, b)) in clouds.iter().zip(bounds).enumerate() {
+        let Some((olo, ohi)) = b else { continue };
+        if j == index || (0..3).any(|k| olo[k] > hi[k] || ohi[k] < lo[k]) {
+            continue;
+        }
+        let Some(mut grid) = RadiusGrid::new(radius) else { return own.to_vec() };
+        cloud.iter().filter(|p| inside(p)).for_each(|p| grid.insert(*p));
+        others.push(grid);
+    }
+    if others.is_empty() {
+        return own.to_vec();
+    }
+    let Some(mut mine) = RadiusGrid::new(radius) else { return own.to_vec() };
+    own.iter().for_each(|p| mine.insert(*p));
+    own.iter()
+        .filter(|p| {
+            let n = mine.count_within(p);
+            others.iter().all(|g| g.count_within(p) <= n)
+        })
+        .copied()
+        .collect()
 }
 
 /// Share of `query` points with a point of `reference` within `radius` (0 for an empty query).
@@ -1507,5 +1604,68 @@ mod tests {
         off.estimates.insert(1, slab(0.5, 0.1, 0.027, 0.037));
         off.snap_unsupported();
         assert!((off.estimates[&1].geometry.center.z - 0.032).abs() < 1e-12);
+    }
+
+    /// A grid of points on a rectangle in the plane `axis = at`, spacing `step`.
+    fn sheet(axis: usize, at: f64, a: (f64, f64), b: (f64, f64), step: f64) -> Vec<Point3<f64>> {
+        let (i, j) = match axis {
+            0 => (1, 2),
+            1 => (0, 2),
+            _ => (0, 1),
+        };
+        let mut out = Vec::new();
+        let (na, nb) = (((a.1 - a.0) / step).round() as usize, ((b.1 - b.0) / step).round() as usize);
+        for ka in 0..=na {
+            for kb in 0..=nb {
+                let mut p = Point3::new(0.0, 0.0, 0.0);
+                p[axis] = at;
+                p[i] = a.0 + ka as f64 * step;
+                p[j] = b.0 + kb as f64 * step;
+                out.push(p);
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn a_neighbours_flank_goes_to_the_neighbour() {
+        // A flat block (top at z = 0.024, x in [0, 0.10], y in [0, 0.05]) and a tall neighbour whose
+        // flank is the plane y = 0.063 (z up to 0.19), seen in many frames (dense). The block's
+        // cloud holds a thin strip of that flank up to z = 0.07, the neighbour's cloud holds a
+        // strip of the block's top edge.
+        let block_top = sheet(2, 0.024, (0.0, 0.10), (0.0, 0.05), 0.002);
+        let flank = sheet(1, 0.063, (0.0, 0.10), (0.005, 0.19), 0.002);
+        let stray_in_block: Vec<Point3<f64>> = sheet(1, 0.063, (0.03, 0.06), (0.03, 0.07), 0.004);
+        let stray_in_flank: Vec<Point3<f64>> = sheet(2, 0.024, (0.02, 0.08), (0.046, 0.05), 0.004);
+        let block: Vec<Point3<f64>> = block_top.iter().chain(&stray_in_block).copied().collect();
+        let neighbour: Vec<Point3<f64>> = flank.iter().chain(&stray_in_flank).copied().collect();
+        let clouds: Vec<&[Point3<f64>]> = vec![&block, &neighbour];
+        let bounds: Vec<_> = clouds.iter().map(|c| cloud_bounds(c)).collect();
+        let kept = owned_points(&clouds, &bounds, 0, 0.005);
+        let top = kept.iter().map(|p| p.z).fold(f64::MIN, f64::max);
+        assert!((top - 0.024).abs() < 1e-9, "block top {top}");
+        assert_eq!(kept.len(), block_top.len(), "every top point kept, every flank point dropped");
+        let kept = owned_points(&clouds, &bounds, 1, 0.005);
+        assert_eq!(kept.len(), flank.len(), "the neighbour loses the block's edge");
+        // Without a neighbour near it, a cloud keeps everything.
+        let far: Vec<Point3<f64>> = neighbour.iter().map(|p| p + Vector3::new(1.0, 0.0, 0.0)).collect();
+        let clouds: Vec<&[Point3<f64>]> = vec![&block, &far];
+        let bounds: Vec<_> = clouds.iter().map(|c| cloud_bounds(c)).collect();
+        assert_eq!(owned_points(&clouds, &bounds, 0, 0.005).len(), block.len());
+    }
+
+    #[test]
+    fn near_touching_lookalikes_keep_their_own_surfaces() {
+        // Two identical boxes' near faces 3 mm apart (x = 0.05 and x = 0.053), each cloud its own
+        // faces only: ownership changes nothing.
+        let a: Vec<Point3<f64>> =
+            [sheet(0, 0.05, (0.0, 0.05), (0.0, 0.05), 0.002), sheet(2, 0.05, (0.0, 0.05), (0.0, 0.05), 0.002)].concat();
+        let b: Vec<Point3<f64>> =
+            [sheet(0, 0.053, (0.0, 0.05), (0.0, 0.05), 0.002), sheet(2, 0.05, (0.053, 0.103), (0.0, 0.05), 0.002)]
+                .concat();
+        let clouds: Vec<&[Point3<f64>]> = vec![&a, &b];
+        let bounds: Vec<_> = clouds.iter().map(|c| cloud_bounds(c)).collect();
+        assert_eq!(owned_points(&clouds, &bounds, 0, 0.005).len(), a.len());
+        assert_eq!(owned_points(&clouds, &bounds, 1, 0.005).len(), b.len());
     }
 }
