@@ -408,6 +408,17 @@ impl ObjectEstimator {
         self.shape
     }
 
+    /// Model another shape from now on (the object's majority label moved to a class of the
+    /// other primitive): the line frames stay, the last estimate and its yaw are dropped, so the
+    /// next [`Self::estimate`] starts over in the new shape.
+    pub fn set_shape(&mut self, shape: Shape) {
+        if shape != self.shape {
+            self.shape = shape;
+            self.last = None;
+            self.last_line_yaw = None;
+        }
+    }
+
     /// Add one frame's line evidence (segments already restricted to the object's box, e.g. by
     /// [`lsd::segments_in_box`]). When the window is full a frame leaves it, chosen by
     /// [`ParamConfig::window_keep`] (by default the oldest leaves the window and the one with the
@@ -702,6 +713,20 @@ mod support_tests {
             pts.push(Point3::new(0.5 + rr * a.cos(), 0.1 + rr * a.sin(), 0.1 + rng.random_range(-0.001..0.001)));
         }
         pts
+    }
+
+    #[test]
+    fn a_new_shape_is_estimated_in_that_shape() {
+        let pts = cut_can(2);
+        let mut est = ObjectEstimator::new(Shape::Cuboid, ParamConfig::default());
+        assert_eq!(est.estimate(&pts).unwrap().geometry.shape, Shape::Cuboid);
+        est.set_shape(Shape::Cylinder);
+        assert_eq!(est.shape(), Shape::Cylinder);
+        assert!(est.last().is_none(), "the cuboid estimate is dropped");
+        let g = est.estimate(&pts).unwrap().geometry;
+        assert_eq!(g.shape, Shape::Cylinder);
+        assert!((g.half_extents.x - g.half_extents.y).abs() < 1e-12);
+        assert!((g.half_extents.x - 0.033).abs() < 0.004, "radius {}", g.half_extents.x);
     }
 
     #[test]

@@ -641,6 +641,7 @@ impl ObjectPipeline {
                 let Some(obj) = map.get(*id) else { continue };
                 let shape = obj.label.shape();
                 let est = self.estimators.entry(*id).or_insert_with(|| ObjectEstimator::new(shape, self.config.param));
+                est.set_shape(shape);
                 if let Some(segs) = segments {
                     est.add_frame(LineFrame {
                         frame: frame.index,
