@@ -54,7 +54,7 @@ use crate::association::metrics::{association_metrics, AssociationMetrics, Metri
 use crate::explore::{CellState, ExploreError, ObservedPoints, Reachability, TableRect};
 use crate::frame::{Frame, GreyImage};
 use crate::geometry::{PinholeCamera, Se3};
-use crate::map::ObjectMap;
+use crate::map::{ObjectMap, ObjectRecord};
 use crate::objects::lsd::LineSegment;
 use crate::pipeline::{frame_segments, MapPointObservation, ObjectPipeline, PipelineConfig, PipelineError};
 use crate::slam::{ate_rmse_m, rpe, PoseSource, SlamError, TrackInput, TrackOutput, Tracker, TrackerConfig};
@@ -365,6 +365,12 @@ impl System {
     /// The object map now.
     pub fn map(&self) -> ObjectMap {
         self.pipeline.map()
+    }
+
+    /// The map's objects as records (id, label, geometry, observation count): those of
+    /// [`Self::map`], read from the map without the objects' clouds (no point is copied).
+    pub fn object_records(&self) -> Vec<ObjectRecord> {
+        self.pipeline.map_without_clouds().object_records()
     }
 
     /// The object pipeline (association, parameterization).
