@@ -121,8 +121,8 @@ impl GreyImage {
         }
         // Each channel's product, looked up: the same `f32` products, summed in the same order.
         let (mut r, mut g, mut b) = ([0f32; 256], [0f32; 256], [0f32; 256]);
-        for (v, ((r, g), b)) in (0u8..=255).zip(r.iter_mut().zip(g.iter_mut()).zip(b.iter_mut())) {
-            (*r, *g, *b) = (f32::from(v) * LUMA_R, f32::from(v) * LUMA_G, f32::from(v) * LUMA_B);
+        for (v, ((rv, gv), bv)) in (0u8..=255).zip(r.iter_mut().zip(g.iter_mut()).zip(b.iter_mut())) {
+            (*rv, *gv, *bv) = (f32::from(v) * LUMA_R, f32::from(v) * LUMA_G, f32::from(v) * LUMA_B);
         }
         let luma = |p: &[u8]| {
             let y = r[usize::from(p[0])] + g[usize::from(p[1])] + b[usize::from(p[2])];

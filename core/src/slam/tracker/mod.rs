@@ -468,9 +468,9 @@ impl Tracker {
         self.threads.set(threads);
     }
 
-    /// The tracker's thread budget, which its parallel stages read when they start: another
-    /// thread may raise it during [`Self::track`] (the system does when the frame's line
-    /// segments are done).
+    /// The tracker's thread budget, which its parallel stages read when they start: others may
+    /// change it during [`Self::track`] (the system lowers it when the frame's line segments
+    /// start, from [`Self::track_then`]'s hook, and raises it when they are done).
     pub fn thread_budget(&self) -> std::sync::Arc<crate::ThreadBudget> {
         std::sync::Arc::clone(&self.threads)
     }
