@@ -37,6 +37,7 @@ def _run(pose_source: str, gt_shift: np.ndarray) -> list[np.ndarray]:
         tracker_config_json=json.dumps({"pose_source": pose_source, "min_init_points": 20, "min_tracked_inliers": 10}),
     )
     k = np.array([[150.0, 0.0, 80.0], [0.0, 150.0, 60.0], [0.0, 0.0, 1.0]])
+    assert mapper.last_pose() is None
     poses = []
     for i, (grey, depth, prior) in enumerate(_frames(4)):
         gt = prior @ np.vstack([np.c_[np.eye(3), gt_shift], [0, 0, 0, 1]])
@@ -45,6 +46,8 @@ def _run(pose_source: str, gt_shift: np.ndarray) -> list[np.ndarray]:
             world_from_camera_gt=gt, view_index=0,
         )
         poses.append(np.asarray(mapper.query('{"query": "last_pose"}')["world_from_camera"]))
+        # The episode's per-frame accessor gives the query's pose bit for bit.
+        np.testing.assert_array_equal(mapper.last_pose(), poses[-1])
     return poses
 
 

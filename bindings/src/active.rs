@@ -244,7 +244,13 @@ impl ActiveMapperPy {
 
     /// The map's objects as JSON records.
     fn objects_json(&self) -> PyResult<String> {
-        to_json(&self.system.map().object_records(), "objects")
+        to_json(&self.system.object_records(), "objects")
+    }
+
+    /// The pose the last frame was mapped with (the `last_pose` query's 4x4 `world_from_camera`,
+    /// without its JSON); None before a frame.
+    fn last_pose<'py>(&self, py: Python<'py>) -> Option<Bound<'py, PyArray2<f64>>> {
+        self.system.last_pose().map(|p| matrix_py(py, &p))
     }
 
     /// Surface grid cells of every object: (N, 3) centres in the world and (N,) states

@@ -13,6 +13,10 @@
 //!
 //! `orb_extract_640x480`: `OrbExtractor::extract`, one thread (as the OpenCV reference).
 //!
+//! `grey_from_rgb_640x480`: `GreyImage::from_rgb`, the BT.601 luma the tracker's grey image is
+//! made of when the simulator hands the core its RGB frame (`shapes_texture` grey levels spread
+//! over three channels).
+//!
 //! `orb_extract_640x480` frames: `shapes_texture(640, 480, seed)` for seeds 0..N_FRAMES, the same frames
 //! `experiments/bench/slam_refs.py` feeds to `cv2.ORB_create(1000)` (it ports the generator
 //! bit for bit), so `orb_extract_640x480` and `cv2_orb_640x480` time identical inputs.
@@ -21,6 +25,7 @@
 #![allow(missing_docs)]
 
 use criterion::{criterion_group, criterion_main, Criterion};
+use objslam_core::frame::GreyImage;
 use objslam_core::slam::synthetic::{shapes_texture, TrackSequence};
 use objslam_core::slam::{OrbConfig, OrbExtractor, Tracker, TrackerConfig};
 
@@ -59,5 +64,14 @@ fn track_frame(c: &mut Criterion) {
     });
 }
 
-criterion_group!(benches, orb_extract, track_frame);
+fn grey_from_rgb(c: &mut Criterion) {
+    let grey = shapes_texture(640, 480, 0);
+    let rgb: Vec<u8> =
+        grey.data.iter().enumerate().flat_map(|(i, &v)| [v, v.wrapping_add(i as u8), v.wrapping_mul(3)]).collect();
+    c.bench_function("grey_from_rgb_640x480", |b| {
+        b.iter(|| GreyImage::from_rgb(640, 480, std::hint::black_box(&rgb)).unwrap_or_else(|e| panic!("{e}")))
+    });
+}
+
+criterion_group!(benches, orb_extract, track_frame, grey_from_rgb);
 criterion_main!(benches);

@@ -360,6 +360,49 @@ fn garbage_frames_never_panic() {
 }
 
 #[test]
+fn track_then_calls_its_hook_once_a_frame_and_a_budget_cut_there_changes_nothing() {
+    // `System::process_frame` lowers the tracker's budget to one thread from the hook (the line
+    // segments take the second core) and raises it again later: same outputs as `track`.
+    let scene = TabletopScene::tabletop(5);
+    let cam = camera();
+    let frames: Vec<_> = (0..6).map(|i| (gt_pose(3 * i), scene.render(&cam, &gt_pose(3 * i)))).collect();
+    let run = |hooked: bool| {
+        let mut tracker = Tracker::new(TrackerConfig::default()).unwrap();
+        let budget = tracker.thread_budget();
+        let mut calls = 0;
+        let outputs: Vec<_> = frames
+            .iter()
+            .enumerate()
+            .map(|(i, (pose, (grey, depth)))| {
+                let input = TrackInput {
+                    grey,
+                    depth,
+                    camera: &cam,
+                    world_from_camera_prior: robot().perturb(pose, i as u64, i as u64),
+                    view_index: i as u64,
+                    world_from_camera_oracle: None,
+                };
+                budget.set(2);
+                if !hooked {
+                    return tracker.track(&input).unwrap();
+                }
+                tracker
+                    .track_then(&input, || {
+                        calls += 1;
+                        budget.set(1);
+                    })
+                    .unwrap()
+            })
+            .collect();
+        (outputs, calls)
+    };
+    let (plain, _) = run(false);
+    let (hooked, calls) = run(true);
+    assert_eq!(calls, frames.len());
+    assert_eq!(hooked, plain);
+}
+
+#[test]
 fn tracking_is_deterministic_and_the_tracker_is_send() {
     fn assert_send<T: Send>() {}
     assert_send::<Tracker>();

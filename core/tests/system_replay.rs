@@ -82,6 +82,7 @@ fn replay_outputs_paced(capture: &Capture, threads: usize, pause: std::time::Dur
                     world_from_camera_gt: f.true_pose().ok(),
                 };
                 out.push(format!("{:?}", system.process_frame(input).unwrap()));
+                assert_eq!(system.object_records(), system.map().object_records());
                 out.push(serde_json::to_string(&system.query(&Query::LastPose, &step).unwrap()).unwrap());
                 std::thread::sleep(pause);
             }

@@ -744,7 +744,8 @@ class Episode:
             world_from_camera_gt=frame.world_from_camera_gt,
             view_index=self.view_index,
         )
-        used_pose = mapper.query('{"query": "last_pose"}')["world_from_camera"]
+        used_pose = mapper.last_pose()
+        assert used_pose is not None
         self.assignments.extend((oid, d.gt_id) for oid, d in zip(assigned, dets) if oid is not None)
         t2 = time.perf_counter()
         self.est_positions.append(used_pose[:3, 3].copy())

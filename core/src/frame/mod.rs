@@ -119,13 +119,25 @@ impl GreyImage {
         if rgb.len() != expected {
             return Err(FrameError::BufferLength { field: "rgb", expected, actual: rgb.len() });
         }
+        // Each channel's product, looked up: the same `f32` products, summed in the same order.
+        let (mut r, mut g, mut b) = ([0f32; 256], [0f32; 256], [0f32; 256]);
+        for (v, ((rv, gv), bv)) in (0u8..=255).zip(r.iter_mut().zip(g.iter_mut()).zip(b.iter_mut())) {
+            (*rv, *gv, *bv) = (f32::from(v) * LUMA_R, f32::from(v) * LUMA_G, f32::from(v) * LUMA_B);
+        }
         let luma = |p: &[u8]| {
-            let g = f32::from(p[0]) * 0.299 + f32::from(p[1]) * 0.587 + f32::from(p[2]) * 0.114;
-            (g + 0.5).clamp(0.0, 255.0) as u8
+            let y = r[usize::from(p[0])] + g[usize::from(p[1])] + b[usize::from(p[2])];
+            (y + 0.5).clamp(0.0, 255.0) as u8
         };
         Ok(Self { width, height, data: rgb.chunks_exact(3).map(luma).collect() })
     }
 }
+
+/// ITU-R BT.601 luma weights of red, green and blue ([`GreyImage::from_rgb`]).
+const LUMA_R: f32 = 0.299;
+/// See [`LUMA_R`].
+const LUMA_G: f32 = 0.587;
+/// See [`LUMA_R`].
+const LUMA_B: f32 = 0.114;
 
 /// A 2D detection: box, class label and confidence.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -194,6 +206,22 @@ mod tests {
         // 0.299 · 255 = 76.2, 0.587 · 255 = 149.7, 0.114 · 255 = 29.1, 29.9 + 88.05 + 22.8 = 140.75.
         assert_eq!(grey.data, vec![255, 0, 76, 150, 29, 141]);
         assert!(GreyImage::from_rgb(3, 3, &rgb).unwrap_err().to_string().contains("rgb"));
+    }
+
+    #[test]
+    fn luma_is_the_rounded_f32_formula_for_every_colour() {
+        // All 2^24 colours, one row of 256 blues per (red, green), against the formula itself.
+        let mut row = vec![0u8; 3 * 256];
+        for (red, green) in (0..=255u8).flat_map(|r| (0..=255u8).map(move |g| (r, g))) {
+            for (blue, p) in (0..=255u8).zip(row.chunks_exact_mut(3)) {
+                p.copy_from_slice(&[red, green, blue]);
+            }
+            let grey = GreyImage::from_rgb(256, 1, &row).unwrap();
+            for (blue, y) in (0..=255u8).zip(&grey.data) {
+                let v = f32::from(red) * 0.299 + f32::from(green) * 0.587 + f32::from(blue) * 0.114;
+                assert_eq!(*y, (v + 0.5).clamp(0.0, 255.0) as u8, "rgb ({red}, {green}, {blue})");
+            }
+        }
     }
 
     fn frame() -> Frame {

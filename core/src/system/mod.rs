@@ -17,10 +17,11 @@
 //! One frame (`process_frame`):
 //! 1. With a tracker, the frame's camera pose is tracked from the grey image and depth, starting
 //!    from the kinematic prior the frame carries (used as given: its error is the robot's); the
-//!    tracked pose replaces it. On two cores ([`System::set_threads`]) the frame's line segments
-//!    (LSD, for the parameterization; they depend on the image alone) are found on a second
-//!    thread meanwhile and through steps 2-4; the tracker takes the second core back when they
-//!    are done ([`crate::ThreadBudget`]). They enter the estimators' line windows last.
+//!    tracked pose replaces it. On two cores ([`System::set_threads`]) the ORB features are
+//!    extracted on both, then the frame's line segments (LSD, for the parameterization; they
+//!    depend on the image alone) are found on a second thread through the rest of tracking and
+//!    steps 2-4; the tracker takes the second core back when they are done
+//!    ([`crate::ThreadBudget`]). They enter the estimators' line windows last.
 //! 2. When the tracker's world ← map gauge moved since the last frame and
 //!    `PipelineConfig::follow_slam_gauge` is set, the object map is moved with it (a change of
 //!    world frame, not of the objects).
@@ -53,7 +54,7 @@ use crate::association::metrics::{association_metrics, AssociationMetrics, Metri
 use crate::explore::{CellState, ExploreError, ObservedPoints, Reachability, TableRect};
 use crate::frame::{Frame, GreyImage};
 use crate::geometry::{PinholeCamera, Se3};
-use crate::map::ObjectMap;
+use crate::map::{ObjectMap, ObjectRecord};
 use crate::objects::lsd::LineSegment;
 use crate::pipeline::{frame_segments, MapPointObservation, ObjectPipeline, PipelineConfig, PipelineError};
 use crate::slam::{ate_rmse_m, rpe, PoseSource, SlamError, TrackInput, TrackOutput, Tracker, TrackerConfig};
@@ -224,43 +225,50 @@ impl System {
         let grey = grey.ok_or(SystemError::MissingGrey)?;
         // The true pose reaches the tracker only as the oracle of the `ground_truth` ablation.
         let oracle = world_from_camera_gt.filter(|_| tracker.config().pose_source == PoseSource::GroundTruth);
-        let track = |tracker: &mut Tracker, frame: &Frame| {
-            let out = tracker.track(&TrackInput {
-                grey,
-                depth: &frame.depth,
-                camera: &frame.camera,
-                world_from_camera_prior: frame.world_from_camera,
-                view_index,
-                world_from_camera_oracle: oracle,
-            })?;
-            Ok::<_, SystemError>((out, tracker.world_from_map()))
-        };
         let threads = self.threads;
+        tracker.set_threads(threads);
         if threads < 2 || !wanted {
-            tracker.set_threads(threads);
-            let tracked = track(tracker, &frame)?;
+            let tracked = (tracker.track(&track_input(&frame, grey, view_index, oracle))?, tracker.world_from_map());
             let segments = lsd()?.flatten();
             return self.map_frame(frame, Some(tracked), world_from_camera_gt, segments.as_deref()).inspect(|_| {
                 self.start_bundle();
             });
         }
-        // The line segments need only the grey image: on two cores they are found on the second
-        // one while the frame is tracked, associated and integrated into the grids (the segments
-        // enter only the estimators' line windows, last). The tracker starts on one thread and
-        // takes the second core back when the segments are done (its results do not depend on
-        // its threads).
-        tracker.set_threads(1);
+        // The line segments need only the grey image: on two cores the frame's ORB features are
+        // extracted on both, then the segments are found on the second core while the frame is
+        // tracked, associated and integrated into the grids (the segments enter only the
+        // estimators' line windows, last). The tracker goes on with one thread and takes the
+        // second core back when the segments are done (its results do not depend on its
+        // threads).
         let budget = tracker.thread_budget();
         std::thread::scope(|s| {
-            let second = s.spawn(move || {
-                let segments = lsd();
-                budget.set(threads);
-                segments
-            });
+            let mut second = None;
+            let start_segments = || {
+                budget.set(1);
+                let budget = std::sync::Arc::clone(&budget);
+                second = Some(s.spawn(move || {
+                    let segments = lsd();
+                    budget.set(threads);
+                    segments
+                }));
+            };
             // (An early return joins the second thread too: the scope waits for it.)
-            let tracked = self.tracker.as_mut().map(|t| track(t, &frame)).transpose()?;
+            let tracked = self
+                .tracker
+                .as_mut()
+                .map(|t| {
+                    Ok::<_, SystemError>((
+                        t.track_then(&track_input(&frame, grey, view_index, oracle), start_segments)?,
+                        t.world_from_map(),
+                    ))
+                })
+                .transpose()?;
             let (mapped_frame, assigned) = self.associate_frame(frame, tracked, world_from_camera_gt)?;
-            let segments = second.join().unwrap_or_else(|e| std::panic::resume_unwind(e))?.flatten();
+            let segments = match second {
+                Some(h) => h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)),
+                None => lsd(),
+            }?
+            .flatten();
             self.pipeline.add_line_frames(&mapped_frame, &assigned, segments.as_deref());
             Ok(assigned)
         })
@@ -357,6 +365,12 @@ impl System {
     /// The object map now.
     pub fn map(&self) -> ObjectMap {
         self.pipeline.map()
+    }
+
+    /// The map's objects as records (id, label, geometry, observation count): those of
+    /// [`Self::map`], read from the map without the objects' clouds (no point is copied).
+    pub fn object_records(&self) -> Vec<ObjectRecord> {
+        self.pipeline.map_without_clouds().object_records()
     }
 
     /// The object pipeline (association, parameterization).
@@ -460,5 +474,22 @@ impl System {
             }
         }
         out
+    }
+}
+
+/// The tracker's input for a frame.
+fn track_input<'a>(
+    frame: &'a Frame,
+    grey: &'a GreyImage,
+    view_index: u64,
+    world_from_camera_oracle: Option<Se3>,
+) -> TrackInput<'a> {
+    TrackInput {
+        grey,
+        depth: &frame.depth,
+        camera: &frame.camera,
+        world_from_camera_prior: frame.world_from_camera,
+        view_index,
+        world_from_camera_oracle,
     }
 }

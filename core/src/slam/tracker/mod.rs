@@ -468,9 +468,9 @@ impl Tracker {
         self.threads.set(threads);
     }
 
-    /// The tracker's thread budget, which its parallel stages read when they start: another
-    /// thread may raise it during [`Self::track`] (the system does when the frame's line
-    /// segments are done).
+    /// The tracker's thread budget, which its parallel stages read when they start: others may
+    /// change it during [`Self::track`] (the system lowers it when the frame's line segments
+    /// start, from [`Self::track_then`]'s hook, and raises it when they are done).
     pub fn thread_budget(&self) -> std::sync::Arc<crate::ThreadBudget> {
         std::sync::Arc::clone(&self.threads)
     }
@@ -565,6 +565,18 @@ impl Tracker {
     /// non-finite or non-rigid prior, a missing ground-truth pose); anything the images do not
     /// support (no texture, no depth, no consensus) is a reported lost frame.
     pub fn track(&mut self, input: &TrackInput<'_>) -> Result<TrackOutput, SlamError> {
+        self.track_then(input, || {})
+    }
+
+    /// [`Self::track`], calling `after_features` once the frame's ORB features are extracted
+    /// (not at all when the input is rejected first): a caller that shares the cores with the
+    /// tracker starts its own work there, after the extraction had both
+    /// ([`Self::thread_budget`]). The output does not depend on what it does.
+    pub fn track_then(
+        &mut self,
+        input: &TrackInput<'_>,
+        after_features: impl FnOnce(),
+    ) -> Result<TrackOutput, SlamError> {
         self.settle_bundle();
         validate(input)?;
         match (self.config.pose_source, input.world_from_camera_oracle) {
@@ -578,6 +590,7 @@ impl Tracker {
         let prior = input.world_from_camera_prior;
         // ORB on the threads one frame may use (the same features on any number of them).
         let features = self.orb.extract_with_threads(input.grey, self.threads.get())?;
+        after_features();
         let depth_m: Vec<Option<f64>> = features
             .keypoints
             .iter()
