@@ -359,6 +359,24 @@ fn garbage_frames_never_panic() {
     }
 }
 
+/// Frame `i` of a short sequence at the robot's perturbed prior of its true `pose`.
+fn perturbed_input<'a>(
+    cam: &'a PinholeCamera,
+    i: usize,
+    pose: &Se3,
+    grey: &'a GreyImage,
+    depth: &'a DepthImage,
+) -> TrackInput<'a> {
+    TrackInput {
+        grey,
+        depth,
+        camera: cam,
+        world_from_camera_prior: robot().perturb(pose, i as u64, i as u64),
+        view_index: i as u64,
+        world_from_camera_oracle: None,
+    }
+}
+
 #[test]
 fn track_then_calls_its_hook_once_a_frame_and_a_budget_cut_there_changes_nothing() {
     // `System::process_frame` lowers the tracker's budget to one thread from the hook (the line
@@ -374,14 +392,7 @@ fn track_then_calls_its_hook_once_a_frame_and_a_budget_cut_there_changes_nothing
             .iter()
             .enumerate()
             .map(|(i, (pose, (grey, depth)))| {
-                let input = TrackInput {
-                    grey,
-                    depth,
-                    camera: &cam,
-                    world_from_camera_prior: robot().perturb(pose, i as u64, i as u64),
-                    view_index: i as u64,
-                    world_from_camera_oracle: None,
-                };
+                let input = perturbed_input(&cam, i, pose, grey, depth);
                 budget.set(2);
                 if !hooked {
                     return tracker.track(&input).unwrap();
@@ -415,14 +426,7 @@ fn tracking_is_deterministic_and_the_tracker_is_send() {
             .iter()
             .enumerate()
             .map(|(i, (pose, (grey, depth)))| {
-                let input = TrackInput {
-                    grey,
-                    depth,
-                    camera: &cam,
-                    world_from_camera_prior: robot().perturb(pose, i as u64, i as u64),
-                    view_index: i as u64,
-                    world_from_camera_oracle: None,
-                };
+                let input = perturbed_input(&cam, i, pose, grey, depth);
                 tracker.track(&input).unwrap()
             })
             .collect::<Vec<_>>()

@@ -685,8 +685,12 @@ impl ObjectPipeline {
         let map = self.raw_map();
         let dirty = std::mem::take(&mut self.dirty);
         let r = self.config.ownership_radius_m;
-        let clouds: Vec<&[Point3<f64>]> =
-            if r > 0.0 { map.objects.iter().map(|o| &o.points_in_world[..]).collect() } else { Vec::new() };
+        // The bounds are only needed when something is re-estimated.
+        let clouds: Vec<&[Point3<f64>]> = if r > 0.0 && !dirty.is_empty() {
+            map.objects.iter().map(|o| &o.points_in_world[..]).collect()
+        } else {
+            Vec::new()
+        };
         let bounds: Vec<Option<(Point3<f64>, Point3<f64>)>> = clouds.iter().map(|c| cloud_bounds(c)).collect();
         for id in dirty {
             let Some(index) = map.objects.iter().position(|o| o.id == id) else { continue };
