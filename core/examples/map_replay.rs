@@ -92,6 +92,20 @@ fn main() -> Result<()> {
                                     println!("      covered by est {} ({:?}) {:.2} votes {votes:?}", m.id, m.label, f);
                                 }
                             }
+                            // Objects held back from the map (existence evidence, too few observations).
+                            for (m, n, unseen) in system.pipeline().existence_evidence() {
+                                if map.get(m.id).is_some() {
+                                    continue;
+                                }
+                                let f = objslam_core::geometry::intersection_volume(&m.geometry(), &g.geometry)
+                                    / g.geometry.volume();
+                                if f > 0.1 {
+                                    println!(
+                                        "      held back est {} ({:?}) {:.2} observations {n} unseen {unseen}",
+                                        m.id, m.label, f
+                                    );
+                                }
+                            }
                         }
                     }
                     if let Some(e) = o.est_id.and_then(|id| map.get(id).map(|m| m.geometry())) {
@@ -116,6 +130,20 @@ fn main() -> Result<()> {
                         );
                     }
                 }
+            }
+            // Every map object: its label votes, the true object it matches and both shapes' fit costs.
+            for m in &map.objects {
+                let gt = ev.objects.iter().find(|o| o.est_id == Some(m.id)).map(|o| format!("{:?}", o.label));
+                let votes = system.pipeline().label_votes(m.id);
+                let costs = system.pipeline().shape_fit_costs(m.id);
+                println!(
+                    "   shape est {} {:?} gt {} votes {:?} costs {:?}",
+                    m.id,
+                    m.label,
+                    gt.unwrap_or_else(|| "-".into()),
+                    votes.map(|v| v.to_vec()),
+                    costs.map(|c| [(c[0] * 1e4).round() / 10.0, (c[1] * 1e4).round() / 10.0])
+                );
             }
             let matched: Vec<u32> = ev.objects.iter().filter_map(|o| o.est_id).collect();
             for m in &map.objects {

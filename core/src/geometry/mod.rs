@@ -346,6 +346,29 @@ impl ObjectGeometry {
         se3_from_yaw(self.center, if self.shape == Shape::Cylinder { 0.0 } else { self.yaw_rad })
     }
 
+    /// Signed distance of a world point to the primitive's surface (negative inside), metres:
+    /// the box's faces, or the cylinder's wall, top and bottom discs (its radius is
+    /// [`Self::radius`]).
+    pub fn surface_distance(&self, p: &Point3<f64>) -> f64 {
+        let d = p.coords - self.center;
+        let q = match self.shape {
+            Shape::Cuboid => {
+                let (s, c) = self.yaw_rad.sin_cos();
+                let local = Vector3::new(c * d.x + s * d.y, -s * d.x + c * d.y, d.z);
+                local.abs() - self.half_extents
+            }
+            Shape::Cylinder => {
+                let radial = d.x.hypot(d.y) - self.radius();
+                Vector3::new(radial, radial, d.z.abs() - self.half_extents.z)
+            }
+        };
+        let outside = match self.shape {
+            Shape::Cuboid => q.sup(&Vector3::zeros()).norm(),
+            Shape::Cylinder => q.x.max(0.0).hypot(q.z.max(0.0)),
+        };
+        outside + q.max().min(0.0)
+    }
+
     /// Volume in cubic metres.
     pub fn volume(&self) -> f64 {
         let h = 2.0 * self.half_extents.z;
@@ -712,6 +735,31 @@ pub fn project_geometry(g: &ObjectGeometry, camera: &PinholeCamera, world_from_c
 mod tests {
     use super::*;
     use std::f64::consts::{FRAC_PI_2, FRAC_PI_4, PI};
+
+    #[test]
+    fn cylinder_surface_distance_is_signed() {
+        let g = ObjectGeometry {
+            shape: Shape::Cylinder,
+            center: Vector3::new(1.0, 2.0, 0.05),
+            yaw_rad: 0.7,
+            half_extents: Vector3::new(0.03, 0.03, 0.05),
+        };
+        let at = |x: f64, y: f64, z: f64| g.surface_distance(&Point3::new(1.0 + x, 2.0 + y, 0.05 + z));
+        // On the wall at any angle (the yaw does not matter), on the top disc.
+        for a in [0.0, 0.9, 2.5, -1.7] {
+            assert!(at(0.03 * f64::cos(a), 0.03 * f64::sin(a), 0.01).abs() < 1e-12);
+        }
+        assert!(at(0.01, -0.01, 0.05).abs() < 1e-12);
+        // Outside the wall by 2 cm; inside, nearest the wall (1 cm) or the top (4 mm).
+        assert!((at(0.0, 0.05, 0.0) - 0.02).abs() < 1e-12);
+        assert!((at(0.02, 0.0, 0.0) + 0.01).abs() < 1e-12);
+        assert!((at(0.0, 0.0, 0.046) + 0.004).abs() < 1e-12);
+        // Beyond the rim: Euclidean distance to it (3 cm out, 4 cm up gives 5 cm).
+        assert!((at(0.06, 0.0, 0.09) - 0.05).abs() < 1e-12);
+        // A box point at its corner is off a cylinder of the box's half-width by (√2 − 1) of it.
+        let corner = Point3::new(1.0 + 0.03, 2.0 + 0.03, 0.05);
+        assert!((g.surface_distance(&corner) - 0.03 * (2f64.sqrt() - 1.0)).abs() < 1e-12);
+    }
 
     #[test]
     fn trimmed_extent_equals_the_sorted_quantiles() {

@@ -230,13 +230,7 @@ fn subsample(points: &[Point3<f64>], max_points: usize) -> Vec<Point3<f64>> {
 
 /// Signed distance of a world point to the surface of a cuboid (negative inside), metres.
 fn surface_distance(g: &ObjectGeometry, p: &Point3<f64>) -> f64 {
-    let (s, c) = g.yaw_rad.sin_cos();
-    let d = p.coords - g.center;
-    let local = Vector3::new(c * d.x + s * d.y, -s * d.x + c * d.y, d.z);
-    let q = local.abs() - g.half_extents;
-    let outside = q.sup(&Vector3::zeros()).norm();
-    let inside = q.max().min(0.0);
-    outside + inside
+    ObjectGeometry { shape: crate::geometry::Shape::Cuboid, ..*g }.surface_distance(p)
 }
 
 /// Huber-robustified residual: `ρ(x)² = huber(x)` (quadratic up to `delta`, linear beyond).
