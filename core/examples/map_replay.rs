@@ -9,9 +9,11 @@
 //! against the truth, recall and precision at 3D IoU 0.25, and the mean 3D IoU; then the totals:
 //! captures whose count is within one of the truth, captures with recall at least 0.9, mean IoU.
 //! With `--objects` it also lists every true object under 3D IoU 0.25 (its estimate and the true
-//! objects that estimate covers, or the estimates covering a missed one, with their label votes)
-//! and every estimate matched to no true object (its observations and the two nearest true
-//! objects). With `--dump DIR` it writes each replayed map, clouds included, to
+//! objects that estimate covers, or the estimates covering a missed one, with their label votes,
+//! and the objects held back from the map that cover it, with their existence evidence), every map
+//! object's label votes and shape-fit costs (`ObjectPipeline::shape_fit_costs`, millimetres:
+//! cuboid, cylinder), and every estimate matched to no true object (its observations and the two
+//! nearest true objects). With `--dump DIR` it writes each replayed map, clouds included, to
 //! `DIR/<capture>.map.json`.
 //! The views are the capture's (the strategy's choices under the recorded map), so this ranks
 //! mapping changes on fixed inputs; the exploration benchmark judges them in closed loop.
