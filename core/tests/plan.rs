@@ -551,3 +551,28 @@ fn grasping_in_clutter_envelope() {
     }
     assert!(planned >= 7, "only {planned} of 12 objects graspable");
 }
+
+#[test]
+fn a_neighbour_estimate_overlapping_the_target_is_trimmed_not_a_wall() {
+    // Two 6.4 cm blocks, 16 cm tall, side by side along y (touching). The neighbour's estimate
+    // is bloated to 12.5 cm along the row and reaches 4 cm into the target's estimate: taken at
+    // face value it fills the space of one finger whichever way the hand turns.
+    let target = cuboid(0.45, 0.0, 0.0, [0.064, 0.064, 0.16]);
+    let bloated = cuboid(0.45, 0.055, 0.0, [0.064, 0.125, 0.16]);
+    let untrimmed = Planner::new(
+        panda_urdf(),
+        PlannerConfig {
+            grasp: objslam_core::plan::GraspConfig { trim_overlapping_neighbours: false, ..Default::default() },
+            ..PlannerConfig::default()
+        },
+    )
+    .unwrap();
+    assert!(matches!(untrimmed.plan_grasp(&Q_READY, &target, &[bloated]), Err(PlanError::NoReachableGrasp { .. })));
+    // Trimmed to y ≥ 0.032 (the target's face), the neighbour leaves the fingers room across x.
+    let planner = planner();
+    let motion = planner.plan_grasp(&Q_READY, &target, &[bloated]).unwrap();
+    assert!(motion.candidate.closing_axis_in_world.x.abs() > 1.0 - 1e-9);
+    // The true neighbour (touching along y) is never hit on the way to the pre-grasp.
+    let neighbour = cuboid(0.45, 0.064, 0.0, [0.064, 0.064, 0.16]);
+    assert_never_hits(&planner, &motion.to_pregrasp.positions, &[target, neighbour]);
+}

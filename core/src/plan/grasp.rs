@@ -12,6 +12,11 @@
 //! is the fallback that keeps the 20 cm wide hand body higher above neighbours. Each candidate carries pre-grasp (above), grasp and
 //! lift poses, the finger opening, its clearance from neighbouring objects and, when reachable, the
 //! collision-free IK solutions.
+//!
+//! Neighbours whose estimated footprint overlaps the target's are trimmed first
+//! ([`trim_neighbours`]): solid objects do not overlap, so the overlap is map error (a bloated or
+//! merged estimate), and an estimate reaching into the target would otherwise wall off every
+//! finger position.
 
 use nalgebra::{Translation3, UnitQuaternion, Vector3};
 
@@ -53,6 +58,13 @@ pub struct GraspConfig {
     /// Number of yaws tried for cylinders (evenly spaced over π, starting at the current hand yaw).
     /// Default 6.
     pub cylinder_yaw_count: usize,
+    /// Trim neighbours whose footprint overlaps the target's ([`trim_neighbours`]): two solid
+    /// objects cannot overlap, so the overlap is map error, and while the target is grasped it is
+    /// taken to be the target's. Default true.
+    pub trim_overlapping_neighbours: bool,
+    /// A trimmed neighbour keeps at least this horizontal half-extent (or radius), metres; one
+    /// that would be thinner is left out of the grasp's obstacles. Default 0.01.
+    pub min_trimmed_half_extent_m: f64,
 }
 
 impl Default for GraspConfig {
@@ -69,6 +81,8 @@ impl Default for GraspConfig {
             allow_long_side: true,
             clearance_enough_m: 0.01,
             cylinder_yaw_count: 6,
+            trim_overlapping_neighbours: true,
+            min_trimmed_half_extent_m: 0.01,
         }
     }
 }
@@ -203,6 +217,121 @@ pub(crate) fn grasp_heights(object: &ObjectGeometry, config: &GraspConfig) -> Ve
     }
 }
 
+/// Half-width of `object`'s footprint along the horizontal unit direction `dir` (its support
+/// function), metres.
+fn footprint_support(object: &ObjectGeometry, dir: &Vector3<f64>) -> f64 {
+    match object.shape {
+        Shape::Cylinder => object.radius(),
+        Shape::Cuboid => {
+            let (s, c) = object.yaw_rad.sin_cos();
+            let h = object.half_extents;
+            h.x * (dir.x * c + dir.y * s).abs() + h.y * (-dir.x * s + dir.y * c).abs()
+        }
+    }
+}
+
+/// The horizontal axes that separate two footprints when their projections do not overlap.
+fn footprint_axes(object: &ObjectGeometry) -> Vec<Vector3<f64>> {
+    match object.shape {
+        Shape::Cylinder => Vec::new(),
+        Shape::Cuboid => {
+            let (s, c) = object.yaw_rad.sin_cos();
+            vec![Vector3::new(c, s, 0.0), Vector3::new(-s, c, 0.0)]
+        }
+    }
+}
+
+/// Horizontal distance from `p` to the footprint of `object` (0 inside), metres.
+fn distance_to_footprint(object: &ObjectGeometry, p: &Vector3<f64>) -> f64 {
+    let d = Vector3::new(p.x - object.center.x, p.y - object.center.y, 0.0);
+    match object.shape {
+        Shape::Cylinder => (d.norm() - object.radius()).max(0.0),
+        Shape::Cuboid => {
+            let (s, c) = object.yaw_rad.sin_cos();
+            let (u, v) = (d.x * c + d.y * s, -d.x * s + d.y * c);
+            let h = object.half_extents;
+            (u.abs() - h.x).max(0.0).hypot((v.abs() - h.y).max(0.0))
+        }
+    }
+}
+
+/// Footprints that overlap by less than this count as touching, metres (rounding).
+const OVERLAP_TOLERANCE_M: f64 = 1e-9;
+
+/// Whether the footprints of `a` and `b` overlap by more than [`OVERLAP_TOLERANCE_M`] (separating
+/// axes: the cuboids' edge normals, and for a cylinder the exact distance to the other footprint).
+pub(crate) fn footprints_overlap(a: &ObjectGeometry, b: &ObjectGeometry) -> bool {
+    match (a.shape, b.shape) {
+        (Shape::Cylinder, _) => distance_to_footprint(b, &a.center) < a.radius() - OVERLAP_TOLERANCE_M,
+        (_, Shape::Cylinder) => distance_to_footprint(a, &b.center) < b.radius() - OVERLAP_TOLERANCE_M,
+        _ => {
+            let d = Vector3::new(b.center.x - a.center.x, b.center.y - a.center.y, 0.0);
+            footprint_axes(a)
+                .iter()
+                .chain(footprint_axes(b).iter())
+                .all(|n| d.dot(n).abs() < footprint_support(a, n) + footprint_support(b, n) - OVERLAP_TOLERANCE_M)
+        }
+    }
+}
+
+/// `neighbour` cut back so its footprint no longer overlaps `target`'s, or None when too little
+/// of it would be left (every horizontal half-extent at least `min_half_m`).
+///
+/// Two solid objects cannot overlap, so the overlap of their estimates is map error; while the
+/// target is grasped it is given to the target, and the neighbour keeps the side away from it. A
+/// cuboid is cut by a plane parallel to one of its faces, the cut that keeps most of it: along
+/// its axis `n` (pointing towards the target) the kept slab ends where the target's footprint
+/// begins. A cylinder keeps its centre and shrinks to the distance from its centre to the target's
+/// footprint. Heights are unchanged. A neighbour that does not overlap is returned unchanged.
+pub fn trim_neighbour(target: &ObjectGeometry, neighbour: &ObjectGeometry, min_half_m: f64) -> Option<ObjectGeometry> {
+    if !footprints_overlap(target, neighbour) {
+        return Some(*neighbour);
+    }
+    match neighbour.shape {
+        Shape::Cylinder => {
+            let r = distance_to_footprint(target, &neighbour.center);
+            (r >= min_half_m)
+                .then(|| ObjectGeometry { half_extents: Vector3::new(r, r, neighbour.half_extents.z), ..*neighbour })
+        }
+        Shape::Cuboid => {
+            let d = Vector3::new(target.center.x - neighbour.center.x, target.center.y - neighbour.center.y, 0.0);
+            let h = neighbour.half_extents;
+            let axes = footprint_axes(neighbour);
+            let mut best: Option<(f64, ObjectGeometry)> = None;
+            for (k, axis) in axes.iter().enumerate() {
+                let half = if k == 0 { h.x } else { h.y };
+                for sign in [1.0, -1.0] {
+                    let n = axis * sign;
+                    // Where the target's footprint begins along n, from the neighbour's centre.
+                    let near = d.dot(&n) - footprint_support(target, &n);
+                    let kept_half = (near.min(half) + half) / 2.0;
+                    if kept_half < min_half_m || best.is_some_and(|(b, _)| b >= kept_half / half) {
+                        continue;
+                    }
+                    let mut half_extents = h;
+                    half_extents[k] = kept_half;
+                    let center = neighbour.center + n * (near.min(half) - half) / 2.0;
+                    best = Some((kept_half / half, ObjectGeometry { center, half_extents, ..*neighbour }));
+                }
+            }
+            best.map(|(_, g)| g)
+        }
+    }
+}
+
+/// The grasp's obstacles: `neighbours` trimmed by `target` ([`trim_neighbour`]) when
+/// [`GraspConfig::trim_overlapping_neighbours`], else unchanged.
+pub fn trim_neighbours(
+    target: &ObjectGeometry,
+    neighbours: &[ObjectGeometry],
+    config: &GraspConfig,
+) -> Vec<ObjectGeometry> {
+    if !config.trim_overlapping_neighbours {
+        return neighbours.to_vec();
+    }
+    neighbours.iter().filter_map(|n| trim_neighbour(target, n, config.min_trimmed_half_extent_m)).collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -269,5 +398,74 @@ mod tests {
         assert!((grasp_heights(&block(0.0, 0.02, 0.02, 0.1), &c)[0] - 0.175).abs() < 1e-12);
         // 7.8 cm wide on both sides: too wide with the 4 mm minimum clearance.
         assert!(grasp_directions(&block(0.0, 0.039, 0.039, 0.03), 0.0, &c).is_empty());
+    }
+
+    fn at(shape: Shape, x: f64, y: f64, yaw: f64, hx: f64, hy: f64) -> ObjectGeometry {
+        ObjectGeometry {
+            shape,
+            center: Vector3::new(x, y, 0.05),
+            yaw_rad: yaw,
+            half_extents: Vector3::new(hx, hy, 0.05),
+        }
+    }
+
+    #[test]
+    fn an_overlapping_cuboid_keeps_its_far_side() {
+        // Target 6 cm square at the origin; neighbour 12 cm × 6 cm centred 5 cm along +x: it reaches
+        // 3 cm into the target. Cut at the target's face x = 0.03: kept x ∈ [0.03, 0.11].
+        let target = at(Shape::Cuboid, 0.0, 0.0, 0.0, 0.03, 0.03);
+        let bloated = at(Shape::Cuboid, 0.05, 0.0, 0.0, 0.06, 0.03);
+        assert!(footprints_overlap(&target, &bloated));
+        let t = trim_neighbour(&target, &bloated, 0.01).unwrap();
+        assert!((t.center.x - 0.07).abs() < 1e-12 && t.center.y.abs() < 1e-12);
+        assert!((t.half_extents.x - 0.04).abs() < 1e-12 && (t.half_extents.y - 0.03).abs() < 1e-12);
+        assert!(!footprints_overlap(&target, &t));
+        // The same neighbour turned by 90° (its x axis along world y) is cut along its own y axis.
+        let turned = at(Shape::Cuboid, 0.05, 0.0, std::f64::consts::FRAC_PI_2, 0.03, 0.06);
+        let t = trim_neighbour(&target, &turned, 0.01).unwrap();
+        assert!((t.center.x - 0.07).abs() < 1e-12 && (t.half_extents.y - 0.04).abs() < 1e-12);
+        // Rotated target (45°): its footprint reaches 3√2 cm along x, and the cut follows it.
+        let diamond = at(Shape::Cuboid, 0.0, 0.0, std::f64::consts::FRAC_PI_4, 0.03, 0.03);
+        let t = trim_neighbour(&diamond, &bloated, 0.01).unwrap();
+        let near_face = t.center.x - t.half_extents.x;
+        assert!((near_face - 0.03 * 2f64.sqrt()).abs() < 1e-12);
+        assert!((t.center.x + t.half_extents.x - 0.11).abs() < 1e-12);
+        assert!(!footprints_overlap(&diamond, &t));
+    }
+
+    #[test]
+    fn touching_or_distant_neighbours_are_kept_and_swallowed_ones_dropped() {
+        let target = at(Shape::Cuboid, 0.0, 0.0, 0.3, 0.03, 0.03);
+        // Exactly touching along the target's x axis: unchanged.
+        let (s, c) = 0.3f64.sin_cos();
+        let touching = at(Shape::Cuboid, 0.06 * c, 0.06 * s, 0.3, 0.03, 0.03);
+        assert_eq!(trim_neighbour(&target, &touching, 0.01), Some(touching));
+        let far = at(Shape::Cylinder, 0.2, 0.0, 0.0, 0.03, 0.03);
+        assert_eq!(trim_neighbour(&target, &far, 0.01), Some(far));
+        // Centre inside the target: nothing of it is left outside the target → dropped.
+        let inside = at(Shape::Cuboid, 0.01, 0.0, 0.0, 0.03, 0.03);
+        assert_eq!(trim_neighbour(&target, &inside, 0.01), None);
+        let cfg = GraspConfig::default();
+        assert_eq!(trim_neighbours(&target, &[inside, far], &cfg), vec![far]);
+        let off = GraspConfig { trim_overlapping_neighbours: false, ..GraspConfig::default() };
+        assert_eq!(trim_neighbours(&target, &[inside, far], &off), vec![inside, far]);
+    }
+
+    #[test]
+    fn an_overlapping_cylinder_shrinks_to_the_target() {
+        // A 7 cm can centred 8 cm from a 6 cm square: its radius becomes the 5 cm gap to the face.
+        let target = at(Shape::Cuboid, 0.0, 0.0, 0.0, 0.03, 0.03);
+        let blob = at(Shape::Cylinder, 0.08, 0.0, 0.0, 0.07, 0.07);
+        let t = trim_neighbour(&target, &blob, 0.01).unwrap();
+        assert!((t.radius() - 0.05).abs() < 1e-12 && t.center == blob.center);
+        assert!(!footprints_overlap(&target, &t));
+        // Towards a corner the distance is to the corner: (0.06, 0.06) → √2·3 cm.
+        let diag = at(Shape::Cylinder, 0.06, 0.06, 0.0, 0.07, 0.07);
+        let t = trim_neighbour(&target, &diag, 0.01).unwrap();
+        assert!((t.radius() - 0.03 * 2f64.sqrt()).abs() < 1e-12);
+        // Cylinder target, cuboid neighbour: cut at the disc's support.
+        let can = at(Shape::Cylinder, 0.0, 0.0, 0.0, 0.03, 0.03);
+        let t = trim_neighbour(&can, &at(Shape::Cuboid, 0.05, 0.0, 0.0, 0.06, 0.03), 0.01).unwrap();
+        assert!((t.center.x - t.half_extents.x - 0.03).abs() < 1e-12);
     }
 }

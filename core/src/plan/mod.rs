@@ -48,6 +48,9 @@
 //! - Grasps are top-down only; tall objects are grasped near their top (`max_grasp_depth_m`);
 //!   fallbacks are the cuboid's long side when it fits and a shallower grasp
 //!   (`shallow_grasp_depth_m`) that lifts the 20 cm wide hand body above close neighbours.
+//! - A neighbour's estimate that overlaps the target's footprint is cut back to it for that grasp
+//!   (`trim_overlapping_neighbours`); one that would keep less than `min_trimmed_half_extent_m`
+//!   is left out.
 //! - The approach (pre-grasp → grasp) is a straight joint-space segment between IK solutions
 //!   seeded from each other; the TCP stays within 1 cm of the vertical line (tested).
 
@@ -406,6 +409,7 @@ impl PlannerConfig {
         range("rrt_goal_bias", self.rrt_goal_bias, 0.0, 1.0, false)?;
         range("object_margin_m", self.object_margin_m, 0.0, 1.0, false)?;
         range("table_margin_m", self.table_margin_m, 0.0, 1.0, false)?;
+        range("min_trimmed_half_extent_m", self.grasp.min_trimmed_half_extent_m, 0.0, 1.0, false)?;
         range("linear_step_m", self.linear_step_m, 1e-4, 1.0, false)?;
         range("linear_step_rad", self.linear_step_rad, 1e-4, 1.0, false)?;
         range("linear_max_joint_step_rad", self.linear_max_joint_step_rad, 0.0, pi, true)?;
@@ -704,8 +708,8 @@ impl Planner {
         self.time_parameterize(&waypoints)
     }
 
-    /// Grasp candidates for `object` (a map estimate) among `neighbours` (the other map objects),
-    /// ranked: reachable first, then clearance (capped at `clearance_enough_m`), then short side
+    /// Grasp candidates for `object` (a map estimate) among `neighbours` (the other map objects,
+    /// trimmed where they overlap the object: [`grasp::trim_neighbours`]), ranked: reachable first, then clearance (capped at `clearance_enough_m`), then short side
     /// before long side, deep before shallow, then smaller hand-yaw change from `q_current`.
     ///
     /// Errors: [`PlanError::InvalidObject`] for a degenerate object, [`PlanError::TooWide`] when the
@@ -719,8 +723,8 @@ impl Planner {
         self.check_input(q_current, "current configuration")?;
         // Validates the object too.
         CollisionScene::new(std::slice::from_ref(object), 0.0, 0.0)?;
-        let scene = self.scene(neighbours)?;
         let g = &self.config.grasp;
+        let scene = self.scene(&grasp::trim_neighbours(object, neighbours, g))?;
         let current_yaw = grasp::hand_yaw_of(&self.forward_tcp(q_current));
         let directions = grasp::grasp_directions(object, current_yaw, g);
         if directions.is_empty() {
@@ -777,7 +781,8 @@ impl Planner {
 
     /// Plans the motions of the best reachable grasp of `object`: start → pre-grasp among all
     /// objects, pre-grasp → grasp and grasp → lift among the neighbours only (the fingers straddle
-    /// the target), both straight lines ([`Planner::plan_linear`]; a joint-space path when the line
+    /// the target); the neighbours are trimmed where they overlap the object
+    /// ([`grasp::trim_neighbours`]), both straight lines ([`Planner::plan_linear`]; a joint-space path when the line
     /// cannot be followed). Tries the ranked candidates in order.
     ///
     /// Errors: those of [`Planner::grasp_candidates`], [`PlanError::NoReachableGrasp`] when no
@@ -790,6 +795,7 @@ impl Planner {
         neighbours: &[ObjectGeometry],
     ) -> Result<GraspMotion, PlanError> {
         let candidates = self.grasp_candidates(object, neighbours, q_start)?;
+        let neighbours = &grasp::trim_neighbours(object, neighbours, &self.config.grasp);
         let n = candidates.len();
         let mut all: Vec<ObjectGeometry> = neighbours.to_vec();
         all.push(*object);

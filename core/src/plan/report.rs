@@ -196,6 +196,10 @@ pub struct PlannerOverrides {
     pub allow_long_side: Option<bool>,
     /// The grasp's `cylinder_yaw_count`.
     pub cylinder_yaw_count: Option<usize>,
+    /// The grasp's `trim_overlapping_neighbours`.
+    pub trim_overlapping_neighbours: Option<bool>,
+    /// The grasp's `min_trimmed_half_extent_m`.
+    pub min_trimmed_half_extent_m: Option<f64>,
     /// [`PlannerConfig::linear_step_m`].
     pub linear_step_m: Option<f64>,
     /// [`PlannerConfig::linear_max_joint_step_rad`].
@@ -226,6 +230,9 @@ impl PlannerOverrides {
         set(&mut c.grasp.lift_height_m, self.lift_height_m);
         c.grasp.allow_long_side = self.allow_long_side.unwrap_or(c.grasp.allow_long_side);
         count(&mut c.grasp.cylinder_yaw_count, self.cylinder_yaw_count);
+        c.grasp.trim_overlapping_neighbours =
+            self.trim_overlapping_neighbours.unwrap_or(c.grasp.trim_overlapping_neighbours);
+        set(&mut c.grasp.min_trimmed_half_extent_m, self.min_trimmed_half_extent_m);
         set(&mut c.linear_step_m, self.linear_step_m);
         set(&mut c.linear_max_joint_step_rad, self.linear_max_joint_step_rad);
         let scales = [
