@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from objslam import _native
 from objslam.config import load_run_config
-from objslam.grasp import GraspSession, run_grasp_session
+from objslam.grasp import GraspSession, run_grasp_session, same_place
 from objslam.scene import gt_objects, load_scene
 from objslam.task_config import GraspRunConfig
 from objslam.world import READY_QPOS, panda_urdf_path
@@ -243,3 +243,25 @@ def test_robustness_report_counts_success_failures_and_touches_per_cell(tmp_path
     assert "| 6 | 1/2 (50.0 %) | 1/2 (50.0 %) |" in md
     assert "| 6 | blind approach | collided 1 | 0 |" in md
     assert (tmp_path / "robustness.png").stat().st_size > 0
+
+
+def test_an_oversized_estimate_does_not_swallow_its_neighbours() -> None:
+    def box(x: float, hx: float, hy: float = 0.03) -> dict:
+        return {"geometry": {"shape": "cuboid", "center": [x, 0.0, 0.05], "yaw_rad": 0.0,
+                             "half_extents": [hx, hy, 0.05]}}
+
+    def can(x: float, r: float) -> dict:
+        return {"geometry": {"shape": "cylinder", "center": [x, 0.0, 0.05], "yaw_rad": 0.0,
+                             "half_extents": [r, r, 0.05]}}
+
+    # A 12.5 cm long estimate over a row of 6 cm blocks: its footprint holds the next block's
+    # centre 6 cm away, but that block's footprint does not reach its centre.
+    long_box, next_block = box(0.5, 0.0625), box(0.56, 0.03)
+    assert not same_place(next_block, long_box, 0.01)
+    assert not same_place(long_box, next_block, 0.01)
+    # Two estimates of one object, 1.5 cm apart: the same place either way round.
+    assert same_place(box(0.5, 0.03), box(0.515, 0.03), 0.01)
+    assert same_place(can(0.5, 0.03), box(0.51, 0.03), 0.01)
+    # The margin: centres 4.5 cm apart with 3 cm half-sizes need a margin of at least 1.5 cm.
+    assert not same_place(can(0.5, 0.03), can(0.545, 0.03), 0.01)
+    assert same_place(can(0.5, 0.03), can(0.545, 0.03), 0.02)

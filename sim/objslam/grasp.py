@@ -39,9 +39,9 @@ Choices (config fields of :class:`GraspRunConfig`):
   moves with the hand.
 - Ground truth only judges: the loop decides from the map and from what the hand senses. An
   attempt the hand feels as a grasp (the closed fingers stopped at least ``min_held_gap_m`` apart
-  after the lift) removes its map object from the obstacles; a later map object whose centre lies
-  in the footprint of one grasped so (plus ``duplicate_margin_m``) is taken for the same object and
-  skipped (``already_grasped``; judged ``wrongly_skipped`` when its true object was never lifted).
+  after the lift) removes its map object from the obstacles; a later map object that shares its
+  place with one grasped so (each centre in the other's footprint plus ``duplicate_margin_m``) is
+  taken for the same object and skipped (``already_grasped``; judged ``wrongly_skipped`` when its true object was never lifted).
   What the hand holds is set aside (the simulator removes the objects that actually left the table
   with it). The true poses enter only the outcome: success, cause, ``lifted``, ``not_in_map``, and
   whether a too-wide map object counts as an attempt.
@@ -555,6 +555,13 @@ def in_footprint(obj: dict[str, Any], other: dict[str, Any], margin_m: float) ->
     return abs(local[0]) <= h[0] + margin_m and abs(local[1]) <= h[1] + margin_m
 
 
+def same_place(a: dict[str, Any], b: dict[str, Any], margin_m: float) -> bool:
+    """Whether map objects ``a`` and ``b`` describe one object: each centre lies in the other's
+    footprint grown by ``margin_m`` (an oversized estimate's footprint reaches its neighbours'
+    centres, but their footprints do not reach its centre)."""
+    return in_footprint(a, b, margin_m) and in_footprint(b, a, margin_m)
+
+
 def match_gt(map_objects: list[dict[str, Any]], gt: list[dict[str, Any]], radius_m: float) -> dict[int, int | None]:
     """Map object id → the true object id it targets (nearest centre in x-y within ``radius_m``;
     each true object at most once, closest pairs first)."""
@@ -610,7 +617,7 @@ def run_grasp_session(
         target = queue.pop(0)
         gt_id = match[target["id"]]  # the judge's; never steers the loop
         neighbours = [m for m in remaining if m["id"] != target["id"]]
-        if any(in_footprint(target, g, cfg.duplicate_margin_m) for g in grasped):
+        if any(same_place(target, g, cfg.duplicate_margin_m) for g in grasped):
             # The hand already took the object here (through another map object of it): skip.
             # Judged: right when its true object was lifted, else a wrongly skipped object.
             right = gt_id is None or gt_id in session.removed

@@ -98,7 +98,8 @@ class GraspRunConfig:
     is felt as a grasp, metres (the narrowest benchmark object is ~3 cm)."""
     duplicate_margin_m: float = 0.01
     """A map object whose centre lies within the footprint (plus this, metres) of a map object the
-    hand grasped earlier is taken for the same object and skipped."""
+    hand grasped earlier, and whose footprint holds that object's centre, is taken for the same
+    object and skipped."""
     contact_backoff_m: float = 0.015
     """How far the hand rises after a touch before it moves sideways, metres."""
     contact_extra_shift_m: float = 0.001
