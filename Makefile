@@ -15,6 +15,10 @@ RUNS_ARGS ?=
 AR_ARGS ?=
 RELOC_ARGS ?=
 FEATURES_ARGS ?=
+# .cargo/config.toml builds for x86-64-v3 (AVX2); a CPU without it gets a baseline x86-64 build.
+ifeq ($(shell [ "$$(uname -m)" = x86_64 ] && ! grep -qw avx2 /proc/cpuinfo && echo 1),1)
+export RUSTFLAGS += -C target-cpu=x86-64
+endif
 
 .PHONY: help setup run runs test test-fast test-rust test-rust-unit test-py fuzz bench benchmark associate parameterize slam grasp grasp-robustness place match match-sim features reloc ar report sensor reports-index view lint fmt clean
 

@@ -85,10 +85,15 @@ fi
 # 5. The native package, built by maturin in release mode, installed into the venv.
 step "5/5 native package objslam (maturin, release)"
 native_hash() {
-  { find core/src bindings/src -name '*.rs' | sort; echo Cargo.toml Cargo.lock pyproject.toml core/Cargo.toml bindings/Cargo.toml; } \
+  { find core/src bindings/src -name '*.rs' | sort; echo Cargo.toml Cargo.lock pyproject.toml core/Cargo.toml bindings/Cargo.toml .cargo/config.toml; } \
     | xargs cat 2>/dev/null | sha256sum | cut -c1-16
 }
 src_hash="$(native_hash)"
+# .cargo/config.toml builds for x86-64-v3 (AVX2); a CPU without it gets a baseline x86-64 build.
+if [ "$(uname -m)" = "x86_64" ] && ! grep -qw avx2 /proc/cpuinfo && [[ "${RUSTFLAGS:-}" != *target-cpu* ]]; then
+  step "    no AVX2 on this CPU: building for baseline x86-64"
+  export RUSTFLAGS="${RUSTFLAGS:-} -C target-cpu=x86-64"
+fi
 if [ -f "$STAMP_DIR/native" ] && [ "$(cat "$STAMP_DIR/native")" = "$src_hash" ] \
    && "$PY" -c "import objslam._native" 2>/dev/null; then
   step "    ok: up to date"
