@@ -5,7 +5,7 @@ when the grasp session gave up (the map objects whose attempt was not felt as a 
 each `no_ik` target, plans again with: no neighbours, each neighbour left out in turn, no object
 margin, the true geometry of the target. Planner only (no simulation).
 
-    PYTHONPATH=sim /work/main/.venv/bin/python studies/grasp_reach/diagnose.py \
+    python studies/grasp_reach/diagnose.py \
         --benchmark runs/exploration_h13.json [--manifest runs/grasp_x/a.json]
 """
 
@@ -14,18 +14,14 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import sys
 from pathlib import Path
 
 import numpy as np
-
-REPO = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(REPO / "experiments"))
-sys.path.insert(0, str(REPO / "sim"))
-
 from objslam import _native
 from objslam.scene import gt_objects, load_scene
 from objslam.world import READY_QPOS, panda_urdf_path
+
+REPO = Path(__file__).resolve().parents[2]
 
 
 def main() -> None:

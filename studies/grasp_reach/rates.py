@@ -1,7 +1,7 @@
 """Grasp success per split (hard, test) and map source, with Wilson 95 % intervals and causes.
 
-    PYTHONPATH=sim /work/main/.venv/bin/python studies/grasp_reach/rates.py reports/grasping.json
-    PYTHONPATH=sim /work/main/.venv/bin/python studies/grasp_reach/rates.py runs/grasp_x/trim_a.json runs/grasp_x/trim_b.json
+    python studies/grasp_reach/rates.py reports/grasping.json
+    python studies/grasp_reach/rates.py runs/grasp_x/trim_a.json runs/grasp_x/trim_b.json
 
 A ``grasping.json`` report gives its rows; manifests give their sessions (rows as the experiment
 counts them: ``experiments/grasp.py``'s ``_rows``).
@@ -9,16 +9,20 @@ counts them: ``experiments/grasp.py``'s ``_rows``).
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import sys
 from collections import Counter
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(REPO / "experiments"))
-
-import grasp as exp
 from objslam.reloc import wilson
+
+REPO = Path(__file__).resolve().parents[2]
+# The experiment script, loaded from its file (its row counting is the report's).
+_spec = importlib.util.spec_from_file_location("grasp_experiment", REPO / "experiments" / "grasp.py")
+assert _spec is not None and _spec.loader is not None
+exp = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(exp)
 
 
 def main() -> None:
