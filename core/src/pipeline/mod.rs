@@ -149,17 +149,59 @@ pub const EXISTENCE_STANDALONE_SHARE: f64 = 0.1;
 /// ... and the median depth of this square window around the projected centre, pixels.
 const EXISTENCE_WINDOW_PX: u32 = 5;
 
-/// The primitive a contested object's cloud chooses
-/// ([`PipelineConfig::shape_cuboid_ratio`], [`PipelineConfig::shape_cylinder_ratio`]), `None`
-/// when the fits do not tell.
-fn shape_from_fits(
-    cuboid: &ObjectGeometry,
-    cylinder: &ObjectGeometry,
-    points: &[Point3<f64>],
+/// The cloud an object is estimated from: its points, less those a neighbour owns
+/// ([`PipelineConfig::ownership_radius_m`], [`PipelineConfig::ownership_min_kept`]). `bounds` is
+/// every cloud's [`cloud_bounds`] (empty when ownership is off).
+fn estimation_points<'a>(
+    clouds: &[&'a [Point3<f64>]],
+    bounds: &[Option<(Point3<f64>, Point3<f64>)>],
+    index: usize,
     config: &PipelineConfig,
-) -> Option<Shape> {
-    let cub = mean_surface_distance(cuboid, points)?;
-    let cyl = mean_surface_distance(cylinder, points)?;
+) -> std::borrow::Cow<'a, [Point3<f64>]> {
+    let all = clouds[index];
+    if config.ownership_radius_m <= 0.0 {
+        return std::borrow::Cow::Borrowed(all);
+    }
+    let owned = owned_points(clouds, bounds, index, config.ownership_radius_m);
+    if (owned.len() as f64) < config.ownership_min_kept * all.len() as f64 {
+        std::borrow::Cow::Borrowed(all)
+    } else {
+        std::borrow::Cow::Owned(owned)
+    }
+}
+
+/// An object estimated as both primitives ([`PipelineConfig::shape_contest_share`]).
+struct BothFits {
+    /// The estimator switched to the other primitive, after its estimate.
+    other: ObjectEstimator,
+    /// Its estimate.
+    other_estimate: ObjectEstimate,
+    /// Mean surface distance of the points under the cuboid and the cylinder estimate, metres.
+    costs: [f64; 2],
+}
+
+/// `est` (whose estimate from `points` is `own`) estimated in the other primitive too, and both
+/// fits' costs; `None` when the other estimate fails or there are no points.
+fn fit_both(est: &ObjectEstimator, own: &ObjectEstimate, points: &[Point3<f64>]) -> Option<BothFits> {
+    let mut other = est.clone();
+    other.set_shape(match est.shape() {
+        Shape::Cuboid => Shape::Cylinder,
+        Shape::Cylinder => Shape::Cuboid,
+    });
+    let other_estimate = other.estimate(points).ok()?;
+    let (cuboid, cylinder) = if est.shape() == Shape::Cuboid {
+        (&own.geometry, &other_estimate.geometry)
+    } else {
+        (&other_estimate.geometry, &own.geometry)
+    };
+    let costs = [mean_surface_distance(cuboid, points)?, mean_surface_distance(cylinder, points)?];
+    Some(BothFits { other, other_estimate, costs })
+}
+
+/// The primitive a contested object's cloud chooses from its fits' `[cuboid, cylinder]` costs
+/// ([`PipelineConfig::shape_cuboid_ratio`], [`PipelineConfig::shape_cylinder_ratio`]), `None`
+/// when they do not tell.
+fn shape_from_costs([cub, cyl]: [f64; 2], config: &PipelineConfig) -> Option<Shape> {
     if cyl >= config.shape_cuboid_ratio * cub {
         Some(Shape::Cuboid)
     } else if cyl <= config.shape_cylinder_ratio * cub {
@@ -756,54 +798,33 @@ impl ObjectPipeline {
         }
         let map = self.raw_map();
         let dirty = std::mem::take(&mut self.dirty);
-        let r = self.config.ownership_radius_m;
-        // The bounds are only needed when something is re-estimated.
-        let clouds: Vec<&[Point3<f64>]> = if r > 0.0 && !dirty.is_empty() {
-            map.objects.iter().map(|o| &o.points_in_world[..]).collect()
-        } else {
-            Vec::new()
-        };
-        let bounds: Vec<Option<(Point3<f64>, Point3<f64>)>> = clouds.iter().map(|c| cloud_bounds(c)).collect();
+        let clouds: Vec<&[Point3<f64>]> = map.objects.iter().map(|o| &o.points_in_world[..]).collect();
+        // The bounds are only needed when ownership is on and something is re-estimated.
+        let bounds: Vec<Option<(Point3<f64>, Point3<f64>)>> =
+            if self.config.ownership_radius_m > 0.0 && !dirty.is_empty() {
+                clouds.iter().map(|c| cloud_bounds(c)).collect()
+            } else {
+                Vec::new()
+            };
         // Objects whose votes are split across primitives, with the primitive of the best label.
         let contested: BTreeMap<u32, Shape> =
             dirty.iter().filter_map(|id| self.contested_shape(*id).map(|s| (*id, s))).collect();
         for id in dirty {
             let Some(index) = map.objects.iter().position(|o| o.id == id) else { continue };
             let Some(est) = self.estimators.get_mut(&id) else { continue };
-            let obj = &map.objects[index];
-            let owned;
-            let points = if r > 0.0 {
-                owned = owned_points(&clouds, &bounds, index, r);
-                if (owned.len() as f64) < self.config.ownership_min_kept * obj.points_in_world.len() as f64 {
-                    &obj.points_in_world[..]
-                } else {
-                    &owned[..]
-                }
-            } else {
-                &obj.points_in_world[..]
-            };
-            let Ok(mut e) = est.estimate(points) else { continue };
+            let points = estimation_points(&clouds, &bounds, index, &self.config);
+            let Ok(mut e) = est.estimate(&points) else { continue };
             if let Some(voted) = contested.get(&id) {
-                // Estimate the other primitive too; the cloud settles the label when it is clear.
-                let mut other = est.clone();
-                other.set_shape(match est.shape() {
-                    Shape::Cuboid => Shape::Cylinder,
-                    Shape::Cylinder => Shape::Cuboid,
-                });
-                if let Ok(o) = other.estimate(points) {
-                    let (cuboid, cylinder) = if est.shape() == Shape::Cuboid {
-                        (&e.geometry, &o.geometry)
-                    } else {
-                        (&o.geometry, &e.geometry)
-                    };
-                    let choice = shape_from_fits(cuboid, cylinder, points, &self.config);
+                // The other primitive too; the cloud settles the label when it is clear.
+                if let Some(both) = fit_both(est, &e, &points) {
+                    let choice = shape_from_costs(both.costs, &self.config);
                     match choice {
                         Some(shape) => self.shape_choice.insert(id, shape),
                         None => self.shape_choice.remove(&id),
                     };
-                    if choice.unwrap_or(*voted) == other.shape() {
-                        *est = other;
-                        e = o;
+                    if choice.unwrap_or(*voted) == both.other.shape() {
+                        *est = both.other;
+                        e = both.other_estimate;
                     }
                 }
             } else {
@@ -1260,21 +1281,23 @@ impl ObjectPipeline {
         (minor > 0 && f64::from(minor) >= share * f64::from(top)).then_some(shape)
     }
 
-    /// How well each primitive explains an object's cloud: the mean distance of its points to the
-    /// surface of the object estimated as a cuboid and as a cylinder (distances capped at 2 cm),
-    /// metres; `None` for an object without an estimator or points.
+    /// How well each primitive explains an object's cloud (the points its estimate is made from):
+    /// the mean distance of its points to the surface of the object estimated as a cuboid and as
+    /// a cylinder (distances capped at 2 cm), metres, as [`PipelineConfig::shape_contest_share`]
+    /// compares them; `None` for an object without an estimator or points.
     pub fn shape_fit_costs(&self, id: u32) -> Option<[f64; 2]> {
         let map = self.raw_map();
-        let obj = map.get(id)?;
-        let est = self.estimators.get(&id)?;
-        let mut out = [0.0; 2];
-        for (k, shape) in [Shape::Cuboid, Shape::Cylinder].into_iter().enumerate() {
-            let mut e = est.clone();
-            e.set_shape(shape);
-            let g = e.estimate(&obj.points_in_world).ok()?.geometry;
-            out[k] = mean_surface_distance(&g, &obj.points_in_world)?;
-        }
-        Some(out)
+        let index = map.objects.iter().position(|o| o.id == id)?;
+        let mut est = self.estimators.get(&id)?.clone();
+        let clouds: Vec<&[Point3<f64>]> = map.objects.iter().map(|o| &o.points_in_world[..]).collect();
+        let bounds: Vec<_> = if self.config.ownership_radius_m > 0.0 {
+            clouds.iter().map(|c| cloud_bounds(c)).collect()
+        } else {
+            Vec::new()
+        };
+        let points = estimation_points(&clouds, &bounds, index, &self.config);
+        let own = est.estimate(&points).ok()?;
+        Some(fit_both(&est, &own, &points)?.costs)
     }
 
     /// An object's label votes (detections per [`crate::map::Label::index`], folded objects'
@@ -1926,8 +1949,8 @@ mod tests {
             let (center, half_extents) = crate::objects::yaw::oriented_extent(cloud, 0.0).unwrap();
             let a = ObjectGeometry { shape: Shape::Cuboid, center, yaw_rad: 0.0, half_extents };
             let b = ObjectEstimator::new(Shape::Cylinder, config.param).estimate(cloud).unwrap().geometry;
-            let ratio = mean_surface_distance(&b, cloud).unwrap() / mean_surface_distance(&a, cloud).unwrap();
-            (shape_from_fits(&a, &b, cloud, config), ratio)
+            let costs = [mean_surface_distance(&a, cloud).unwrap(), mean_surface_distance(&b, cloud).unwrap()];
+            (shape_from_costs(costs, config), costs[1] / costs[0])
         };
         for seed in 0..5 {
             // A box's corners lie off any cylinder: the cloud says cuboid.
@@ -1940,6 +1963,19 @@ mod tests {
         // Ratios between the two thresholds leave the votes to decide.
         let wide = PipelineConfig { shape_cuboid_ratio: 1e3, shape_cylinder_ratio: 0.0, ..PipelineConfig::default() };
         assert_eq!(fits(&seen_cloud(Shape::Cuboid, 0), &wide).0, None);
+        // Both fits from either primitive: the other estimator, its estimate, costs in
+        // [cuboid, cylinder] order.
+        let cloud = seen_cloud(Shape::Cuboid, 1);
+        for start in [Shape::Cuboid, Shape::Cylinder] {
+            let mut est = ObjectEstimator::new(start, config.param);
+            let own = est.estimate(&cloud).unwrap();
+            let both = fit_both(&est, &own, &cloud).unwrap();
+            assert_ne!(both.other.shape(), start);
+            assert_eq!(both.other_estimate.geometry.shape, both.other.shape());
+            let g = |shape| if own.geometry.shape == shape { own.geometry } else { both.other_estimate.geometry };
+            assert_eq!(both.costs[0], mean_surface_distance(&g(Shape::Cuboid), &cloud).unwrap());
+            assert_eq!(both.costs[1], mean_surface_distance(&g(Shape::Cylinder), &cloud).unwrap());
+        }
         // The ratios must be ordered.
         let bad = PipelineConfig { shape_cuboid_ratio: 1.0, shape_cylinder_ratio: 1.5, ..PipelineConfig::default() };
         assert!(ObjectPipeline::new(bad).is_err());
