@@ -149,6 +149,18 @@ pub const EXISTENCE_STANDALONE_SHARE: f64 = 0.1;
 /// ... and the median depth of this square window around the projected centre, pixels.
 const EXISTENCE_WINDOW_PX: u32 = 5;
 
+/// The best-voted label of primitive `shape` and its votes (ties: the lower index), `None` when
+/// no label of that primitive has a vote.
+fn best_label_of(votes: &[u32; crate::map::Label::ALL.len()], shape: Shape) -> Option<(crate::map::Label, u32)> {
+    let mut best: Option<(crate::map::Label, u32)> = None;
+    for (label, v) in crate::map::Label::ALL.iter().zip(votes) {
+        if label.shape() == shape && *v > 0 && best.is_none_or(|(_, b)| *v > b) {
+            best = Some((*label, *v));
+        }
+    }
+    best
+}
+
 /// The cloud an object is estimated from: its points, less those a neighbour owns
 /// ([`PipelineConfig::ownership_radius_m`], [`PipelineConfig::ownership_min_kept`]). `bounds` is
 /// every cloud's [`cloud_bounds`] (empty when ownership is off).
@@ -1079,14 +1091,7 @@ impl ObjectPipeline {
                 continue;
             }
             let Some(votes) = self.label_votes(o.id) else { continue };
-            // The best-voted label of the chosen primitive (ties: the lower index).
-            let mut best: Option<(crate::map::Label, u32)> = None;
-            for (label, v) in crate::map::Label::ALL.iter().zip(votes) {
-                if label.shape() == *shape && v > 0 && best.is_none_or(|(_, b)| v > b) {
-                    best = Some((*label, v));
-                }
-            }
-            if let Some((label, _)) = best {
+            if let Some((label, _)) = best_label_of(&votes, *shape) {
                 o.label = label;
             }
         }
@@ -1266,15 +1271,7 @@ impl ObjectPipeline {
             return None;
         }
         let votes = self.label_votes(id)?;
-        let best = |shape: Shape| {
-            crate::map::Label::ALL
-                .iter()
-                .zip(votes)
-                .filter(|(l, _)| l.shape() == shape)
-                .map(|(_, v)| v)
-                .max()
-                .unwrap_or(0)
-        };
+        let best = |shape: Shape| best_label_of(&votes, shape).map_or(0, |(_, v)| v);
         let (cuboid, cylinder) = (best(Shape::Cuboid), best(Shape::Cylinder));
         let (top, minor, shape) =
             if cuboid >= cylinder { (cuboid, cylinder, Shape::Cuboid) } else { (cylinder, cuboid, Shape::Cylinder) };
@@ -1963,6 +1960,11 @@ mod tests {
         // Ratios between the two thresholds leave the votes to decide.
         let wide = PipelineConfig { shape_cuboid_ratio: 1e3, shape_cylinder_ratio: 0.0, ..PipelineConfig::default() };
         assert_eq!(fits(&seen_cloud(Shape::Cuboid, 0), &wide).0, None);
+        // The label a chosen primitive gets: its best-voted one (ties: the lower index).
+        let votes = [43, 49, 0, 0, 22, 22, 0, 0];
+        assert_eq!(best_label_of(&votes, Shape::Cuboid), Some((Label::Book, 49)));
+        assert_eq!(best_label_of(&votes, Shape::Cylinder), Some((Label::Can, 22)));
+        assert_eq!(best_label_of(&[5, 0, 0, 0, 0, 0, 0, 0], Shape::Cylinder), None);
         // Both fits from either primitive: the other estimator, its estimate, costs in
         // [cuboid, cylinder] order.
         let cloud = seen_cloud(Shape::Cuboid, 1);
