@@ -396,8 +396,8 @@ pub struct PipelineConfig {
     /// A contested object is a cuboid when its points' mean distance to the cylinder estimate's
     /// surface is at least this many times their mean distance to the cuboid estimate's (a box
     /// fits a cylinder's cloud nearly as well as a cylinder does, a cylinder fits a box's cloud
-    /// far worse: on the hard suite's replays the ratio is 1.1 for true cylinders, median, and
-    /// 3.0 for true cuboids). Default 2.0.
+    /// far worse: on the hard suite's replays the ratio is 1.13 for true cylinders, median, and
+    /// 3.3 for true cuboids; studies/shape_evidence). Default 2.0.
     pub shape_cuboid_ratio: f64,
     /// ... and a cylinder when that ratio is at most this (the cylinder fits at least as well as
     /// the box). Between the two, the votes decide. Default 1.0.
