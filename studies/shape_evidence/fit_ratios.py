@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import re
 import sys
+from pathlib import Path
 
 CUBOID_LABELS = {"Block", "Book", "Keyboard"}
 LINE = re.compile(r"\s*shape est \d+ \w+ gt (\w+) votes .* costs Some\(\[([\d.]+), ([\d.]+)\]\)")
@@ -16,7 +17,7 @@ LINE = re.compile(r"\s*shape est \d+ \w+ gt (\w+) votes .* costs Some\(\[([\d.]+
 
 def main() -> None:
     ratios: dict[str, list[float]] = {"cuboid": [], "cylinder": []}
-    for line in open(sys.argv[1]):
+    for line in Path(sys.argv[1]).read_text().splitlines():
         m = LINE.match(line)
         if not m or float(m[2]) <= 0.0:
             continue

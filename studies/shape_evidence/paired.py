@@ -11,13 +11,14 @@ from __future__ import annotations
 import random
 import re
 import sys
+from pathlib import Path
 
 LINE = re.compile(r"\s*(\S+): *(\d+) for *(\d+)\*? *recall ([\d.]+) precision ([\d.]+) IoU ([\d.]+)")
 
 
 def load(path: str) -> dict[str, dict[str, float]]:
     out = {}
-    for line in open(path):
+    for line in Path(path).read_text().splitlines():
         m = LINE.match(line)
         if m:
             out[m[1]] = {"recall": float(m[4]), "precision": float(m[5]), "iou": float(m[6])}
