@@ -143,7 +143,25 @@ def _foundation_run(d: dict[str, Any]) -> str:
     )
 
 
+def _ar(d: dict[str, Any]) -> str:
+    s = d["summary"]
+    return (
+        f"occlusion mask IoU {s['mean_occlusion_iou']:.3f} (map only {s['mean_occlusion_iou_map']:.3f}, "
+        f"naive overlay {s['mean_occlusion_iou_naive']:.3f}); "
+        f"dropped objects' rest error (median) {s['median_rest_error_cm']:.2f} cm over {s['drops']} drops"
+    )
+
+
+def _sensor(d: dict[str, Any]) -> str:
+    checks = d.get("checks") or []
+    passed = sum(1 for c in checks if c.get("ok"))
+    details = "; ".join(f"{c['name']}: {c['detail']}" for c in checks)
+    return f"checks passed {passed}/{len(checks)}: {details}"
+
+
 HEADLINES: dict[str, Callable[[dict[str, Any]], str]] = {
+    "ar": _ar,
+    "sensor": _sensor,
     "exploration": _exploration,
     "association": _association,
     "parameterization": _parameterization,
