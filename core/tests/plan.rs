@@ -601,7 +601,7 @@ fn a_block_in_a_staggered_row_is_grasped_tilted_off_centre_with_fitted_fingers()
     )
     .unwrap();
     assert!(matches!(without.plan_grasp(&Q_READY, &target, &neighbours), Err(PlanError::NoReachableGrasp { .. })));
-    // The fallback: fingers opened to the width + 2 cm, the closing axis turned, the TCP moved
+    // The fallback: fingers opened to the width + 2.4 cm, the closing axis turned, the TCP moved
     // towards the block's free end.
     let planner = planner();
     let m = planner.plan_grasp(&Q_READY, &target, &neighbours).unwrap();

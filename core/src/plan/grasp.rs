@@ -78,7 +78,7 @@ pub struct GraspConfig {
     /// neighbours leave less room beside it than the open fingers need. Default true.
     pub narrow_opening_fallback: bool,
     /// Opening beyond the object's width of the fallback candidates, metres (split over both
-    /// sides; a tilted pad's edge reaches `pad half-width · tan tilt` closer). Default 0.02.
+    /// sides; a tilted pad's edge reaches `pad half-width · tan tilt` closer). Default 0.024.
     pub narrow_opening_clearance_m: f64,
     /// Off-centre fallback TCP positions per side along the cuboid's axis across the closing
     /// axis (`fallback_grasps`): `k / steps` of the largest offset, k = 1 … steps. 0 = centred
@@ -91,7 +91,7 @@ pub struct GraspConfig {
     /// [`Self::max_tilt_rad`], k = 1 … steps. 0 = untilted only. Default 2.
     pub tilt_steps: usize,
     /// Largest turn of a fallback closing axis from the cuboid's face normal, radians: a tilted
-    /// closing reaches past a neighbour that covers part of a side. Default 0.45 (about 26°).
+    /// closing reaches past a neighbour that covers part of a side. Default 0.35 (about 20°).
     pub max_tilt_rad: f64,
 }
 
@@ -112,11 +112,11 @@ impl Default for GraspConfig {
             trim_overlapping_neighbours: true,
             min_trimmed_half_extent_m: 0.01,
             narrow_opening_fallback: true,
-            narrow_opening_clearance_m: 0.02,
+            narrow_opening_clearance_m: 0.024,
             off_centre_steps: 2,
             off_centre_inset_m: 0.008,
             tilt_steps: 2,
-            max_tilt_rad: 0.45,
+            max_tilt_rad: 0.35,
         }
     }
 }
@@ -461,7 +461,7 @@ mod tests {
         let b = block(0.0, 0.05, 0.025, 0.012);
         let d = GraspDirection { yaw_rad: 0.0, width_m: 0.05, short_side: true };
         let f = fallback_grasps(&b, &d, &c);
-        // 5 tilts (0, ±0.225, ±0.45) × 5 offsets; all fit (5 cm / cos 0.45 = 5.6 cm).
+        // 5 tilts (0, ±0.175, ±0.35) × 5 offsets; all fit (5 cm / cos 0.35 = 5.3 cm).
         assert_eq!(f.len(), 25);
         assert_eq!((f[0].offset_m, f[0].tilt_rad), (0.0, 0.0));
         for g in &f {
@@ -472,11 +472,11 @@ mod tests {
             let reach = g.offset_m.abs() + 0.025 * g.tilt_rad.tan().abs();
             assert!(reach <= 0.05 - c.off_centre_inset_m + 1e-12);
         }
-        // The largest untilted offset: 5 − 0.8 = 4.2 cm; at 0.45 rad: 4.2 − 2.5 · tan 0.45.
+        // The largest untilted offset: 5 − 0.8 = 4.2 cm; at 0.35 rad: 4.2 − 2.5 · tan 0.35.
         let max_at =
             |t: f64| f.iter().filter(|g| (g.tilt_rad - t).abs() < 1e-12).map(|g| g.offset_m).fold(0.0, f64::max);
         assert!((max_at(0.0) - 0.042).abs() < 1e-12);
-        assert!((max_at(0.45) - (0.042 - 0.025 * 0.45f64.tan())).abs() < 1e-12);
+        assert!((max_at(0.35) - (0.042 - 0.025 * 0.35f64.tan())).abs() < 1e-12);
         // Tilts that make the chord too wide are dropped: a 7.5 cm block fits untilted only.
         let wide = GraspDirection { width_m: 0.075, ..d };
         assert!(fallback_grasps(&block(0.0, 0.05, 0.0375, 0.012), &wide, &c).iter().all(|g| g.tilt_rad == 0.0));
