@@ -729,7 +729,9 @@ impl Planner {
     }
 
     /// Grasp candidates for `object` (a map estimate) among `neighbours` (the other map objects,
-    /// trimmed where they overlap the object: [`grasp::trim_neighbours`]), ranked: reachable first, then clearance (capped at `clearance_enough_m`), then short side
+    /// trimmed where they overlap the object: [`grasp::trim_neighbours`]), ranked: reachable first, then
+    /// smaller off-centre offset and tilt (fallback candidates, only when no regular one is
+    /// reachable: [`GraspConfig::narrow_opening_fallback`]), then clearance (capped at `clearance_enough_m`), then short side
     /// before long side, deep before shallow, then smaller hand-yaw change from `q_current`.
     ///
     /// Errors: [`PlanError::InvalidObject`] for a degenerate object, [`PlanError::TooWide`] when the
