@@ -265,3 +265,26 @@ def test_an_oversized_estimate_does_not_swallow_its_neighbours() -> None:
     # The margin: centres 4.5 cm apart with 3 cm half-sizes need a margin of at least 1.5 cm.
     assert not same_place(can(0.5, 0.03), can(0.545, 0.03), 0.01)
     assert same_place(can(0.5, 0.03), can(0.545, 0.03), 0.02)
+
+
+def test_fallback_grasps_are_planned_only_in_the_last_round(scene01_session) -> None:
+    """``fallback_last``: the regular planner has no fallback grasps (a block in a staggered row
+    of touching blocks is ``no_ik`` for it); the fallback planner, used for the objects still
+    deferred when nothing else can be executed, plans it tilted and off-centre."""
+    scene, cfg = scene01_session
+    yaw = 0.25
+    u, v = np.array([np.cos(yaw), np.sin(yaw)]), np.array([-np.sin(yaw), np.cos(yaw)])
+
+    def block(k: float) -> dict:
+        c = np.array([0.44, -0.24]) + 0.027 * k * u - 0.0545 * k * v
+        return {"shape": "cuboid", "center": [*c.tolist(), 0.0115], "yaw_rad": yaw,
+                "half_extents": [0.05, 0.026, 0.0115]}
+
+    target, row = json.dumps(block(0)), json.dumps([block(1), block(2)])
+    session = GraspSession(scene, cfg, GraspRunConfig())
+    q = READY_QPOS[:7]
+    assert session.planner.plan_grasp(q, target, row)["cause"] == "no_ik"
+    plan = session.fallback_planner.plan_grasp(q, target, row)
+    assert plan["ok"] and plan["fingers_at_opening"] and plan["tilt_rad"] != 0.0 and plan["off_centre_m"] < 0.0
+    off = GraspSession(scene, cfg, GraspRunConfig(fallback_last=False))
+    assert off.fallback_planner is None and off.planner.plan_grasp(q, target, row)["ok"]

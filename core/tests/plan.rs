@@ -576,3 +576,52 @@ fn a_neighbour_estimate_overlapping_the_target_is_trimmed_not_a_wall() {
     let neighbour = cuboid(0.45, 0.064, 0.0, [0.064, 0.064, 0.16]);
     assert_never_hits(&planner, &motion.to_pregrasp.positions, &[target, neighbour]);
 }
+
+#[test]
+fn a_block_in_a_staggered_row_is_grasped_tilted_off_centre_with_fitted_fingers() {
+    // Three flat blocks (10 × 5.2 × 2.3 cm) side by side across their short side, 2.5 mm apart
+    // and each shifted 2.7 cm along its long side from the last (a staggered row). The row's end
+    // block: the neighbour covers most of one long side, so the open fingers (modelled at the full
+    // 8 cm opening, 1 cm object margin) have no room beside it, centred or not.
+    let yaw: f64 = 0.25;
+    let (s, c) = yaw.sin_cos();
+    let (u, v) = (Vector3::new(c, s, 0.0), Vector3::new(-s, c, 0.0));
+    let size = [0.10, 0.052, 0.023];
+    let at = |k: f64| {
+        let p = Vector3::new(0.44, -0.24, 0.0) + u * (0.027 * k) - v * (0.0545 * k);
+        cuboid(p.x, p.y, yaw, size)
+    };
+    let (target, neighbours) = (at(0.0), [at(1.0), at(2.0)]);
+    let without = Planner::new(
+        panda_urdf(),
+        PlannerConfig {
+            grasp: objslam_core::plan::GraspConfig { narrow_opening_fallback: false, ..Default::default() },
+            ..PlannerConfig::default()
+        },
+    )
+    .unwrap();
+    assert!(matches!(without.plan_grasp(&Q_READY, &target, &neighbours), Err(PlanError::NoReachableGrasp { .. })));
+    // The fallback: fingers opened to the width + 2.4 cm, the closing axis turned, the TCP moved
+    // towards the block's free end.
+    let planner = planner();
+    let m = planner.plan_grasp(&Q_READY, &target, &neighbours).unwrap();
+    let g = &m.candidate;
+    assert!(g.fingers_at_opening && g.tilt_rad != 0.0 && g.off_centre_m < 0.0, "{g:?}");
+    // Closed form: the tilted closing line through the TCP meets the long faces inside the block.
+    let tcp = g.world_from_tcp_grasp.translation.vector - target.center;
+    let axis = g.closing_axis_in_world;
+    for side in [-1.0, 1.0] {
+        // Where the line tcp + t·axis crosses v·x = ±2.6 cm (block frame).
+        let t = (side * 0.026 - tcp.dot(&v)) / axis.dot(&v);
+        let along = (tcp + axis * t).dot(&u);
+        assert!(along.abs() <= 0.05 - 0.008 + 1e-9, "contact {along} m along the block");
+    }
+    assert!((g.expected_closed_width_m - 0.052 / g.tilt_rad.cos()).abs() < 1e-9);
+    let clearance = planner.config().grasp.narrow_opening_clearance_m;
+    assert!((g.open_width_m - g.expected_closed_width_m - clearance).abs() < 1e-9);
+    // The fingers at that opening never touch a neighbour on the approach and the lift.
+    let fitted = planner.with_fingers_open(g.open_width_m);
+    assert_never_hits(&fitted, &m.approach.positions, &neighbours);
+    assert_never_hits(&fitted, &m.lift.positions, &neighbours);
+    assert_never_hits(&planner, &m.to_pregrasp.positions, &[target, neighbours[0], neighbours[1]]);
+}

@@ -193,8 +193,9 @@ class Planner:
     rrt_max_iterations, shortcut_iterations, rng_seed, ik_seed, ik_random_restarts, sample_dt_s,
     velocity_scale, acceleration_scale, jerk_scale, opening_clearance_m, max_grasp_depth_m,
     shallow_grasp_depth_m, min_tcp_height_m, pregrasp_height_m, lift_height_m, allow_long_side,
-    cylinder_yaw_count, trim_overlapping_neighbours, min_trimmed_half_extent_m, linear_step_m,
-    linear_max_joint_step_rad (an unknown key is an
+    cylinder_yaw_count, trim_overlapping_neighbours, min_trimmed_half_extent_m,
+    narrow_opening_fallback, narrow_opening_clearance_m, off_centre_steps, off_centre_inset_m,
+    tilt_steps, max_tilt_rad, linear_step_m, linear_max_joint_step_rad (an unknown key is an
     ``InputError``). ``plan_to_pose(..., linear=True)`` moves the TCP along a straight line (IK every
     ``linear_step_m`` continuing the previous solution; a line that cannot be followed is
     ``no_path``). ``held_json`` (the ObjectGeometry of the object in the hand, where it stood

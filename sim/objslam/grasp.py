@@ -122,7 +122,15 @@ class GraspSession:
         )
         self.detector = SimulatedDetector(run_cfg.detector, episode_rng(seed, scene.seed, STREAM_GRASP_DETECTOR))
         planner_cfg = {"rng_seed": int(seed) + 1, **cfg.planner}
+        self.fallback_planner: Any = None
+        """The planner with fallback grasps, for the last round of deferred objects
+        (``GraspRunConfig.fallback_last``); None when the regular planner decides alone."""
+        if cfg.fallback_last and planner_cfg.get("narrow_opening_fallback", True):
+            self.fallback_planner = _native.Planner(str(panda_urdf_path()), json.dumps(planner_cfg))
+            planner_cfg = {**planner_cfg, "narrow_opening_fallback": False}
         self.planner = _native.Planner(str(panda_urdf_path()), json.dumps(planner_cfg))
+        self.grasp_planner = self.planner
+        """The planner of the current attempt's grasps (regular or fallback)."""
         self.limits = self.planner.joint_limits()
         self.rec = rec
         self.removed: set[int] = set()
@@ -365,7 +373,7 @@ class GraspSession:
                 if r["ok"]:
                     self.execute(r, open_half)
                 # A fresh plan for the moved target from here: its own pre-grasp, approach and lift.
-                g = self.planner.plan_grasp(self.q_arm(), json.dumps(moved["geometry"]), obs)
+                g = self.grasp_planner.plan_grasp(self.q_arm(), json.dumps(moved["geometry"]), obs)
                 if g["ok"]:
                     shifts.append(round(shift, 5))
                     plan, target = g, moved
@@ -380,8 +388,16 @@ class GraspSession:
         return err, plan, target, shifts
 
     # ----- one attempt ------------------------------------------------------------------------------
-    def attempt(self, k: int, target: dict[str, Any], neighbours: list[dict[str, Any]], gt_id: int | None) -> dict[str, Any]:
-        """Plan and execute one grasp of map object ``target``; returns the outcome record: what the
+    def attempt(
+        self,
+        k: int,
+        target: dict[str, Any],
+        neighbours: list[dict[str, Any]],
+        gt_id: int | None,
+        fallback: bool = False,
+    ) -> dict[str, Any]:
+        """Plan and execute one grasp of map object ``target`` (``fallback``: with the planner's
+        fallback grasps, :attr:`fallback_planner`); returns the outcome record: what the
         hand sensed (``held``, ``closed_gap_m``, ``held_gap_m``, ``contact_shifts_m``) and, judged from
         the ground truth (``gt_id``: the true object the judge matched to the target; it never steers
         the attempt), ``success``, ``cause``, ``rise_m``, ``lifted``."""
@@ -405,7 +421,8 @@ class GraspSession:
             out["target_geometry"] = target["geometry"]
             if cfg.reobserve_return_ready:
                 self.go_ready([n["geometry"] for n in neighbours] + [target["geometry"]])
-        plan = self.planner.plan_grasp(
+        self.grasp_planner = self.fallback_planner if fallback and self.fallback_planner else self.planner
+        plan = self.grasp_planner.plan_grasp(
             self.q_arm(), json.dumps(target["geometry"]), json.dumps([n["geometry"] for n in neighbours])
         )
         if not plan["ok"]:
@@ -607,7 +624,13 @@ def run_grasp_session(
     n_deferred: dict[int, int] = {}
     grasped: list[dict[str, Any]] = []  # map objects the hand felt it grasped (as grasped)
     k = 0
+    fallback = False  # the last round of deferred objects, with the planner's fallback grasps
     while queue or deferred:
+        if not queue and not fallback and session.fallback_planner is not None:
+            fallback = True
+            queue = [t for t, _ in deferred]
+            deferred = []
+            continue
         if not queue:
             # Nothing executed since these were deferred: the scene is unchanged, so they stay
             # unreachable; their last planning outcome is the row.
@@ -628,7 +651,7 @@ def run_grasp_session(
                          "gt_id": gt_id, "skipped": right})
             remaining = [m for m in remaining if m["id"] != target["id"]]
             continue
-        res = session.attempt(k, target, neighbours, gt_id)
+        res = session.attempt(k, target, neighbours, gt_id, fallback)
         k += 1
         executed = "open_width_m" in res
         if cfg.defer_unreachable and not executed and res["cause"] in DEFERRABLE:
@@ -655,6 +678,7 @@ def run_grasp_session(
             # The scene changed (an object left, or was pushed): the deferred objects get another plan.
             queue.extend(t for t, _ in deferred)
             deferred = []
+            fallback = False
     attempted = {r["gt_id"] for r in rows if r["gt_id"] is not None}
     for gid in sorted(graspable_gt - attempted):
         rows.append(

@@ -110,6 +110,12 @@ class GraspRunConfig:
     a neighbour may have been set aside; it is reported ``no_ik`` / ``no_path`` only if it is still
     unreachable when no executed attempt is left. Every object still gets at most one physical
     attempt; rows record how often it was deferred (``deferred``)."""
+    fallback_last: bool = True
+    """The planner's fallback grasps (``narrow_opening_fallback``: closing axes tilted and TCPs off
+    the centre, fingers opened to the width plus ``narrow_opening_clearance_m``, for a block whose
+    neighbours leave no room beside it) are planned only for the objects still deferred when no
+    executed attempt is left: setting a neighbour aside first frees a regular grasp. After the next
+    executed attempt the regular planner is tried again. False: the planner's own config decides."""
     planner: dict[str, Any] = field(
         default_factory=lambda: {"opening_clearance_m": 0.08, "max_grasp_depth_m": 0.04}
     )

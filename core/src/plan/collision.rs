@@ -325,6 +325,29 @@ impl ArmCollisionModel {
         Ok(out)
     }
 
+    /// This model with the fingers of `hand_link` moved `by_m` towards each other: every capsule of
+    /// that link lying wholly in [`FINGER_Z_RANGE_M`] at a constant nonzero `y` (a finger at full
+    /// opening) has its `y` moved towards 0 by `by_m` (at most to 0). For a grasp whose fingers
+    /// open less than fully.
+    pub fn with_fingers_closed_by(&self, hand_link: &str, by_m: f64) -> Self {
+        let mut out = self.clone();
+        for (_, c) in out.capsules.iter_mut().take(self.n_arm) {
+            let in_range = |p: &[f64; 3]| p[2] >= FINGER_Z_RANGE_M[0] - 1e-9 && p[2] <= FINGER_Z_RANGE_M[1] + 1e-9;
+            let y = c.a_in_link[1];
+            if c.link == hand_link
+                && in_range(&c.a_in_link)
+                && in_range(&c.b_in_link)
+                && y != 0.0
+                && c.b_in_link[1] == y
+            {
+                let moved = y.signum() * (y.abs() - by_m).max(0.0);
+                c.a_in_link[1] = moved;
+                c.b_in_link[1] = moved;
+            }
+        }
+        out
+    }
+
     /// The attached capsules (held objects), in their links' frames.
     pub fn attached(&self) -> impl Iterator<Item = &ArmCapsule> {
         self.capsules.iter().skip(self.n_arm).map(|(_, c)| c)

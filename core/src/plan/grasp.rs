@@ -17,6 +17,12 @@
 //! ([`trim_neighbours`]): solid objects do not overlap, so the overlap is map error (a bloated or
 //! merged estimate), and an estimate reaching into the target would otherwise wall off every
 //! finger position.
+//!
+//! When no candidate is reachable, fallback candidates of cuboids are tried
+//! ([`GraspConfig::narrow_opening_fallback`]): the closing axis tilted from the face normal and the
+//! TCP moved along the block towards a free end (`fallback_grasps`), the fingers opened only to the
+//! chord plus [`GraspConfig::narrow_opening_clearance_m`] and modelled at that opening. A tilted
+//! closing reaches past a neighbour that covers part of a side (a staggered row of touching blocks).
 
 use nalgebra::{Translation3, UnitQuaternion, Vector3};
 
@@ -65,6 +71,28 @@ pub struct GraspConfig {
     /// A trimmed neighbour keeps at least this horizontal half-extent (or radius), metres; one
     /// that would be thinner is left out of the grasp's obstacles. Default 0.01.
     pub min_trimmed_half_extent_m: f64,
+    /// When no candidate at the configured opening is reachable, try fallback candidates whose
+    /// fingers open only to the object's width plus [`Self::narrow_opening_clearance_m`], with
+    /// the collision model's fingers placed at that opening (not at the full opening), and
+    /// off-centre along the fingers' width ([`off_centre_offsets`]): the grasp of a block whose
+    /// neighbours leave less room beside it than the open fingers need. Default true.
+    pub narrow_opening_fallback: bool,
+    /// Opening beyond the object's width of the fallback candidates, metres (split over both
+    /// sides; a tilted pad's edge reaches `pad half-width · tan tilt` closer). Default 0.024.
+    pub narrow_opening_clearance_m: f64,
+    /// Off-centre fallback TCP positions per side along the cuboid's axis across the closing
+    /// axis (`fallback_grasps`): `k / steps` of the largest offset, k = 1 … steps. 0 = centred
+    /// only. Default 2.
+    pub off_centre_steps: usize,
+    /// The fallback grasps' contact points stay at least this far inside the cuboid's ends,
+    /// metres (the finger pads are about 2 cm wide). Default 0.008.
+    pub off_centre_inset_m: f64,
+    /// Tilted fallback closing directions per side (`fallback_grasps`): `k / steps` of
+    /// [`Self::max_tilt_rad`], k = 1 … steps. 0 = untilted only. Default 2.
+    pub tilt_steps: usize,
+    /// Largest turn of a fallback closing axis from the cuboid's face normal, radians: a tilted
+    /// closing reaches past a neighbour that covers part of a side. Default 0.35 (about 20°).
+    pub max_tilt_rad: f64,
 }
 
 impl Default for GraspConfig {
@@ -83,6 +111,12 @@ impl Default for GraspConfig {
             cylinder_yaw_count: 6,
             trim_overlapping_neighbours: true,
             min_trimmed_half_extent_m: 0.01,
+            narrow_opening_fallback: true,
+            narrow_opening_clearance_m: 0.024,
+            off_centre_steps: 2,
+            off_centre_inset_m: 0.008,
+            tilt_steps: 2,
+            max_tilt_rad: 0.35,
         }
     }
 }
@@ -112,6 +146,14 @@ pub struct GraspCandidate {
     pub short_side: bool,
     /// How far the TCP (pads' centre) is below the object's top, metres.
     pub depth_below_top_m: f64,
+    /// Signed TCP offset from the object's centre along the cuboid's axis across the untilted
+    /// closing axis, metres; 0 = centred (`fallback_grasps`).
+    pub off_centre_m: f64,
+    /// Turn of the closing axis from the cuboid's face normal, radians; 0 = untilted.
+    pub tilt_rad: f64,
+    /// Whether this is a fallback candidate ([`GraspConfig::narrow_opening_fallback`]): its
+    /// collision tests place the fingers at `open_width_m` rather than at the full opening.
+    pub fingers_at_opening: bool,
     /// Collision-free IK solution at the pre-grasp pose (None = unreachable).
     pub q_pregrasp: Option<super::JointVector>,
     /// Collision-free IK solution at the grasp pose, seeded from `q_pregrasp` (None = unreachable).
@@ -190,6 +232,73 @@ pub(crate) fn grasp_directions(
     // Closest to the current hand yaw first (stable for ties).
     out.sort_by(|a, b| {
         wrap_angle(a.yaw_rad - current_yaw_rad).abs().total_cmp(&wrap_angle(b.yaw_rad - current_yaw_rad).abs())
+    });
+    out
+}
+
+/// A fallback grasp of a cuboid ([`GraspConfig::narrow_opening_fallback`]): a closing direction
+/// turned by `tilt_rad` and a TCP shifted by `offset_m` along the cuboid's axis across the untilted
+/// closing axis.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FallbackGrasp {
+    /// Hand yaw, radians (the direction's yaw plus `tilt_rad`).
+    pub yaw_rad: f64,
+    /// Turn of the closing axis from the cuboid's face normal, radians.
+    pub tilt_rad: f64,
+    /// TCP offset from the centre along the cuboid's axis across the untilted closing axis, metres.
+    pub offset_m: f64,
+    /// Unit horizontal direction of that axis in the world.
+    pub along: Vector3<f64>,
+    /// Width of the object along the tilted closing axis through the TCP, metres.
+    pub width_m: f64,
+}
+
+/// Fallback grasps of `object` for closing direction `d` (cuboids only; none for cylinders, where
+/// any yaw is already tried and an off-centre closing on a disc pushes it sideways): tilts
+/// `±k / tilt_steps · max_tilt_rad` (k = 0 … [`GraspConfig::tilt_steps`]) times offsets
+/// `±k / off_centre_steps · m` (k = 0 … [`GraspConfig::off_centre_steps`]) along the cuboid's axis
+/// `u` across the closing axis, where, with `L` and `W` the half-extents along `u` and across it,
+/// `m = L − off_centre_inset_m − W · tan|tilt|` keeps both contact points (where the tilted closing
+/// line meets the faces, `offset ± W · tan tilt` along `u`) at least the inset inside the ends.
+/// The width across the tilted axis is `2W / cos tilt` and must fit the gripper. Order: smaller
+/// offset first, then smaller tilt (the untilted centred grasp first).
+pub(crate) fn fallback_grasps(object: &ObjectGeometry, d: &GraspDirection, config: &GraspConfig) -> Vec<FallbackGrasp> {
+    if object.shape != Shape::Cuboid {
+        return Vec::new();
+    }
+    let along = Vector3::new(d.yaw_rad.cos(), d.yaw_rad.sin(), 0.0);
+    let half_l = footprint_support(object, &along);
+    let half_w = 0.5 * d.width_m;
+    let signed = |n: usize| -> Vec<f64> {
+        let mut v = vec![0.0];
+        for k in 1..=n {
+            v.extend([k as f64 / n as f64, -(k as f64) / n as f64]);
+        }
+        v
+    };
+    let mut out = Vec::new();
+    for t in signed(config.tilt_steps) {
+        let tilt = t * config.max_tilt_rad;
+        let width_m = d.width_m / tilt.cos();
+        if width_m + config.min_opening_clearance_m > config.max_opening_m {
+            continue;
+        }
+        let m = half_l - config.off_centre_inset_m - half_w * tilt.abs().tan();
+        if m < 0.0 {
+            continue;
+        }
+        for f in signed(config.off_centre_steps) {
+            out.push(FallbackGrasp {
+                yaw_rad: wrap_angle(d.yaw_rad + tilt),
+                tilt_rad: tilt,
+                offset_m: f * m,
+                along,
+                width_m,
+            });
+        }
+    }
+    out.sort_by(|a, b| {
+        a.offset_m.abs().total_cmp(&b.offset_m.abs()).then(a.tilt_rad.abs().total_cmp(&b.tilt_rad.abs()))
     });
     out
 }
@@ -343,6 +452,37 @@ mod tests {
             yaw_rad: yaw,
             half_extents: Vector3::new(hx, hy, hz),
         }
+    }
+
+    #[test]
+    fn fallback_grasps_keep_the_contacts_inside_the_block() {
+        let c = GraspConfig::default();
+        // 10 cm × 5 cm block along world x; short-side closing along y (hand yaw 0): u = x.
+        let b = block(0.0, 0.05, 0.025, 0.012);
+        let d = GraspDirection { yaw_rad: 0.0, width_m: 0.05, short_side: true };
+        let f = fallback_grasps(&b, &d, &c);
+        // 5 tilts (0, ±0.175, ±0.35) × 5 offsets; all fit (5 cm / cos 0.35 = 5.3 cm).
+        assert_eq!(f.len(), 25);
+        assert_eq!((f[0].offset_m, f[0].tilt_rad), (0.0, 0.0));
+        for g in &f {
+            assert!((g.yaw_rad - g.tilt_rad).abs() < 1e-12);
+            assert!((g.width_m - 0.05 / g.tilt_rad.cos()).abs() < 1e-12);
+            // The tilted closing line through the TCP meets the faces y = ±2.5 cm at
+            // x = offset ± 2.5 cm · tan(tilt): both at least the inset inside x = ±5 cm.
+            let reach = g.offset_m.abs() + 0.025 * g.tilt_rad.tan().abs();
+            assert!(reach <= 0.05 - c.off_centre_inset_m + 1e-12);
+        }
+        // The largest untilted offset: 5 − 0.8 = 4.2 cm; at 0.35 rad: 4.2 − 2.5 · tan 0.35.
+        let max_at =
+            |t: f64| f.iter().filter(|g| (g.tilt_rad - t).abs() < 1e-12).map(|g| g.offset_m).fold(0.0, f64::max);
+        assert!((max_at(0.0) - 0.042).abs() < 1e-12);
+        assert!((max_at(0.35) - (0.042 - 0.025 * 0.35f64.tan())).abs() < 1e-12);
+        // Tilts that make the chord too wide are dropped: a 7.5 cm block fits untilted only.
+        let wide = GraspDirection { width_m: 0.075, ..d };
+        assert!(fallback_grasps(&block(0.0, 0.05, 0.0375, 0.012), &wide, &c).iter().all(|g| g.tilt_rad == 0.0));
+        // Cylinders get none.
+        let can = ObjectGeometry { shape: Shape::Cylinder, ..b };
+        assert!(fallback_grasps(&can, &d, &c).is_empty());
     }
 
     #[test]

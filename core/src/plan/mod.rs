@@ -48,6 +48,9 @@
 //! - Grasps are top-down only; tall objects are grasped near their top (`max_grasp_depth_m`);
 //!   fallbacks are the cuboid's long side when it fits and a shallower grasp
 //!   (`shallow_grasp_depth_m`) that lifts the 20 cm wide hand body above close neighbours.
+//! - When no top-down candidate is reachable, cuboids get fallback candidates: closing axis tilted,
+//!   TCP off-centre, fingers opened to the chord plus `narrow_opening_clearance_m` and modelled at
+//!   that opening (`narrow_opening_fallback`).
 //! - A neighbour's estimate that overlaps the target's footprint is cut back to it for that grasp
 //!   (`trim_overlapping_neighbours`); one that would keep less than `min_trimmed_half_extent_m`
 //!   is left out.
@@ -410,6 +413,9 @@ impl PlannerConfig {
         range("object_margin_m", self.object_margin_m, 0.0, 1.0, false)?;
         range("table_margin_m", self.table_margin_m, 0.0, 1.0, false)?;
         range("min_trimmed_half_extent_m", self.grasp.min_trimmed_half_extent_m, 0.0, 1.0, false)?;
+        range("narrow_opening_clearance_m", self.grasp.narrow_opening_clearance_m, 0.0, 1.0, false)?;
+        range("off_centre_inset_m", self.grasp.off_centre_inset_m, 0.0, 1.0, false)?;
+        range("max_tilt_rad", self.grasp.max_tilt_rad, 0.0, 1.2, false)?;
         range("linear_step_m", self.linear_step_m, 1e-4, 1.0, false)?;
         range("linear_step_rad", self.linear_step_rad, 1e-4, 1.0, false)?;
         range("linear_max_joint_step_rad", self.linear_max_joint_step_rad, 0.0, pi, true)?;
@@ -425,6 +431,8 @@ impl PlannerConfig {
             ("linear_waypoint_every", self.linear_waypoint_every, 1),
             ("ik_random_restarts", self.ik.random_restarts, 0),
             ("cylinder_yaw_count", self.grasp.cylinder_yaw_count, 0),
+            ("off_centre_steps", self.grasp.off_centre_steps, 0),
+            ("tilt_steps", self.grasp.tilt_steps, 0),
         ] {
             if n < min || n > MAX_ITERATIONS {
                 return Err(PlanError::InvalidConfig {
@@ -465,6 +473,18 @@ impl Planner {
         let capsule = held.capsule(&self.config.hand_link, &self.hand_from_tcp)?;
         let model = self.model.with_attached(&self.chain, capsule)?;
         Ok(Self { model, ..self.clone() })
+    }
+
+    /// This planner with the fingers modelled at opening `open_width_m` (metres, total gap) instead
+    /// of the full [`grasp::GraspConfig::max_opening_m`]
+    /// ([`ArmCollisionModel::with_fingers_closed_by`] on the hand link); unchanged when the opening
+    /// is the full one or wider.
+    pub fn with_fingers_open(&self, open_width_m: f64) -> Self {
+        let by = 0.5 * (self.config.grasp.max_opening_m - open_width_m);
+        if by <= 0.0 {
+            return self.clone();
+        }
+        Self { model: self.model.with_fingers_closed_by(&self.config.hand_link, by), ..self.clone() }
     }
 
     /// The kinematic chain (to the TCP).
@@ -709,7 +729,9 @@ impl Planner {
     }
 
     /// Grasp candidates for `object` (a map estimate) among `neighbours` (the other map objects,
-    /// trimmed where they overlap the object: [`grasp::trim_neighbours`]), ranked: reachable first, then clearance (capped at `clearance_enough_m`), then short side
+    /// trimmed where they overlap the object: [`grasp::trim_neighbours`]), ranked: reachable first, then
+    /// smaller off-centre offset and tilt (fallback candidates, only when no regular one is
+    /// reachable: [`GraspConfig::narrow_opening_fallback`]), then clearance (capped at `clearance_enough_m`), then short side
     /// before long side, deep before shallow, then smaller hand-yaw change from `q_current`.
     ///
     /// Errors: [`PlanError::InvalidObject`] for a degenerate object, [`PlanError::TooWide`] when the
@@ -734,35 +756,70 @@ impl Planner {
             });
         }
         let top = object.center.z + object.half_extents.z;
+        let candidate = |planner: &Planner,
+                         scene: &CollisionScene,
+                         z: f64,
+                         d: &grasp::GraspDirection,
+                         f: &grasp::FallbackGrasp,
+                         open_width_m: f64,
+                         fingers_at_opening: bool| {
+            let p = nalgebra::Vector3::new(object.center.x, object.center.y, z) + f.along * f.offset_m;
+            let grasp_pose = grasp::top_down_pose(p, f.yaw_rad);
+            let up = |h: f64| grasp::top_down_pose(p + nalgebra::Vector3::new(0.0, 0.0, h), f.yaw_rad);
+            let pregrasp = up(g.pregrasp_height_m);
+            let lift = up(g.lift_height_m);
+            let world_from_hand = grasp_pose * self.hand_from_tcp.inverse();
+            let clearance_m = planner.model.hand_clearance(&world_from_hand, &self.config.hand_link, scene);
+            let q_pregrasp = planner.inverse_tcp_free(&pregrasp, q_current, scene).ok().map(|s| s.q);
+            let q_grasp = q_pregrasp.and_then(|qp| planner.inverse_tcp_free(&grasp_pose, &qp, scene).ok().map(|s| s.q));
+            let q_lift = q_grasp.and_then(|qg| planner.inverse_tcp_free(&lift, &qg, scene).ok().map(|s| s.q));
+            GraspCandidate {
+                world_from_tcp_pregrasp: pregrasp,
+                world_from_tcp_grasp: grasp_pose,
+                world_from_tcp_lift: lift,
+                hand_yaw_rad: f.yaw_rad,
+                closing_axis_in_world: grasp_pose.rotation * nalgebra::Vector3::y(),
+                open_width_m,
+                expected_closed_width_m: f.width_m,
+                clearance_m,
+                short_side: d.short_side,
+                depth_below_top_m: top - z,
+                off_centre_m: f.offset_m,
+                tilt_rad: f.tilt_rad,
+                fingers_at_opening,
+                q_pregrasp,
+                q_grasp,
+                q_lift,
+            }
+        };
+        let heights = grasp::grasp_heights(object, g);
         let mut out = Vec::new();
-        for z in grasp::grasp_heights(object, g) {
+        for &z in &heights {
             for d in &directions {
-                let p = nalgebra::Vector3::new(object.center.x, object.center.y, z);
-                let grasp_pose = grasp::top_down_pose(p, d.yaw_rad);
-                let up = |h: f64| grasp::top_down_pose(p + nalgebra::Vector3::new(0.0, 0.0, h), d.yaw_rad);
-                let pregrasp = up(g.pregrasp_height_m);
-                let lift = up(g.lift_height_m);
-                let world_from_hand = grasp_pose * self.hand_from_tcp.inverse();
-                let clearance_m = self.model.hand_clearance(&world_from_hand, &self.config.hand_link, &scene);
-                let q_pregrasp = self.inverse_tcp_free(&pregrasp, q_current, &scene).ok().map(|s| s.q);
-                let q_grasp =
-                    q_pregrasp.and_then(|qp| self.inverse_tcp_free(&grasp_pose, &qp, &scene).ok().map(|s| s.q));
-                let q_lift = q_grasp.and_then(|qg| self.inverse_tcp_free(&lift, &qg, &scene).ok().map(|s| s.q));
-                out.push(GraspCandidate {
-                    world_from_tcp_pregrasp: pregrasp,
-                    world_from_tcp_grasp: grasp_pose,
-                    world_from_tcp_lift: lift,
-                    hand_yaw_rad: d.yaw_rad,
-                    closing_axis_in_world: grasp_pose.rotation * nalgebra::Vector3::y(),
-                    open_width_m: (d.width_m + g.opening_clearance_m).min(g.max_opening_m),
-                    expected_closed_width_m: d.width_m,
-                    clearance_m,
-                    short_side: d.short_side,
-                    depth_below_top_m: top - z,
-                    q_pregrasp,
-                    q_grasp,
-                    q_lift,
-                });
+                let open = (d.width_m + g.opening_clearance_m).min(g.max_opening_m);
+                let centred = grasp::FallbackGrasp {
+                    yaw_rad: d.yaw_rad,
+                    tilt_rad: 0.0,
+                    offset_m: 0.0,
+                    along: nalgebra::Vector3::zeros(),
+                    width_m: d.width_m,
+                };
+                out.push(candidate(self, &scene, z, d, &centred, open, false));
+            }
+        }
+        if g.narrow_opening_fallback && !out.iter().any(GraspCandidate::reachable) {
+            for &z in &heights {
+                for d in &directions {
+                    for f in grasp::fallback_grasps(object, d, g) {
+                        let open = (f.width_m + g.narrow_opening_clearance_m).min(g.max_opening_m);
+                        let full = (d.width_m + g.opening_clearance_m).min(g.max_opening_m);
+                        if f.offset_m == 0.0 && f.tilt_rad == 0.0 && open >= full - 1e-9 {
+                            continue; // the candidate above
+                        }
+                        let narrowed = self.with_fingers_open(open);
+                        out.push(candidate(&narrowed, &scene, z, d, &f, open, true));
+                    }
+                }
             }
         }
         let yaw_change = |c: &GraspCandidate| crate::geometry::wrap_angle(c.hand_yaw_rad - current_yaw).abs();
@@ -771,6 +828,8 @@ impl Planner {
         out.sort_by(|a, b| {
             b.reachable()
                 .cmp(&a.reachable())
+                .then(a.off_centre_m.abs().total_cmp(&b.off_centre_m.abs()))
+                .then(a.tilt_rad.abs().total_cmp(&b.tilt_rad.abs()))
                 .then(capped(b).total_cmp(&capped(a)))
                 .then(b.short_side.cmp(&a.short_side))
                 .then(b.depth_below_top_m.total_cmp(&a.depth_below_top_m))
@@ -816,9 +875,17 @@ impl Planner {
             // Approach and lift along the straight vertical line (the fingers straddle the target
             // with a few millimetres to spare; a joint-space line between the two IK solutions can
             // stray by a centimetre); the joint-space line is the fallback.
+            // Fallback candidates: the fingers at their planned opening from the pre-grasp on.
+            let narrowed;
+            let hand: &Planner = if c.fingers_at_opening {
+                narrowed = self.with_fingers_open(c.open_width_m);
+                &narrowed
+            } else {
+                self
+            };
             let straight_or_path = |from: &JointVector, pose: &Se3, to: &JointVector| -> Option<JointTrajectory> {
-                self.plan_linear(from, pose, neighbours).ok().or_else(|| {
-                    self.plan_path(from, to, &scene_neigh).ok().and_then(|path| self.time_parameterize(&path).ok())
+                hand.plan_linear(from, pose, neighbours).ok().or_else(|| {
+                    hand.plan_path(from, to, &scene_neigh).ok().and_then(|path| hand.time_parameterize(&path).ok())
                 })
             };
             let Some(approach) = straight_or_path(&qp, &c.world_from_tcp_grasp, &qg) else {

@@ -122,6 +122,12 @@ pub struct GraspPlan {
     pub short_side: bool,
     /// How far the TCP is below the object's top, metres.
     pub depth_below_top_m: f64,
+    /// TCP offset from the object's centre along the fingers' width, metres (0 = centred).
+    pub off_centre_m: f64,
+    /// Turn of the closing axis from the cuboid's face normal, radians.
+    pub tilt_rad: f64,
+    /// Whether the fingers were modelled at `open_width_m` (a fallback candidate).
+    pub fingers_at_opening: bool,
     /// Start → pre-grasp.
     pub to_pregrasp: JointTrajectory,
     /// Pre-grasp → grasp.
@@ -144,6 +150,9 @@ impl From<GraspMotion> for GraspPlan {
             clearance_m: if c.clearance_m.is_finite() { c.clearance_m } else { f64::MAX },
             short_side: c.short_side,
             depth_below_top_m: c.depth_below_top_m,
+            off_centre_m: c.off_centre_m,
+            tilt_rad: c.tilt_rad,
+            fingers_at_opening: c.fingers_at_opening,
             to_pregrasp: g.to_pregrasp,
             approach: g.approach,
             lift: g.lift,
@@ -200,6 +209,18 @@ pub struct PlannerOverrides {
     pub trim_overlapping_neighbours: Option<bool>,
     /// The grasp's `min_trimmed_half_extent_m`.
     pub min_trimmed_half_extent_m: Option<f64>,
+    /// The grasp's `narrow_opening_fallback`.
+    pub narrow_opening_fallback: Option<bool>,
+    /// The grasp's `narrow_opening_clearance_m`.
+    pub narrow_opening_clearance_m: Option<f64>,
+    /// The grasp's `off_centre_steps`.
+    pub off_centre_steps: Option<usize>,
+    /// The grasp's `off_centre_inset_m`.
+    pub off_centre_inset_m: Option<f64>,
+    /// The grasp's `tilt_steps`.
+    pub tilt_steps: Option<usize>,
+    /// The grasp's `max_tilt_rad`.
+    pub max_tilt_rad: Option<f64>,
     /// [`PlannerConfig::linear_step_m`].
     pub linear_step_m: Option<f64>,
     /// [`PlannerConfig::linear_max_joint_step_rad`].
@@ -233,6 +254,12 @@ impl PlannerOverrides {
         c.grasp.trim_overlapping_neighbours =
             self.trim_overlapping_neighbours.unwrap_or(c.grasp.trim_overlapping_neighbours);
         set(&mut c.grasp.min_trimmed_half_extent_m, self.min_trimmed_half_extent_m);
+        c.grasp.narrow_opening_fallback = self.narrow_opening_fallback.unwrap_or(c.grasp.narrow_opening_fallback);
+        set(&mut c.grasp.narrow_opening_clearance_m, self.narrow_opening_clearance_m);
+        count(&mut c.grasp.off_centre_steps, self.off_centre_steps);
+        set(&mut c.grasp.off_centre_inset_m, self.off_centre_inset_m);
+        count(&mut c.grasp.tilt_steps, self.tilt_steps);
+        set(&mut c.grasp.max_tilt_rad, self.max_tilt_rad);
         set(&mut c.linear_step_m, self.linear_step_m);
         set(&mut c.linear_max_joint_step_rad, self.linear_max_joint_step_rad);
         let scales = [
