@@ -58,6 +58,11 @@ fn planner() -> Planner {
     Planner::new(panda_urdf(), PlannerConfig::default()).unwrap()
 }
 
+/// A planner with the default config but for its grasp settings.
+fn planner_with_grasp(grasp: objslam_core::plan::GraspConfig) -> Planner {
+    Planner::new(panda_urdf(), PlannerConfig { grasp, ..PlannerConfig::default() }).unwrap()
+}
+
 fn fixture() -> Value {
     let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/panda_kinematics.json");
     let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
@@ -559,14 +564,10 @@ fn a_neighbour_estimate_overlapping_the_target_is_trimmed_not_a_wall() {
     // face value it fills the space of one finger whichever way the hand turns.
     let target = cuboid(0.45, 0.0, 0.0, [0.064, 0.064, 0.16]);
     let bloated = cuboid(0.45, 0.055, 0.0, [0.064, 0.125, 0.16]);
-    let untrimmed = Planner::new(
-        panda_urdf(),
-        PlannerConfig {
-            grasp: objslam_core::plan::GraspConfig { trim_overlapping_neighbours: false, ..Default::default() },
-            ..PlannerConfig::default()
-        },
-    )
-    .unwrap();
+    let untrimmed = planner_with_grasp(objslam_core::plan::GraspConfig {
+        trim_overlapping_neighbours: false,
+        ..Default::default()
+    });
     assert!(matches!(untrimmed.plan_grasp(&Q_READY, &target, &[bloated]), Err(PlanError::NoReachableGrasp { .. })));
     // Trimmed to y ≥ 0.032 (the target's face), the neighbour leaves the fingers room across x.
     let planner = planner();
@@ -592,14 +593,8 @@ fn a_block_in_a_staggered_row_is_grasped_tilted_off_centre_with_fitted_fingers()
         cuboid(p.x, p.y, yaw, size)
     };
     let (target, neighbours) = (at(0.0), [at(1.0), at(2.0)]);
-    let without = Planner::new(
-        panda_urdf(),
-        PlannerConfig {
-            grasp: objslam_core::plan::GraspConfig { narrow_opening_fallback: false, ..Default::default() },
-            ..PlannerConfig::default()
-        },
-    )
-    .unwrap();
+    let without =
+        planner_with_grasp(objslam_core::plan::GraspConfig { narrow_opening_fallback: false, ..Default::default() });
     assert!(matches!(without.plan_grasp(&Q_READY, &target, &neighbours), Err(PlanError::NoReachableGrasp { .. })));
     // The fallback: fingers opened to the width + 2.4 cm, the closing axis turned, the TCP moved
     // towards the block's free end.
