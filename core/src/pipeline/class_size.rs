@@ -74,15 +74,20 @@ pub fn default_class_sizes() -> BTreeMap<Label, ClassSize> {
 
 /// Share of `own`'s points that the other clouds claim: a point is claimed when some other cloud
 /// has more points than `own` within `radius` of it (the ownership rule of
-/// [`super::PipelineConfig::ownership_radius_m`]). 0 for an empty cloud.
-pub(super) fn claimed_share(own: &[Point3<f64>], others: &[&[Point3<f64>]], radius: f64) -> f64 {
+/// [`super::PipelineConfig::ownership_radius_m`]). `others_bounds` holds each other cloud's
+/// [`super::cloud_bounds`], in order (computed once by a caller testing several clouds against the
+/// same others). 0 for an empty cloud.
+pub(super) fn claimed_share(
+    own: &[Point3<f64>],
+    others: &[&[Point3<f64>]],
+    others_bounds: &[Option<(Point3<f64>, Point3<f64>)>],
+    radius: f64,
+) -> f64 {
     if own.is_empty() {
         return 0.0;
     }
-    let mut clouds: Vec<&[Point3<f64>]> = Vec::with_capacity(others.len() + 1);
-    clouds.push(own);
-    clouds.extend_from_slice(others);
-    let bounds: Vec<_> = clouds.iter().map(|c| super::cloud_bounds(c)).collect();
+    let clouds: Vec<&[Point3<f64>]> = std::iter::once(own).chain(others.iter().copied()).collect();
+    let bounds: Vec<_> = std::iter::once(super::cloud_bounds(own)).chain(others_bounds.iter().copied()).collect();
     let kept = super::owned_points(&clouds, &bounds, 0, radius).len();
     1.0 - kept as f64 / own.len() as f64
 }
@@ -128,12 +133,12 @@ mod tests {
         let dense: Vec<Point3<f64>> = (0..20)
             .flat_map(|i| (0..40).map(move |j| Point3::new(f64::from(i) * 0.0025, f64::from(j) * 0.0025, 0.1)))
             .collect();
-        let share = claimed_share(&patch, &[&dense], 0.005);
+        let share = claimed_share(&patch, &[&dense], &[super::super::cloud_bounds(&dense)], 0.005);
         assert!((0.5..=0.6).contains(&share), "{share}");
         // Nothing near: nothing claimed; an empty cloud claims and is claimed nothing.
         let far: Vec<Point3<f64>> = dense.iter().map(|p| p + Vector3::new(0.0, 0.0, 0.1)).collect();
-        assert_eq!(claimed_share(&patch, &[&far], 0.005), 0.0);
-        assert_eq!(claimed_share(&[], &[&dense], 0.005), 0.0);
-        assert_eq!(claimed_share(&patch, &[], 0.005), 0.0);
+        assert_eq!(claimed_share(&patch, &[&far], &[super::super::cloud_bounds(&far)], 0.005), 0.0);
+        assert_eq!(claimed_share(&[], &[&dense], &[super::super::cloud_bounds(&dense)], 0.005), 0.0);
+        assert_eq!(claimed_share(&patch, &[], &[], 0.005), 0.0);
     }
 }

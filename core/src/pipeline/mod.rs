@@ -913,11 +913,12 @@ impl ObjectPipeline {
         }
         let fitting: Vec<&[Point3<f64>]> =
             map.objects.iter().zip(&odd).filter(|(_, m)| !**m).map(|(o, _)| &o.points_in_world[..]).collect();
+        let fitting_bounds: Vec<_> = fitting.iter().map(|c| cloud_bounds(c)).collect();
         map.objects
             .iter()
             .zip(&odd)
             .filter(|(o, m)| {
-                **m && class_size::claimed_share(&o.points_in_world, &fitting, radius)
+                **m && class_size::claimed_share(&o.points_in_world, &fitting, &fitting_bounds, radius)
                     >= self.config.class_size_claimed_share
             })
             .map(|(o, _)| o.id)
